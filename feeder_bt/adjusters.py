@@ -1,0 +1,186 @@
+"""Auto-adjusters (thesis 8.1.3): turn cell statistics into new speeds every period.
+
+A scenario picks one by name (``adjust.algorithm``) and tunes it with ``adjust.params``.
+Each class declares its parameters and defaults in ``PARAMS`` so a scenario validator can
+reject a misspelt key before a run starts. The thesis's two algorithms are baselines:
+``queue_proportional`` (its first attempt) and ``water_marks`` (its Figure 8-2). Both
+change only the horizontal belt speed; the incline and robot speeds pass through.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
+
+
+@dataclass
+class AdjustInputs:
+    """What an adjuster may look at; counts are cumulative since the run started."""
+
+    t: float
+    queue_len: int
+    horizontal_mm_s: float
+    incline_pct: float
+    robot_speed_pct: float
+    retrieved: int
+    located: int
+    recirculated: int
+    missed: int
+
+
+@dataclass
+class Speeds:
+    """The speeds the adjust tree writes back to the blackboard."""
+
+    horizontal_mm_s: float
+    incline_pct: float
+    robot_speed_pct: float
+
+
+class AdjusterParamError(ValueError):
+    """A bad ``adjust.params`` entry; ``key`` lets the validator point at the YAML line."""
+
+    def __init__(self, key: str, message: str) -> None:
+        self.key = key
+        super().__init__(f"{key}: {message}")
+
+
+ADJUSTERS: dict[str, type[Adjuster]] = {}
+
+
+class Adjuster:
+    """Base class: subclasses set ``NAME`` and ``PARAMS`` and are registered by name."""
+
+    NAME: ClassVar[str] = ""
+    PARAMS: ClassVar[dict[str, float]] = {}
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.NAME:
+            ADJUSTERS[cls.NAME] = cls
+
+    def __init__(self, params: Mapping[str, float] | None = None) -> None:
+        values = dict(self.PARAMS)
+        for key, value in (params or {}).items():
+            if key not in self.PARAMS:
+                known = ", ".join(sorted(self.PARAMS)) or "none"
+                raise AdjusterParamError(
+                    key, f"unknown parameter for adjuster {self.NAME!r} (known: {known})")
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise AdjusterParamError(key, f"must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise AdjusterParamError(key, f"must be finite, got {value!r}")
+            values[key] = float(value)
+        self.params: dict[str, float] = values
+        self._check()
+
+    def _check(self) -> None:
+        """Reject parameter combinations that cannot work; subclasses extend."""
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        """Called every ``adjust.period_s`` with fresh statistics; returns speeds to apply."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _with_horizontal(inp: AdjustInputs, horizontal_mm_s: float) -> Speeds:
+        return Speeds(horizontal_mm_s, inp.incline_pct, inp.robot_speed_pct)
+
+    def _check_range(self) -> None:
+        if self.params["min_mm_s"] > self.params["max_mm_s"]:
+            raise AdjusterParamError("min_mm_s", "must not exceed max_mm_s")
+        if self.params["min_mm_s"] < 0:
+            raise AdjusterParamError("min_mm_s", "must not be negative")
+
+    def _clamp(self, speed: float) -> float:
+        return min(max(speed, self.params["min_mm_s"]), self.params["max_mm_s"])
+
+
+class NoAdjuster(Adjuster):
+    """Leaves every speed alone: the control for comparing adjusters."""
+
+    NAME = "none"
+    PARAMS: ClassVar[dict[str, float]] = {}
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        return self._with_horizontal(inp, inp.horizontal_mm_s)
+
+
+class QueueProportional(Adjuster):
+    """The thesis's first attempt: faster when the queue is short, slower when long.
+
+    Kept as a baseline; the thesis found it satisfied by a long queue on a crawling belt.
+    """
+
+    NAME = "queue_proportional"
+    PARAMS: ClassVar[dict[str, float]] = {
+        "target": 10.0,
+        "gain": 5.0,
+        "min_mm_s": 50.0,
+        "max_mm_s": 300.0,
+        "nominal_mm_s": 150.0,
+    }
+
+    def _check(self) -> None:
+        self._check_range()
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        p = self.params
+        speed = p["nominal_mm_s"] + p["gain"] * (p["target"] - inp.queue_len)
+        return self._with_horizontal(inp, self._clamp(speed))
+
+
+class WaterMarks(Adjuster):
+    """Thesis Figure 8-2: step down above ``high``, step up below ``low``, else pull.
+
+    Between the marks the speed moves a fraction ``gain`` of the way to ``median_mm_s``.
+    The result always lies in [``min_mm_s``, ``max_mm_s``], even if the current speed
+    did not (an operator may have set it by hand).
+    """
+
+    NAME = "water_marks"
+    PARAMS: ClassVar[dict[str, float]] = {
+        "high": 100.0,
+        "low": 50.0,
+        "gain": 0.1,
+        "step": 5.0,
+        "min_mm_s": 50.0,
+        "max_mm_s": 300.0,
+        "median_mm_s": 150.0,
+    }
+
+    def _check(self) -> None:
+        self._check_range()
+        p = self.params
+        if p["low"] > p["high"]:
+            raise AdjusterParamError("low", "must not exceed high")
+        if not 0.0 <= p["gain"] <= 1.0:
+            raise AdjusterParamError("gain", "must be in [0, 1] or the pull overshoots")
+        if p["step"] < 0:
+            raise AdjusterParamError("step", "must not be negative")
+        if not p["min_mm_s"] <= p["median_mm_s"] <= p["max_mm_s"]:
+            raise AdjusterParamError("median_mm_s", "must lie within [min_mm_s, max_mm_s]")
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        p = self.params
+        cur = inp.horizontal_mm_s
+        if inp.queue_len > p["high"]:
+            new = cur - p["step"]
+        elif inp.queue_len < p["low"]:
+            new = cur + p["step"]
+        # Figure 8-2's two branches are the same formula; kept as written for reference.
+        elif cur > p["median_mm_s"]:
+            new = cur - p["gain"] * (cur - p["median_mm_s"])
+        else:
+            new = cur + p["gain"] * (p["median_mm_s"] - cur)
+        return self._with_horizontal(inp, self._clamp(new))
+
+
+def make_adjuster(name: str, params: Mapping[str, float] | None = None) -> Adjuster:
+    """Build the adjuster a scenario names; a wrong name or key is a ValueError."""
+    cls = ADJUSTERS.get(name)
+    if cls is None:
+        known = ", ".join(sorted(ADJUSTERS))
+        raise ValueError(f"unknown adjust algorithm {name!r} (known: {known})")
+    return cls(params or {})

@@ -1,0 +1,240 @@
+"""What every leaf shares: the context, the job-leaf pattern, timers and fault reporting.
+
+A leaf never blocks: ``JobLeaf`` starts a HAL job in ``initialise()``, polls it in
+``update()`` and cancels it in ``terminate()`` when pre-empted.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import py_trees
+from py_trees.common import Access, Status
+
+from ..clock import Clock
+from ..encoder import EncoderSync
+from ..errors import HalError
+from ..hal.interfaces import Hal
+from ..jobs import Job, JobState
+from ..parts import PartsQueue
+from ..scenario.model import CellSpec, Scenario
+
+
+@dataclass
+class Event:
+    t: float
+    kind: str
+    data: dict[str, Any]
+
+
+class Stats:
+    """Counters and samples the trees write and the adjuster, view and report read."""
+
+    def __init__(self) -> None:
+        self.counts: Counter[str] = Counter()
+        self.retrieved: Counter[str] = Counter()
+        self.faults: Counter[str] = Counter()
+        self.recoveries: Counter[str] = Counter()
+        self.vision_ms: list[float] = []
+        self.timeline: list[dict[str, float]] = []
+        self.events: deque[Event] = deque(maxlen=500)
+        self.listeners: list = []
+        self.version = 0
+        self.started_at: float | None = None
+        self.last_retrieved: str | None = None
+
+    def count(self, key: str, n: int = 1) -> None:
+        self.counts[key] += n
+        self.version += 1
+
+    def emit(self, t: float, kind: str, /, **data: Any) -> None:
+        # positional-only: fault events carry their own ``kind=`` in ``data``
+        ev = Event(t, kind, data)
+        self.events.append(ev)
+        self.version += 1
+        for fn in self.listeners:
+            fn(ev)
+
+    @property
+    def total_retrieved(self) -> int:
+        return sum(self.retrieved.values())
+
+
+@dataclass
+class Ctx:
+    """Everything a leaf may use, handed down by the cell (never a concrete driver)."""
+
+    hal: Hal
+    clock: Clock
+    scenario: Scenario
+    cell: CellSpec
+    queue: PartsQueue
+    encoder: EncoderSync
+    stats: Stats
+    vision: Any = None                   # VisionWorker, created per scenario
+    adjuster: Any = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def now(self) -> float:
+        return self.clock.now()
+
+
+# --------------------------------------------------------------------------- blackboard
+
+SPEEDS = "/speeds"
+FAULTS = "/faults"
+
+
+def client(owner: py_trees.behaviour.Behaviour, read: tuple[str, ...] = (),
+           write: tuple[str, ...] = ()) -> py_trees.blackboard.Client:
+    """A blackboard client registering only the keys a leaf uses."""
+    bb = owner.attach_blackboard_client(name=owner.name)
+    for key in read:
+        bb.register_key(key=key, access=Access.READ)
+    for key in write:
+        bb.register_key(key=key, access=Access.WRITE)
+    return bb
+
+
+def init_blackboard(scenario: Scenario) -> None:
+    """Fresh blackboard for a scenario: speeds from the YAML, no faults."""
+    py_trees.blackboard.Blackboard.clear()
+    bb = py_trees.blackboard.Client(name="cell")
+    for key in ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct",
+                "/present/request", "/present/completed", "/retrieve/part",
+                "/retrieve/error", "/faults/escalate", "/locate/frame", "/locate/result",
+                "/locate/found", "/locate/error", "/present/error"):
+        bb.register_key(key=key, access=Access.WRITE)
+    bb.set("/speeds/horizontal_mm_s", scenario.present.horizontal_mm_s)
+    bb.set("/speeds/incline_pct", scenario.present.incline_pct)
+    bb.set("/speeds/robot_speed_pct", scenario.retrieve.robot_speed_pct)
+    bb.set("/present/request", None)
+    bb.set("/present/completed", 0)
+    bb.set("/retrieve/part", None)
+    bb.set("/retrieve/error", None)
+    bb.set("/locate/error", None)      # read by the fallbacks even when no job ever failed
+    bb.set("/present/error", None)
+    bb.set("/faults/escalate", None)
+    bb.set("/locate/frame", None)
+    bb.set("/locate/result", None)
+    bb.set("/locate/found", 0)
+
+
+# --------------------------------------------------------------------------- leaves
+
+
+class Leaf(py_trees.behaviour.Behaviour):
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name)
+        self.ctx = ctx
+
+
+class JobLeaf(Leaf):
+    """Start a job, poll it, cancel it when pre-empted. Failures land in ``/retrieve/error``-
+    style keys through ``on_failure`` so that a fallback can choose the recovery."""
+
+    fault_key: str | None = None        # blackboard key that receives the error kind
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.job: Job | None = None
+        self.error: HalError | None = None
+        if self.fault_key:
+            self.bb_fault = client(self, write=(self.fault_key,))
+
+    def start(self) -> Job:
+        raise NotImplementedError
+
+    def on_success(self, result: Any) -> Status:
+        return Status.SUCCESS
+
+    def on_failure(self, error: HalError) -> Status:
+        self.feedback_message = str(error)
+        if self.fault_key:
+            self.bb_fault.set(self.fault_key, error)
+        return Status.FAILURE
+
+    def initialise(self) -> None:
+        self.error = None
+        self.job = self.start()
+
+    def update(self) -> Status:
+        assert self.job is not None
+        state = self.job.poll()
+        if state is JobState.RUNNING:
+            return Status.RUNNING
+        if state is JobState.SUCCEEDED:
+            return self.on_success(self.job.result)
+        self.error = self.job.error or HalError(f"{self.job.name} {state.value}")
+        return self.on_failure(self.error)
+
+    def terminate(self, new_status: Status) -> None:
+        if new_status is Status.INVALID and self.job is not None and not self.job.done:
+            self.job.cancel()
+
+
+class Wait(Leaf):
+    """RUNNING for ``seconds`` of clock time; tells the clock when it will be done."""
+
+    def __init__(self, name: str, ctx: Ctx, seconds: float) -> None:
+        super().__init__(name, ctx)
+        self.seconds = seconds
+        self.until = 0.0
+
+    def initialise(self) -> None:
+        self.until = self.ctx.now() + self.seconds
+        self.ctx.clock.wake_at(self.until)
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.ctx.now() >= self.until - 1e-9 else Status.RUNNING
+
+
+class ErrorIs(Leaf):
+    """Condition: the last error in ``key`` is of one of ``kinds``."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str, kinds: tuple[str, ...]) -> None:
+        super().__init__(name, ctx)
+        self.key, self.kinds = key, kinds
+        self.bb = client(self, read=(key,))
+
+    def update(self) -> Status:
+        err = self.bb.get(self.key)
+        return Status.SUCCESS if err is not None and err.kind in self.kinds else Status.FAILURE
+
+
+class CountFault(Leaf):
+    """Count the fault in ``key``, log it, and let the branch go on."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str, counter: str | None = None) -> None:
+        super().__init__(name, ctx)
+        self.key, self.counter = key, counter
+        self.bb = client(self, read=(key,))
+
+    def update(self) -> Status:
+        err = self.bb.get(self.key)
+        kind = err.kind if err is not None else "unknown"
+        self.ctx.stats.faults[kind] += 1
+        if self.counter:
+            self.ctx.stats.count(self.counter)
+        self.ctx.stats.emit(self.ctx.now(), "fault", kind=kind, message=str(err))
+        return Status.SUCCESS
+
+
+class Escalate(Leaf):
+    """Last resort of a branch: ask the cell to go to FAULT, with the reason."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str | None, what: str) -> None:
+        super().__init__(name, ctx)
+        self.key, self.what = key, what
+        self.bb = client(self, read=(key,) if key else (), write=("/faults/escalate",))
+
+    def update(self) -> Status:
+        err = self.bb.get(self.key) if self.key else None
+        reason = f"{self.what}: {err}" if err is not None else self.what
+        if self.bb.get("/faults/escalate") is None:
+            self.bb.set("/faults/escalate", reason)
+            self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1
+        self.feedback_message = reason
+        return Status.RUNNING

@@ -1,0 +1,190 @@
+"""Part location: latched grabs every ``frame_spacing_mm`` of belt, recipe, enqueue."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+from py_trees.common import Status
+
+from ..encoder import diff
+from ..hal.interfaces import Frame
+from ..jobs import Job
+from ..parts import Part
+from .common import Ctx, JobLeaf, Leaf, client
+
+
+class WaitTravel(JobLeaf):
+    """Continuous mode: the conveyor's distance notification paces the frames."""
+
+    fault_key = "/locate/error"     # so the fallbacks never act on a stale grab error
+
+    def start(self) -> Job:
+        return self.ctx.hal.conveyors["horizontal"].travelled(
+            self.ctx.scenario.locate.frame_spacing_mm)
+
+
+class Grab(JobLeaf):
+    """Trigger the camera; the same trigger latches the conveyor encoder."""
+
+    fault_key = "/locate/error"
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, write=("/locate/frame",))
+
+    def start(self) -> Job:
+        return self.ctx.hal.camera.grab()
+
+    def on_success(self, result: Frame) -> Status:
+        self.bb.set("/locate/frame", result)
+        return Status.SUCCESS
+
+
+class Recognise(JobLeaf):
+    """Run the scenario's recipe on the frame, on the vision worker."""
+
+    fault_key = "/locate/error"
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/locate/frame",), write=("/locate/result",))
+
+    def start(self) -> Job:
+        return self.ctx.vision.recognise(self.bb.get("/locate/frame").image)
+
+    def on_success(self, result) -> Status:
+        self.bb.set("/locate/result", result)
+        self.ctx.stats.vision_ms.append(result.ms)
+        self.ctx.stats.count("frames")
+        return Status.SUCCESS
+
+
+class SeenParts:
+    """Parts located recently, to drop the same part seen again in an overlapping frame.
+
+    Positions are compared at the new frame's latch: the old part's x moves by the belt
+    travel between the two latches, read from the encoder."""
+
+    def __init__(self, counts_per_mm: float, robot_bits: int, forget_beyond_mm: float) -> None:
+        self.cpm, self.bits, self.forget = counts_per_mm, robot_bits, forget_beyond_mm
+        self.parts: list[Part] = []
+
+    def shift_mm(self, part: Part, latch: int) -> float:
+        return diff(latch, part.latch, self.bits) / self.cpm
+
+    def is_new(self, cand: Part, tol_mm: float) -> bool:
+        for old in self.parts:
+            if old.type != cand.type:
+                continue
+            x = old.x_mm + self.shift_mm(old, cand.latch)
+            if math.hypot(x - cand.x_mm, old.y_mm - cand.y_mm) <= tol_mm:
+                return False
+        return True
+
+    def add(self, part: Part) -> None:
+        self.parts.append(part)
+
+    def prune(self, latch: int) -> None:
+        self.parts = [p for p in self.parts
+                      if p.x_mm + self.shift_mm(p, latch) <= self.forget]
+
+
+class Enqueue(Leaf):
+    """Turn detections into parts in the belt frame, drop duplicates, queue the pickable."""
+
+    _ids = itertools.count(1)
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/locate/frame", "/locate/result"),
+                         write=("/locate/found",))
+        cam = ctx.cell.camera
+        window_end = cam.calibration.origin_mm[0] + cam.height_px * cam.calibration.mm_per_px
+        seen = ctx.extras.get("seen")
+        if seen is None:
+            seen = SeenParts(ctx.cell.encoder.counts_per_mm, ctx.cell.encoder.robot_bits,
+                             window_end + 200.0)
+            ctx.extras["seen"] = seen
+        self.seen: SeenParts = seen
+
+    def update(self) -> Status:
+        frame: Frame = self.bb.get("/locate/frame")
+        result = self.bb.get("/locate/result")
+        latch = self.ctx.encoder.to_robot(frame.latch)
+        self.seen.prune(latch)
+        stats, new = self.ctx.stats, 0
+        tol = self.ctx.scenario.locate.dedupe_mm
+        for det in result.parts:
+            part = Part(id=next(self._ids), type=det.part, x_mm=det.x_mm, y_mm=det.y_mm,
+                        angle_deg=det.angle_deg, latch=latch, located_at=frame.t,
+                        pose=det.pose or "", pickable=det.pickable, frame=frame.index,
+                        features=dict(det.features))
+            if not self.seen.is_new(part, tol):
+                stats.count("duplicates")
+                continue
+            self.seen.add(part)
+            if part.pickable:
+                self.ctx.queue.put(part)
+                stats.count("located")
+                new += 1
+                stats.emit(frame.t, "located", id=part.id, type=part.type,
+                           x_mm=round(part.x_mm, 1), y_mm=round(part.y_mm, 1))
+            else:
+                stats.count("located_unpickable")
+        stats.count("rejected_blobs", len(result.rejected))
+        self.bb.set("/locate/found", new)
+        self.feedback_message = f"frame {frame.index}: {new} new"
+        return Status.SUCCESS
+
+
+class QueueEmpty(Leaf):
+    """Incremental mode: look again only when the robot has taken what was found."""
+
+    def update(self) -> Status:
+        robot_busy = self.ctx.hal.robot.holding()
+        return Status.SUCCESS if len(self.ctx.queue) == 0 and not robot_busy else Status.RUNNING
+
+
+class AdvanceIfNothing(Leaf):
+    """Incremental mode: if the last frame found nothing, ask the presenter to advance
+    (small; big after ``big_after`` empty frames in a row) and wait until it has."""
+
+    def __init__(self, name: str, ctx: Ctx, big_after: int = 3) -> None:
+        super().__init__(name, ctx)
+        self.big_after = big_after
+        self.empty_run = big_after        # first advance loads the belt
+        self.bb = client(self, read=("/locate/found", "/present/completed"),
+                         write=("/present/request",))
+        self.waiting_for: int | None = None
+
+    def initialise(self) -> None:
+        self.waiting_for = None
+
+    def update(self) -> Status:
+        if self.waiting_for is None:
+            if self.bb.get("/locate/found") > 0:
+                self.empty_run = 0
+                return Status.SUCCESS
+            self.empty_run += 1
+            kind = "big" if self.empty_run >= self.big_after else "small"
+            if kind == "big":
+                self.empty_run = 0
+            self.bb.set("/present/request", kind)
+            self.waiting_for = self.bb.get("/present/completed") + 1
+            self.feedback_message = f"{kind} advance"
+        if self.bb.get("/present/completed") >= self.waiting_for:
+            return Status.SUCCESS
+        return Status.RUNNING
+
+
+class GrabGolden(JobLeaf):
+    """Set-up: grab the golden image (an empty, lit belt) for image subtraction."""
+
+    def start(self) -> Job:
+        return self.ctx.hal.camera.grab()
+
+    def on_success(self, result: Frame) -> Status:
+        self.ctx.vision.set_golden(result.image)
+        self.ctx.stats.emit(self.ctx.now(), "golden_image", frame=result.index)
+        return Status.SUCCESS

@@ -1,0 +1,123 @@
+"""Part presentation: run the conveyors (continuous) or advance on request (incremental)."""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from ..jobs import Job
+from .common import Ctx, JobLeaf, Leaf, client
+
+
+class RunConveyors(Leaf):
+    """Keep both conveyors at the blackboard speeds; RUNNING for as long as it is ticked.
+
+    The incline runs at ``incline_pct`` % of the horizontal speed (thesis 8.1.3)."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/incline_pct"),
+                         write=("/present/error",))
+        self.jobs: list[Job] = []
+        self.commanded: tuple[float, float] | None = None
+
+    def initialise(self) -> None:
+        self.commanded = None
+        self.jobs = []
+
+    def update(self) -> Status:
+        h = float(self.bb.get("/speeds/horizontal_mm_s"))
+        i = h * float(self.bb.get("/speeds/incline_pct")) / 100.0
+        if self.commanded != (h, i):
+            conv = self.ctx.hal.conveyors
+            self.jobs = [conv["horizontal"].set_speed(h), conv["incline"].set_speed(i)]
+            self.commanded = (h, i)
+            self.ctx.stats.emit(self.ctx.now(), "speeds", horizontal_mm_s=h, incline_mm_s=i)
+        for job in self.jobs:
+            if job.done and not job.ok:
+                self.bb.set("/present/error", job.error)
+                self.feedback_message = str(job.error)
+                return Status.FAILURE
+        self.feedback_message = f"horizontal {h:.0f} mm/s, incline {i:.0f} mm/s"
+        return Status.RUNNING
+
+    def terminate(self, new_status: Status) -> None:
+        # pre-empted while running: stop. After a FAILURE the recovery branch stops them.
+        if (new_status is Status.INVALID and self.status is Status.RUNNING
+                and self.commanded is not None):
+            for job in self.jobs:
+                job.cancel()                # no-op for jobs already done
+            for conv in self.ctx.hal.conveyors.values():
+                conv.stop()
+            self.commanded = None
+
+
+class ServeAdvance(JobLeaf):
+    """Incremental mode: wait for a request from the locator, then advance the belts."""
+
+    fault_key = "/present/error"
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/present/request",),
+                         write=("/present/request", "/present/completed"))
+        self.kind: str | None = None
+
+    def initialise(self) -> None:
+        self.kind = None
+        self.job = None
+
+    def update(self) -> Status:
+        if self.job is None:
+            self.kind = self.bb.get("/present/request")
+            if self.kind is None:
+                return Status.RUNNING
+            self.job = self.start()
+        return super().update()
+
+    def start(self) -> Job:
+        p = self.ctx.scenario.present
+        conv = self.ctx.hal.conveyors
+        h_speed = self.ctx.cell.conveyors["horizontal"].max_mm_s
+        if self.kind == "big":
+            # one job for both belts: done when both are, failed or cancelled together
+            return _all([conv["incline"].move(p.big_advance_incline_mm, h_speed),
+                         conv["horizontal"].move(p.big_advance_mm, h_speed)])
+        return conv["horizontal"].move(p.small_advance_mm, h_speed)
+
+    def on_success(self, result: object) -> Status:
+        self.bb.set("/present/request", None)
+        self.bb.set("/present/completed", self.bb.get("/present/completed") + 1)
+        return Status.SUCCESS
+
+
+class StopConveyors(JobLeaf):
+    def start(self) -> Job:
+        jobs = [c.stop() for c in self.ctx.hal.conveyors.values()]
+        return jobs[0] if len(jobs) == 1 else _all(jobs)
+
+
+def _all(jobs: list[Job]) -> Job:
+    """One job that ends when every job has ended (first failure wins)."""
+    combined = Job("+".join(j.name for j in jobs))
+    remaining = set(range(len(jobs)))
+    cancelling: list[bool] = []
+
+    def cancel_parts() -> None:     # cancelling the whole cancels every part
+        cancelling.append(True)
+        for j in jobs:
+            j.cancel()
+
+    combined._on_cancel = cancel_parts
+
+    def done(i: int, j: Job) -> None:
+        if cancelling:
+            return
+        remaining.discard(i)
+        if not j.ok and j.error is not None:
+            combined.fail(j.error)
+        elif not remaining:
+            combined.succeed(None)
+
+    for i, j in enumerate(jobs):
+        j.add_done_callback(lambda jj, i=i: done(i, jj))
+    return combined

@@ -1,0 +1,158 @@
+"""Part retrieval: choose the next part, check it is not too far, pick it (tracking the
+belt), place it, count it."""
+
+from __future__ import annotations
+
+from py_trees.common import Status
+
+from ..encoder import diff
+from ..hal.interfaces import PickTarget, Pose
+from ..jobs import Job
+from ..parts import Part
+from .common import Ctx, JobLeaf, Leaf, client
+
+
+class Policy:
+    """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder."""
+
+    name = "fifo"
+
+    def choose(self, parts: list[Part], x_now) -> Part | None:
+        return parts[0] if parts else None
+
+
+class Fifo(Policy):
+    name = "fifo"
+
+
+class EarliestDeadline(Policy):
+    """The part that leaves the pick window first: the one furthest down the belt."""
+
+    name = "earliest_deadline"
+
+    def choose(self, parts: list[Part], x_now) -> Part | None:
+        return max(parts, key=x_now, default=None)
+
+
+POLICIES: dict[str, type[Policy]] = {"fifo": Fifo, "earliest_deadline": EarliestDeadline}
+
+
+class NextPart(Leaf):
+    """Take the next part by policy; drop parts already too far to catch (thesis 5.2.2
+    ``too_far``). RUNNING while the queue is empty — it never blocks."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/speeds/horizontal_mm_s",),
+                         write=("/retrieve/part", "/retrieve/error"))
+        self.policy = POLICIES[ctx.scenario.retrieve.policy]()
+        self.seq = list(ctx.scenario.retrieve.sequence)
+        self.seq_i = 0
+
+    def x_now(self, part: Part) -> float:
+        enc = self.ctx.hal.robot_position.belt_encoder()
+        bits = self.ctx.cell.encoder.robot_bits
+        return part.x_mm + diff(enc, part.latch, bits) / self.ctx.cell.encoder.counts_per_mm
+
+    def update(self) -> Status:
+        r = self.ctx.scenario.retrieve
+        queue = self.ctx.queue
+        if len(queue) == 0:
+            self.feedback_message = "waiting for a part"
+            return Status.RUNNING
+        lead = self.bb.get("/speeds/horizontal_mm_s") * r.reach_time_s if r.tracking else 0.0
+        gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
+        if gone:
+            self.ctx.stats.count("too_far", len(gone))
+        wanted = self.seq[self.seq_i % len(self.seq)] if self.seq else None
+        parts = [p for p in queue.peek_all() if wanted is None or p.type == wanted]
+        part = self.policy.choose(parts, self.x_now)
+        if part is None or not queue.remove(part.id):
+            self.feedback_message = f"waiting for a {wanted or 'part'}"
+            return Status.RUNNING
+        self.seq_i += 1
+        self.bb.set("/retrieve/part", part)
+        self.bb.set("/retrieve/error", None)
+        self.feedback_message = f"part {part.id} ({part.type})"
+        return Status.SUCCESS
+
+
+class Pick(JobLeaf):
+    fault_key = "/retrieve/error"
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/retrieve/part",))
+
+    def start(self) -> Job:
+        part: Part = self.bb.get("/retrieve/part")
+        spec = self.ctx.scenario.parts[part.type]
+        self.feedback_message = f"picking part {part.id}"
+        return self.ctx.hal.robot.pick(PickTarget(
+            part_id=part.id, x_mm=part.x_mm, y_mm=part.y_mm, angle_deg=part.angle_deg,
+            latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
+            tool_offset=tuple(spec.tool_offset)))
+
+
+class Place(JobLeaf):
+    fault_key = "/retrieve/error"
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/retrieve/part",))
+
+    def start(self) -> Job:
+        part: Part = self.bb.get("/retrieve/part")
+        place = self.ctx.scenario.parts[part.type].place
+        rz = -part.angle_deg if place.orient else 0.0
+        return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))
+
+    def on_success(self, result: object) -> Status:
+        part: Part = self.bb.get("/retrieve/part")
+        stats = self.ctx.stats
+        stats.retrieved[part.type] += 1
+        stats.last_retrieved = part.type
+        stats.count("retrieved")
+        stats.emit(self.ctx.now(), "retrieved", id=part.id, type=part.type)
+        return Status.SUCCESS
+
+
+class Recover(JobLeaf):
+    """Servo time-out: run the controller's recovery program and re-enable power."""
+
+    fault_key = "/retrieve/error"
+
+    def start(self) -> Job:
+        return self.ctx.hal.robot.recover()
+
+    def on_success(self, result: object) -> Status:
+        self.ctx.stats.recoveries["servo_timeout"] += 1
+        return Status.SUCCESS
+
+
+class MoveSafe(JobLeaf):
+    fault_key = "/retrieve/error"
+
+    def start(self) -> Job:
+        return self.ctx.hal.robot.move_safe()
+
+
+class SetRobotSpeed(JobLeaf):
+    def start(self) -> Job:
+        return self.ctx.hal.robot.set_speed(self.ctx.scenario.retrieve.robot_speed_pct)
+
+
+class FollowRobotSpeed(Leaf):
+    """Apply a robot speed written to the blackboard (by the adjuster or the operator)."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/speeds/robot_speed_pct",))
+        self.applied: float | None = None
+
+    def update(self) -> Status:
+        pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        if pct != self.applied:
+            self.ctx.hal.robot.set_speed(pct)
+            self.applied = pct
+        return Status.SUCCESS

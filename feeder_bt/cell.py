@@ -1,0 +1,207 @@
+"""The cell (thesis ``main_control``): state, scenario, and which tree is ticked.
+
+STOPPED --start--> STARTING (set-up tree) --> RUNNING (feeding tree)
+RUNNING --pause--> PAUSED --resume--> RUNNING
+RUNNING/PAUSED --stop--> STOPPING (clean-up tree) --> STOPPED
+any --fault--> FAULTING (clean-up tree) --> FAULT --reset--> STOPPED
+
+Part-specific objects (locator, adjuster, trees) are built at each start and dropped at
+stop, so a scenario can be switched without restarting the process (thesis 8.1.1).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from typing import Any
+
+import py_trees
+from py_trees.common import Status
+
+from .adjusters import make_adjuster
+from .behaviours.common import Ctx, Stats, init_blackboard
+from .clock import Clock
+from .encoder import EncoderSync
+from .errors import FeederError
+from .hal.interfaces import Hal
+from .parts import PartsQueue
+from .scenario.model import CellSpec, Scenario
+from .scenario.plugins import load_class
+from .trees import build_cleanup, build_feeding, build_setup
+from .vision.calibration import Calibration
+from .vision.locator import Locator
+from .vision.worker import VisionWorker
+
+
+class CellState(enum.Enum):
+    STOPPED = "STOPPED"
+    STARTING = "STARTING"
+    RUNNING = "RUNNING"
+    PAUSED = "PAUSED"
+    STOPPING = "STOPPING"
+    FAULTING = "FAULTING"
+    FAULT = "FAULT"
+
+
+class CellCommandError(FeederError):
+    """An operator command that does not fit the cell's state."""
+
+
+class Cell:
+    def __init__(self, cell: CellSpec, hal: Hal, clock: Clock) -> None:
+        self.cell, self.hal, self.clock = cell, hal, clock
+        self.state = CellState.STOPPED
+        self.scenario: Scenario | None = None
+        self.ctx: Ctx | None = None
+        self.root: py_trees.behaviour.Behaviour | None = None      # the tree ticked now
+        self.feeding: py_trees.behaviour.Behaviour | None = None
+        self.fault_reason: str | None = None
+        self.encoder = EncoderSync(cell.encoder.conveyor_bits, cell.encoder.robot_bits)
+        self.stats = Stats()
+        self.listeners: list[Callable[[CellState, CellState], None]] = []
+        self.ticks = 0
+        self.version = 0
+
+    # ------------------------------------------------------------------ commands
+    def load(self, scenario: Scenario) -> None:
+        """Choose the scenario to feed; only while STOPPED (thesis: switch without restart)."""
+        if self.state not in (CellState.STOPPED, CellState.FAULT):
+            raise CellCommandError(f"cannot switch scenario while {self.state.value}")
+        if self.scenario is not None and self.scenario.name != scenario.name:
+            self.hal.changeover(scenario)
+        self.scenario = scenario
+
+    def start(self) -> None:
+        if self.state is not CellState.STOPPED:
+            raise CellCommandError(f"cannot start while {self.state.value}")
+        if self.scenario is None:
+            raise CellCommandError("no scenario loaded")
+        self.ctx = self._make_ctx(self.scenario)
+        self.stats.started_at = self.clock.now()
+        self.feeding = build_feeding(self.ctx)
+        self._switch(CellState.STARTING, build_setup(self.ctx))
+
+    def pause(self) -> None:
+        if self.state is not CellState.RUNNING:
+            raise CellCommandError(f"cannot pause while {self.state.value}")
+        self._halt_feeding()
+        self._switch(CellState.PAUSED, None)
+        for conv in self.hal.conveyors.values():
+            conv.stop()
+
+    def resume(self) -> None:
+        if self.state is not CellState.PAUSED:
+            raise CellCommandError(f"cannot resume while {self.state.value}")
+        self._switch(CellState.RUNNING, self.feeding)
+
+    def stop(self) -> None:
+        if self.state in (CellState.STOPPED, CellState.STOPPING, CellState.FAULT,
+                          CellState.FAULTING):
+            return
+        self._halt_feeding()
+        self._switch(CellState.STOPPING, build_cleanup(self.ctx))
+
+    def fault(self, reason: str) -> None:
+        if self.state in (CellState.FAULT, CellState.FAULTING, CellState.STOPPED):
+            return
+        self.fault_reason = reason
+        self.stats.emit(self.clock.now(), "fault", kind="cell", message=reason)
+        self._halt_feeding()
+        self._switch(CellState.FAULTING, build_cleanup(self.ctx))
+
+    def reset(self) -> None:
+        """Operator acknowledges a FAULT."""
+        if self.state is not CellState.FAULT:
+            raise CellCommandError(f"nothing to reset while {self.state.value}")
+        self.fault_reason = None
+        self._switch(CellState.STOPPED, None)
+
+    def set_speeds(self, **speeds: float) -> None:
+        """Operator or tool writes speeds (``horizontal_mm_s``, ``incline_pct``,
+        ``robot_speed_pct``) to the blackboard; the trees follow."""
+        bb = py_trees.blackboard.Client(name="operator")
+        for key, value in speeds.items():
+            bb.register_key(key=f"/speeds/{key}", access=py_trees.common.Access.WRITE)
+            bb.set(f"/speeds/{key}", float(value))
+        self.version += 1
+
+    # ------------------------------------------------------------------ ticking
+    def tick(self) -> None:
+        """One tick of whichever tree the state calls for."""
+        self.ticks += 1
+        root = self.root
+        if root is None:
+            return
+        root.tick_once()
+        if self.state is CellState.RUNNING:
+            reason = py_trees.blackboard.Blackboard.storage.get("/faults/escalate")
+            if reason:
+                self.fault(reason)
+            return
+        if root.status is Status.SUCCESS:
+            nxt = {CellState.STARTING: (CellState.RUNNING, self.feeding),
+                   CellState.STOPPING: (CellState.STOPPED, None),
+                   CellState.FAULTING: (CellState.FAULT, None)}.get(self.state)
+            if nxt:
+                if nxt[0] in (CellState.STOPPED, CellState.FAULT):
+                    self._drop_scenario_objects()
+                self._switch(*nxt)
+        elif root.status is Status.FAILURE:
+            what = getattr(_failed_leaf(root), "feedback_message", "") or "failed"
+            if self.state is CellState.STARTING:
+                self.fault(f"set-up failed: {what}")
+            else:   # clean-up failed: nothing more can be done in software
+                self.fault_reason = f"clean-up failed: {what}"
+                self._drop_scenario_objects()
+                self._switch(CellState.FAULT, None)
+
+    def nodes(self) -> list[py_trees.behaviour.Behaviour]:
+        return list(self.root.iterate()) if self.root is not None else []
+
+    # ------------------------------------------------------------------ internals
+    def _make_ctx(self, scenario: Scenario) -> Ctx:
+        init_blackboard(scenario)
+        self.stats = Stats()
+        queue = PartsQueue(list(scenario.parts))
+        locator_cls = load_class(scenario.vision.leaf) if scenario.vision.leaf else Locator
+        locator = locator_cls(scenario.vision, scenario.parts,
+                              Calibration(self.cell.camera.calibration))
+        adjuster = (load_class(scenario.adjust.leaf)(scenario.adjust.params)
+                    if scenario.adjust.leaf
+                    else make_adjuster(scenario.adjust.algorithm, scenario.adjust.params))
+        return Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
+                   queue=queue, encoder=self.encoder, stats=self.stats,
+                   vision=VisionWorker(locator, self.clock, self.cell.camera.vision_latency_s),
+                   adjuster=adjuster)
+
+    def _halt_feeding(self) -> None:
+        if self.root is not None and self.root.status is Status.RUNNING:
+            self.root.stop(Status.INVALID)         # terminate(): every running job cancelled
+        if self.ctx is not None:
+            self.ctx.queue.wake_all()
+
+    def _drop_scenario_objects(self) -> None:
+        if self.ctx is not None:
+            self.ctx.queue.flush()
+            self.ctx.queue.wake_all()
+            self.ctx.vision.close()
+        self.feeding = None
+
+    def _switch(self, state: CellState, root: py_trees.behaviour.Behaviour | None) -> None:
+        old, self.state, self.root = self.state, state, root
+        self.version += 1
+        self.stats.emit(self.clock.now(), "state", old=old.value, new=state.value)
+        for fn in self.listeners:
+            fn(old, state)
+
+    def summary(self) -> dict[str, Any]:
+        s = self.stats
+        return {"state": self.state.value, "scenario": self.scenario.name if self.scenario else None,
+                "retrieved": dict(s.retrieved), "queue": len(self.ctx.queue) if self.ctx else 0}
+
+
+def _failed_leaf(root: py_trees.behaviour.Behaviour) -> py_trees.behaviour.Behaviour:
+    for node in root.iterate():
+        if node.status is Status.FAILURE and not node.children:
+            return node
+    return root

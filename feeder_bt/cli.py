@@ -1,0 +1,121 @@
+"""``feeder``: the command line. Every error is one line and a non-zero exit, never a
+traceback (set FEEDER_DEBUG=1 to see one)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from .errors import FeederError
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="feeder", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    r = sub.add_parser("run", help="feed parts: the main job (simulated cell by default)")
+    r.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")
+    r.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    r.add_argument("--duration", type=_positive, default=60.0,
+                   help="seconds of feeding (virtual seconds on the simulated cell); default 60")
+    r.add_argument("--fast", action="store_true",
+                   help="simulated cell only: run virtual time as fast as possible")
+    r.add_argument("--seed", type=int, default=1, help="random seed of the simulated cell")
+    r.add_argument("--report", metavar="FILE.json", help="write the run report here")
+    r.add_argument("--hal", default="sim", choices=["sim", "emulated", "real"],
+                   help="which hardware layer: sim (default), emulated, real")
+    r.add_argument("--view", default="unicode", choices=["unicode", "ascii", "none"],
+                   help="live tree view in real-time runs (default unicode)")
+    r.add_argument("--no-skip", dest="skip_idle", action="store_false",
+                   help="fast runs: tick every tick even when nothing can change")
+
+    t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
+    t.add_argument("scenario")
+    t.add_argument("--format", default="unicode",
+                   choices=["ascii", "unicode", "dot", "svg", "png"])
+    t.add_argument("-o", "--output", help="write to this file instead of standard output")
+    t.add_argument("--part", default="feeding", choices=["feeding", "setup", "cleanup"],
+                   help="which tree (default: the four feeding trees)")
+
+    c = sub.add_parser("check", help="validate scenario and cell YAML files")
+    c.add_argument("files", nargs="+")
+    return p
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .run import RunOptions, run_job
+    if args.fast and args.hal != "sim":
+        raise FeederError("--fast needs the simulated cell (--hal sim): real hardware runs "
+                          "in real time")
+    report = run_job(RunOptions(scenario=args.scenario, cell=args.cell, duration=args.duration,
+                                fast=args.fast, seed=args.seed, report=args.report,
+                                hal=args.hal, view=args.view, skip_idle=args.skip_idle))
+    p = report["parts"]
+    print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
+          f"({report['wall_seconds']:.1f} s wall): retrieved "
+          f"{sum(p['retrieved'].values())} {json.dumps(p['retrieved'])}, "
+          f"{report['parts_per_minute']:.1f} parts/min, located {p['located']}, "
+          f"missed {p['missed']}, lost {p['lost']}")
+    if report["fault"]:
+        print(f"FAULT: {report['fault']}", file=sys.stderr)
+        return 3
+    if args.report:
+        print(f"report: {args.report}")
+    return 0
+
+
+def cmd_tree(args: argparse.Namespace) -> int:
+    from .treeview import render_tree
+    out = render_tree(args.scenario, args.format, args.part)
+    if args.output:
+        Path(args.output).write_bytes(out if isinstance(out, bytes) else out.encode())
+        print(f"wrote {args.output}")
+    elif isinstance(out, bytes):
+        raise FeederError(f"--format {args.format} is binary: give -o FILE")
+    else:
+        print(out)
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from .scenario import check_files
+    errors = check_files(args.files)
+    for line in errors:
+        print(line, file=sys.stderr)
+    if not errors:
+        print(f"ok: {len(args.files)} file(s)")
+    return 2 if errors else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    handler = {"run": cmd_run, "tree": cmd_tree, "check": cmd_check}[args.command]
+    try:
+        return handler(args)
+    except FeederError as e:
+        if os.environ.get("FEEDER_DEBUG"):
+            raise
+        print(f"feeder: {e}", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("feeder: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

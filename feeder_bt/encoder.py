@@ -1,0 +1,90 @@
+"""Conveyor encoder synchronisation (thesis 2.3.1 and 5.3.1).
+
+The conveyor controller (Galil) counts the belt encoder in a 32-bit signed counter and the
+robot controller (Adept) counts the same pulses in a 24-bit signed counter; each wraps at
+its own width, the robot's every few minutes. A latched conveyor count is useless to the
+robot until it is translated into the robot's counter, so ``EncoderSync`` carries the two
+counts forward together, applying each conveyor difference modulo the robot's width.
+
+Pure arithmetic: no hardware, no clock. The caller owns the locking if it shares one.
+"""
+
+from __future__ import annotations
+
+
+def wrap(value: int, bits: int) -> int:
+    """Fold any integer into a ``bits``-wide two's-complement counter, as the hardware does."""
+    if bits < 1:
+        raise ValueError(f"bits must be >= 1, got {bits}")
+    half = 1 << (bits - 1)
+    return ((value + half) % (1 << bits)) - half
+
+
+def diff(a: int, b: int, bits: int) -> int:
+    """Signed shortest ``a - b`` on a wrapping counter.
+
+    Right whenever the true movement between the readings is under half a wrap, which
+    is why the sync must be consulted at least that often.
+    """
+    return wrap(a - b, bits)
+
+
+class EncoderSync:
+    """Translates conveyor counts (e.g. a latched one) into robot counts across roll-over.
+
+    ``reset`` records one simultaneous pair of counts while the belt is stationary (the
+    thesis's constructor refused to start on a moving belt). Every newer conveyor count
+    seen by ``to_robot`` advances the reference, so calling it at least once per half-wrap
+    of the larger counter keeps the two in step indefinitely; older counts (a latch from
+    a frame taken earlier) are translated without moving the reference back.
+
+    With the default widths the limit never bites (2**24 divides 2**32, so a conveyor
+    difference misread by a whole conveyor wrap is still right modulo the robot's), but
+    the reference is kept anyway so other widths, e.g. a narrower conveyor counter, work.
+    """
+
+    def __init__(self, conveyor_bits: int = 32, robot_bits: int = 24) -> None:
+        if conveyor_bits < 2 or robot_bits < 2:
+            raise ValueError("counter widths must be at least 2 bits")
+        self.conveyor_bits = conveyor_bits
+        self.robot_bits = robot_bits
+        self._conveyor_ref: int | None = None
+        self._robot_ref = 0
+
+    @property
+    def is_reset(self) -> bool:
+        """False until ``reset``: before that no translation can be right."""
+        return self._conveyor_ref is not None
+
+    @property
+    def reference(self) -> tuple[int, int] | None:
+        """The current (conveyor, robot) pair the translation is anchored to."""
+        if self._conveyor_ref is None:
+            return None
+        return self._conveyor_ref, self._robot_ref
+
+    def reset(self, conveyor_count: int, robot_count: int) -> None:
+        """Anchor the two counters to each other; the belt must not be moving."""
+        self._conveyor_ref = wrap(conveyor_count, self.conveyor_bits)
+        self._robot_ref = wrap(robot_count, self.robot_bits)
+
+    def to_robot(self, conveyor_count: int) -> int:
+        """Robot count at the moment the conveyor counter read ``conveyor_count``."""
+        if self._conveyor_ref is None:
+            raise RuntimeError("EncoderSync.reset must be called (belt stopped) before use")
+        count = wrap(conveyor_count, self.conveyor_bits)
+        moved = diff(count, self._conveyor_ref, self.conveyor_bits)
+        robot = wrap(self._robot_ref + moved, self.robot_bits)
+        if moved > 0:
+            self._conveyor_ref, self._robot_ref = count, robot
+        return robot
+
+    def robot_diff(self, a: int, b: int) -> int:
+        """Counts the belt moved from robot count ``b`` to ``a``, across a robot wrap."""
+        return diff(a, b, self.robot_bits)
+
+    def mm_between(self, a_robot: int, b_robot: int, counts_per_mm: float) -> float:
+        """Belt travel in mm from ``b_robot`` to ``a_robot`` (negative if backwards)."""
+        if counts_per_mm == 0:
+            raise ValueError("counts_per_mm must be non-zero")
+        return self.robot_diff(a_robot, b_robot) / counts_per_mm

@@ -1,0 +1,160 @@
+"""HAL interfaces (thesis 8.2.1.3: abstract server-level base classes).
+
+Anything that takes time returns a ``Job``; cheap reads return values. Implementations
+raise the typed errors of ``feeder_bt.errors`` through the job.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from ..jobs import Job
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A pose in the robot frame (mm, degrees about z)."""
+
+    x: float
+    y: float
+    z: float = 0.0
+    rz: float = 0.0
+
+
+@dataclass(frozen=True)
+class PickTarget:
+    """What the retriever asks the robot to pick: a part's pose on the belt at a latch."""
+
+    part_id: int
+    x_mm: float          # belt frame, at the latch
+    y_mm: float
+    angle_deg: float
+    latch: int           # robot encoder count at the latch
+    tracking: bool = True
+    tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class Frame:
+    """An image and the conveyor encoder latched by the same trigger."""
+
+    image: np.ndarray    # uint8, grey
+    latch: int           # conveyor controller's count (32-bit signed) at the trigger
+    t: float             # clock time of the trigger
+    index: int = 0
+
+
+@dataclass
+class PickResult:
+    part_id: int
+    t: float
+    belt_x_mm: float = 0.0
+
+
+@dataclass
+class IoChange:
+    signal: str
+    value: bool
+    t: float
+
+
+class Conveyor(Protocol):
+    """One conveyor axis. Speeds in mm/s; distances in mm along the belt."""
+
+    name: str
+
+    def set_speed(self, mm_s: float) -> Job:
+        """Jog at a speed (0 stops); the job ends when the speed is reached."""
+
+    def move(self, distance_mm: float, mm_s: float) -> Job:
+        """Relative move; the job ends when the move is complete."""
+
+    def stop(self) -> Job: ...
+
+    def shake(self, amplitude_mm: float, cycles: int) -> Job:
+        """Jog back and forth to clear a jam; returns to the previous speed after."""
+
+    def speed(self) -> float:
+        """Commanded speed now (mm/s)."""
+
+    def position(self) -> int:
+        """Encoder count now (the controller's own representation)."""
+
+    def travelled(self, distance_mm: float) -> Job:
+        """A notification: ends when the belt has moved ``distance_mm`` from now."""
+
+
+class Camera(Protocol):
+    def grab(self) -> Job:
+        """Trigger (mirrored to the conveyor latch) and grab; result is a ``Frame``."""
+
+    def set_exposure(self, ms: float) -> Job: ...
+
+
+class Robot(Protocol):
+    def pick(self, target: PickTarget) -> Job:
+        """Pick a part, tracking the belt if ``target.tracking``; result ``PickResult``.
+
+        Errors: ``MissedGrab`` (nothing held after the grip), ``EnvelopeError`` (out of
+        reach by the time the robot gets there), ``ServoTimeout``.
+        """
+
+    def place(self, pose: Pose) -> Job: ...
+
+    def move_to(self, pose: Pose) -> Job: ...
+
+    def move_safe(self) -> Job:
+        """Move clear of the belt and the camera's view."""
+
+    def set_speed(self, pct: float) -> Job: ...
+
+    def recover(self) -> Job:
+        """Run the controller's recovery program and re-enable power (after a servo error)."""
+
+    def holding(self) -> bool: ...
+
+
+class RobotPosition(Protocol):
+    """Read-only view of the robot controller, usable while the robot moves."""
+
+    def belt_encoder(self) -> int:
+        """The robot controller's count of the belt encoder (24-bit signed)."""
+
+    def pose(self) -> Pose: ...
+
+
+class DigitalIO(Protocol):
+    """Named signals (the cell description maps names to controllers and bit numbers)."""
+
+    def get(self, signal: str) -> bool: ...
+
+    def set(self, signal: str, value: bool) -> Job: ...
+
+    def changes(self) -> list[IoChange]:
+        """Input changes since the last call (drained)."""
+
+
+@dataclass
+class Hal:
+    """The whole cell as the trees see it."""
+
+    conveyors: dict[str, Conveyor]
+    robot: Robot
+    robot_position: RobotPosition
+    camera: Camera
+    io: DigitalIO
+    kind: str = "sim"
+    extras: dict = field(default_factory=dict)
+
+    def step(self, now: float) -> None:
+        """Advance anything that runs on the clock (the simulated world) to ``now``."""
+
+    def changeover(self, scenario) -> None:
+        """The operator swaps the parts for another scenario's (the simulated cell refills
+        its hopper; a real cell has nothing to do)."""
+
+    def close(self) -> None:
+        """Release connections and workers."""

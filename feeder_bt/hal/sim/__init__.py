@@ -1,0 +1,1 @@
+"""The simulated cell: world, devices and rendered camera images, on the clock."""

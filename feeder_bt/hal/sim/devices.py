@@ -1,0 +1,254 @@
+"""The HAL over the simulated world: what the trees talk to on the simulated cell.
+
+Each device turns a call into a ``Job`` that the world completes at the right virtual
+time. Rendering runs on the camera's own worker thread; the virtual clock waits for it
+(``FutureJob`` gating), so a fast run gives the same results on any machine.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from ...clock import SimClock
+from ...errors import HalError
+from ...jobs import DoneJob, FutureJob, Job
+from ...scenario.model import CellSpec, Scenario
+from ...vision.calibration import Calibration
+from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
+from .axis import Axis
+from .render import Renderer
+from .world import World
+
+
+class TimedJob(Job):
+    """A job the world finishes at a scheduled virtual time; cancel unschedules it."""
+
+    def __init__(self, name: str, world: World) -> None:
+        super().__init__(name)
+        self.world = world
+        self.seq: int | None = None
+        self.on_cancel = None
+
+    def at(self, t: float, fn) -> TimedJob:
+        self.seq = self.world.schedule(t, fn)
+        return self
+
+    def _on_cancel(self) -> None:
+        if self.seq is not None:
+            self.world.unschedule(self.seq)
+        if self.on_cancel is not None:
+            self.on_cancel()
+
+
+class SimConveyor:
+    def __init__(self, name: str, axis: Axis, world: World) -> None:
+        self.name, self.axis, self.world = name, axis, world
+
+    def _ends_at(self, name: str, t_end: float) -> Job:
+        job = TimedJob(name, self.world)
+        return job.at(t_end, lambda t: job.succeed(t))
+
+    def set_speed(self, mm_s: float) -> Job:
+        return self._ends_at(f"{self.name}.set_speed", self.axis.jog(self.world.t, mm_s))
+
+    def move(self, distance_mm: float, mm_s: float) -> Job:
+        return self._ends_at(f"{self.name}.move", self.axis.move(self.world.t, distance_mm, mm_s))
+
+    def stop(self) -> Job:
+        return self._ends_at(f"{self.name}.stop", self.axis.jog(self.world.t, 0.0))
+
+    def shake(self, amplitude_mm: float, cycles: int) -> Job:
+        """Back-and-forth moves, then back to the speed it had."""
+        before = self.axis.commanded
+        t = self.axis.jog(self.world.t, 0.0)
+        for _ in range(max(1, cycles)):
+            t = self.axis.move(t, amplitude_mm, self.axis.max_speed)
+            t = self.axis.move(t, -amplitude_mm, self.axis.max_speed)
+        if before:
+            t = self.axis.jog(t, before)
+        return self._ends_at(f"{self.name}.shake", t)
+
+    def speed(self) -> float:
+        return self.axis.commanded
+
+    def position(self) -> int:
+        return self.world.galil_count()
+
+    def travelled(self, distance_mm: float) -> Job:
+        job = Job(f"{self.name}.travelled({distance_mm:g})")
+        self.world.notify_travel(self.axis, distance_mm, job)
+        return job
+
+
+class SimCamera:
+    def __init__(self, world: World, cell: CellSpec, seed: int) -> None:
+        self.world, self.cell, self.seed = world, cell, seed
+        self.renderer = Renderer(cell.camera)
+        self.calibration = Calibration(cell.camera.calibration)
+        cam = cell.camera
+        corners = self.calibration.px_to_mm(np.array(
+            [[0, 0], [cam.width_px, 0], [0, cam.height_px], [cam.width_px, cam.height_px]],
+            dtype=float))
+        self.x_range = (float(corners[:, 0].min()), float(corners[:, 0].max()))
+        self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sim-camera")
+        self.frames = 0
+        self.exposure_ms = cam.exposure_ms
+
+    def grab(self) -> Job:
+        w = self.world
+        t = w.t
+        self.frames += 1
+        index = self.frames
+        latch = w.galil_count(t)
+        lit = w.io.get("backlight", True)
+        outlines = w.visible_outlines(t, self.x_range) if lit else []
+        rng = np.random.default_rng([self.seed, index])
+
+        def render() -> Frame:
+            img = self.renderer.render(outlines, rng)
+            if not lit:
+                img = (img * 0.08).astype(np.uint8)
+            return Frame(image=img, latch=latch, t=t, index=index)
+
+        future = self.worker.submit(render)
+        return FutureJob("camera.grab", future, w.clock, eta=t + self.cell.camera.grab_s)
+
+    def set_exposure(self, ms: float) -> Job:
+        self.exposure_ms = ms
+        return DoneJob("camera.set_exposure")
+
+    def close(self) -> None:
+        self.worker.shutdown(wait=True, cancel_futures=True)
+
+
+class SimRobot:
+    def __init__(self, world: World) -> None:
+        self.world = world
+
+    def _busy_check(self, name: str) -> HalError | None:
+        busy = self.world.robot_busy
+        if busy is not None and not busy.done:
+            return HalError(f"robot busy with {busy.name}; {name} refused")
+        return None
+
+    def _run(self, name: str, duration: float, finish) -> Job:
+        err = self._busy_check(name)
+        if err:
+            return DoneJob(name, error=err)
+        job = TimedJob(name, self.world)
+        self.world.robot_busy = job
+
+        def done(t: float) -> None:
+            try:
+                job.succeed(finish(t))
+            except HalError as e:
+                job.fail(e)
+
+        return job.at(self.world.t + duration, done)
+
+    def pick(self, target: PickTarget) -> Job:
+        w = self.world
+        err = self._busy_check("pick")
+        if err:
+            return DoneJob("robot.pick", error=err)
+        try:
+            _, t_grip = w.plan_pick(target, w.t)
+        except HalError as e:
+            return DoneJob("robot.pick", error=e)
+        return self._run("robot.pick", t_grip - w.t, lambda t: w.grip(target, t))
+
+    def place(self, pose: Pose) -> Job:
+        w = self.world
+        d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
+        duration = w.robot_model.arch_time(d, w.robot_speed_pct) + w.cell.robot.release_s
+        job = self._run("robot.place", duration, lambda t: w.release(pose, t))
+        if isinstance(job, TimedJob):
+            job.on_cancel = lambda: w.release(pose, w.t)   # V+ finishes the place it began
+        return job
+
+    def move_to(self, pose: Pose) -> Job:
+        w = self.world
+        d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
+
+        def arrive(t: float) -> Pose:
+            w.robot_pose = pose
+            return pose
+
+        return self._run("robot.move", w.robot_model.arch_time(d, w.robot_speed_pct), arrive)
+
+    def move_safe(self) -> Job:
+        return self.move_to(Pose(*self.world.cell.robot.safe_mm))
+
+    def set_speed(self, pct: float) -> Job:
+        self.world.robot_speed_pct = float(pct)
+        return DoneJob("robot.set_speed")
+
+    def recover(self) -> Job:
+        return self._run("robot.recover", 2.0, lambda t: None)
+
+    def holding(self) -> bool:
+        return self.world.gripper is not None
+
+
+class SimRobotPosition:
+    def __init__(self, world: World) -> None:
+        self.world = world
+
+    def belt_encoder(self) -> int:
+        return self.world.robot_count()
+
+    def pose(self) -> Pose:
+        return self.world.robot_pose
+
+
+class SimIO:
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._changes: list[IoChange] = []
+
+    def get(self, signal: str) -> bool:
+        return self.world.io.get(signal, False)
+
+    def set(self, signal: str, value: bool) -> Job:
+        if signal not in self.world.io:
+            return DoneJob(f"io.set({signal})", error=HalError(f"unknown signal {signal!r}"))
+        self.world.io[signal] = bool(value)
+        return DoneJob(f"io.set({signal})")
+
+    def changes(self) -> list[IoChange]:
+        out, self._changes = self._changes, []
+        return out
+
+
+class SimHal(Hal):
+    """The simulated cell behind the HAL interfaces."""
+
+    world: World
+
+    def step(self, now: float) -> None:
+        self.world.step(now)
+
+    def changeover(self, scenario: Scenario) -> None:
+        fresh = make_sim_hal(scenario, self.world.cell, self.world.clock, self.world.seed)
+        self.camera.close()
+        self.__dict__.update(fresh.__dict__)
+
+    def close(self) -> None:
+        self.camera.close()
+
+
+def make_sim_hal(scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> SimHal:
+    world = World(scenario, cell, clock, seed)
+    hal = SimHal(
+        conveyors={"horizontal": SimConveyor("horizontal", world.horizontal, world),
+                   "incline": SimConveyor("incline", world.incline, world)},
+        robot=SimRobot(world),
+        robot_position=SimRobotPosition(world),
+        camera=SimCamera(world, cell, seed),
+        io=SimIO(world),
+        kind="sim",
+    )
+    hal.world = world
+    return hal

@@ -1,0 +1,444 @@
+"""The simulated feeder: hopper, inclined and horizontal conveyors, return conveyor, robot.
+
+A discrete-event world on virtual time. Belt motion is analytic (``Axis``), so every event
+— a part leaving the hopper, landing on the horizontal belt, falling off its end, a grip —
+happens at an exact virtual time that does not depend on how often the world is stepped.
+
+Honesty: the world knows where every part truly is; it hands the camera outlines to
+render into pixels and judges each grip against the truth. Nothing here is shown to the
+locator. Every part is always in exactly one place, checked on every step.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from ...clock import SimClock
+from ...encoder import diff, wrap
+from ...errors import AccountingError, EnvelopeError, MissedGrab
+from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
+from ...jobs import Job
+from ...scenario.model import CellSpec, Scenario
+from ..interfaces import PickResult, PickTarget, Pose
+from .axis import Axis
+from .robot_model import RobotModel
+
+PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed")
+LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp
+EDGE_MARGIN_MM = 28.0           # side rails keep parts this far from the belt edges
+TOUCH_GAP_MM = 1.0              # closer than this, two parts count as touching
+RECYCLE_S = 20.0                # placed parts go back to the hopper after this long
+
+
+@dataclass
+class SimPart:
+    id: int
+    type: str
+    pose: str = ""
+    pickable: bool = False
+    where: str = "hopper"
+    outline: np.ndarray | None = None
+    radius: float = 0.0
+    p_release: float = 0.0      # incline position at release
+    x0: float = 0.0             # belt-frame x minus horizontal belt position at landing
+    y: float = 0.0
+    angle: float = 0.0
+    touching: set[int] = field(default_factory=set)
+    held_error_deg: float = 0.0
+
+    @property
+    def singulated(self) -> bool:
+        return not self.touching
+
+
+@dataclass
+class Notification:
+    axis: Axis
+    target: float
+    job: Job
+    hinted_version: int = -1
+
+
+class World:
+    """Ground truth of the simulated cell, advanced by ``step(now)``."""
+
+    def __init__(self, scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> None:
+        self.scenario, self.cell, self.clock, self.seed = scenario, cell, clock, seed
+        self.rng = np.random.default_rng(seed)
+        hc, ic = cell.conveyors["horizontal"], cell.conveyors["incline"]
+        self.horizontal = Axis(hc.accel_mm_s2, hc.max_mm_s)
+        self.incline = Axis(ic.accel_mm_s2, ic.max_mm_s)
+        self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
+        self.cpm = cell.encoder.counts_per_mm
+        self.robot_model = RobotModel(cell.robot)
+        self.t = clock.now()
+
+        # where the parts are
+        self.parts: dict[int, SimPart] = {}
+        self.hopper: deque[int] = deque()
+        self.on_incline: deque[int] = deque()
+        self.on_horizontal: dict[int, SimPart] = {}
+        self.returning: list[tuple[float, int]] = []
+        self.placed: list[tuple[float, int]] = []
+        self.gripper: int | None = None
+        ids = itertools.count(1)
+        order = [t for t, n in scenario.hopper.items() for _ in range(n)]
+        self.rng.shuffle(order)
+        self._outlines: dict[tuple[str, str], np.ndarray] = {}
+        for ptype in order:
+            pid = next(ids)
+            self.parts[pid] = SimPart(pid, str(ptype))
+            self.hopper.append(pid)
+        self.total = len(self.parts)
+        self.next_release = self._draw_gap(0.0)
+
+        # scheduled things
+        self._timed: list[tuple[float, int, Callable[[float], None]]] = []
+        self._seq = itertools.count()
+        self.notifications: list[Notification] = []
+        self.io: dict[str, bool] = {name: False for name in cell.io}
+
+        # robot
+        self.robot_pose = Pose(*cell.robot.safe_mm)
+        self.robot_speed_pct = 100.0
+        self.robot_busy: Job | None = None
+
+        # ground-truth statistics
+        self.counts: Counter[str] = Counter()
+        self.placed_by_type: Counter[str] = Counter()
+
+    # ------------------------------------------------------------------ time
+    def schedule(self, t: float, fn: Callable[[float], None]) -> int:
+        seq = next(self._seq)
+        heapq.heappush(self._timed, (t, seq, fn))
+        self.clock.wake_at(t)
+        return seq
+
+    def unschedule(self, seq: int) -> None:
+        self._timed = [e for e in self._timed if e[1] != seq]
+        heapq.heapify(self._timed)
+
+    def step(self, now: float) -> None:
+        """Process every event up to ``now`` in time order."""
+        while True:
+            t, kind = self._next_event()
+            if t is None or t > now:
+                break
+            self.t = max(self.t, t)
+            kind(self.t)
+        self.t = now
+        self._hint_notifications()
+        self.check_accounting()
+
+    def _next_event(self) -> tuple[float | None, Callable[[float], None]]:
+        best: tuple[float | None, Callable[[float], None]] = (None, _noop)
+
+        def consider(t: float | None, fn: Callable[[float], None]) -> None:
+            nonlocal best
+            if t is not None and (best[0] is None or t < best[0]):
+                best = (t, fn)
+
+        if self._timed:
+            consider(self._timed[0][0], self._run_timed)
+        if self.hopper:
+            consider(self.incline.time_at(self.next_release, self.t), self._release)
+        if self.on_incline:
+            front = self.parts[self.on_incline[0]]
+            consider(self.incline.time_at(front.p_release + self.i_len, self.t), self._land)
+        if self.on_horizontal:
+            lead = max(self.on_horizontal.values(), key=lambda p: p.x0)
+            consider(self.horizontal.time_at(self.h_len - lead.x0, self.t),
+                     lambda t, pid=lead.id: self._fall(t, pid))
+        if self.returning:
+            consider(self.returning[0][0], self._arrive_hopper)
+        if self.placed:
+            consider(self.placed[0][0], self._recycle)
+        for n in self.notifications:
+            consider(n.axis.time_at(n.target, self.t), lambda t, n=n: self._notify(t, n))
+        return best
+
+    def _run_timed(self, t: float) -> None:
+        _, _, fn = heapq.heappop(self._timed)
+        fn(t)
+
+    # ------------------------------------------------------------------ part flow
+    def _draw_gap(self, at: float) -> float:
+        fill = min(1.0, len(self.hopper) / max(1, self.cell.hopper.nominal_fill))
+        rate = self.cell.hopper.release_per_mm * max(fill, 1e-6)
+        return at + float(self.rng.exponential(1.0 / rate))
+
+    def _release(self, t: float) -> None:
+        pid = self.hopper.popleft()
+        part = self.parts[pid]
+        part.where, part.p_release = "incline", self.next_release
+        spec = self.scenario.parts[part.type]
+        names = list(spec.poses)
+        probs = np.array([spec.poses[n].probability for n in names])
+        part.pose = names[int(self.rng.choice(len(names), p=probs / probs.sum()))]
+        part.pickable = spec.poses[part.pose].pickable
+        part.angle = float(self.rng.uniform(-180.0, 180.0))
+        part.y = float(self.rng.uniform(EDGE_MARGIN_MM, self.h_width - EDGE_MARGIN_MM))
+        part.x0 = float(self.rng.uniform(*LAND_X_MM))      # landing x, fixed at release
+        self.on_incline.append(pid)
+        self.counts["released"] += 1
+        self.next_release = self._draw_gap(self.next_release) if self.hopper else math.inf
+
+    def _land(self, t: float) -> None:
+        pid = self.on_incline.popleft()
+        part = self.parts[pid]
+        part.outline = self.outline(part.type, part.pose)
+        part.radius = circumradius(part.outline)
+        land_x = part.x0
+        part.x0 = land_x - self.horizontal.pos(t)
+        part.where = "horizontal"
+        for other in self.on_horizontal.values():
+            if self._touch(part, other, t):
+                part.touching.add(other.id)
+                other.touching.add(part.id)
+        self.on_horizontal[pid] = part
+        self.counts["landed"] += 1
+        if part.touching:
+            self.counts["landed_touching"] += 1
+
+    def _fall(self, t: float, pid: int) -> None:
+        part = self.on_horizontal.pop(pid)
+        self._untouch(part)
+        part.where = "return"
+        heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))
+        self.counts["recirculated"] += 1
+
+    def _arrive_hopper(self, t: float) -> None:
+        _, pid = heapq.heappop(self.returning)
+        self._to_hopper(pid)
+
+    def _recycle(self, t: float) -> None:
+        _, pid = heapq.heappop(self.placed)
+        self._to_hopper(pid)
+
+    def _to_hopper(self, pid: int) -> None:
+        was_empty = not self.hopper
+        self.parts[pid].where = "hopper"
+        self.parts[pid].touching.clear()
+        self.hopper.append(pid)
+        if was_empty:
+            self.next_release = self._draw_gap(self.incline.pos(self.t))
+
+    def outline(self, ptype: str, pose: str) -> np.ndarray:
+        key = (ptype, pose)
+        if key not in self._outlines:
+            self._outlines[key] = pose_outline(self.scenario.parts[ptype], pose)
+        return self._outlines[key]
+
+    def part_xy(self, part: SimPart, t: float) -> tuple[float, float]:
+        return part.x0 + self.horizontal.pos(t), part.y
+
+    def _touch(self, a: SimPart, b: SimPart, t: float) -> bool:
+        ax, ay = self.part_xy(a, t)
+        bx, by = self.part_xy(b, t)
+        if math.hypot(ax - bx, ay - by) > a.radius + b.radius + TOUCH_GAP_MM:
+            return False
+        pa = _grown(place_outline(a.outline, ax, ay, a.angle), (ax, ay), TOUCH_GAP_MM / 2)
+        pb = _grown(place_outline(b.outline, bx, by, b.angle), (bx, by), TOUCH_GAP_MM / 2)
+        area, _ = cv2.intersectConvexConvex(pa.astype(np.float32), pb.astype(np.float32))
+        return area > 0.0
+
+    def _untouch(self, part: SimPart) -> None:
+        for oid in part.touching:
+            self.parts[oid].touching.discard(part.id)
+        part.touching.clear()
+
+    # ------------------------------------------------------------------ sensing
+    def galil_count(self, t: float | None = None) -> int:
+        t = self.t if t is None else t
+        return wrap(round(self.horizontal.pos(t) * self.cpm), self.cell.encoder.conveyor_bits)
+
+    def robot_count(self, t: float | None = None) -> int:
+        t = self.t if t is None else t
+        enc = self.cell.encoder
+        return wrap(enc.robot_start + round(self.horizontal.pos(t) * self.cpm), enc.robot_bits)
+
+    def visible_outlines(self, t: float, x_range: tuple[float, float]) -> list[np.ndarray]:
+        """Outlines (belt frame, mm) of parts near the camera window at ``t``, for rendering."""
+        lo, hi = x_range
+        out = []
+        for part in self.on_horizontal.values():
+            x, y = self.part_xy(part, t)
+            if lo - part.radius <= x <= hi + part.radius:
+                out.append(place_outline(part.outline, x, y, part.angle))
+        return out
+
+    def truth(self, t: float | None = None) -> list[dict]:
+        """Ground truth of parts on the horizontal belt, for tests and tools — never the locator."""
+        t = self.t if t is None else t
+        rows = []
+        for p in self.on_horizontal.values():
+            x, y = self.part_xy(p, t)
+            rows.append({"id": p.id, "type": p.type, "pose": p.pose, "x_mm": x, "y_mm": y,
+                         "angle_deg": p.angle, "pickable": p.pickable,
+                         "singulated": p.singulated})
+        return rows
+
+    # ------------------------------------------------------------------ notifications
+    def notify_travel(self, axis: Axis, distance: float, job: Job) -> None:
+        n = Notification(axis, axis.pos(self.t) + distance, job)
+        self.notifications.append(n)
+        job.add_done_callback(lambda j, n=n: self._drop_notification(n))
+        self._hint(n)
+
+    def _drop_notification(self, n: Notification) -> None:
+        if n in self.notifications:
+            self.notifications.remove(n)
+
+    def _notify(self, t: float, n: Notification) -> None:
+        self._drop_notification(n)
+        n.job.succeed(t)
+
+    def _hint(self, n: Notification) -> None:
+        when = n.axis.time_at(n.target, self.t)
+        if when is not None:
+            self.clock.wake_at(when)
+        n.hinted_version = n.axis.version
+
+    def _hint_notifications(self) -> None:
+        for n in self.notifications:
+            if n.hinted_version != n.axis.version:
+                self._hint(n)
+
+    # ------------------------------------------------------------------ robot
+    def commanded_xy(self, target: PickTarget, t: float) -> tuple[float, float]:
+        """Where the robot aims for ``target`` at ``t``: tracking follows the belt encoder."""
+        ox, oy, _ = target.tool_offset
+        x = target.x_mm + ox
+        if target.tracking:
+            moved = diff(self.robot_count(t), target.latch, self.cell.encoder.robot_bits)
+            x += moved / self.cpm
+        return x, target.y_mm + oy
+
+    def plan_pick(self, target: PickTarget, t0: float) -> tuple[float, float]:
+        """Intercept: the arrival time and grip time for a pick started at ``t0``."""
+        spec = self.cell.robot
+        px, py = self.robot_pose.x, self.robot_pose.y
+        t_arr = t0
+        for _ in range(6):
+            cx, cy = self.commanded_xy(target, t_arr)
+            t_arr = t0 + self.robot_model.arch_time(math.hypot(cx - px, cy - py),
+                                                    self.robot_speed_pct)
+        cx, cy = self.commanded_xy(target, t_arr)
+        if not self.robot_model.reachable(cx, cy):
+            t_enter = self._time_entering_reach(target, cy, t0)
+            if t_enter is None or t_enter < t_arr:
+                raise EnvelopeError(f"part {target.part_id} at x={cx:.0f} y={cy:.0f} mm "
+                                    "is out of reach")
+            t_arr = t_enter
+        t_grip = t_arr + (spec.track_settle_s if target.tracking else 0.0) + spec.grip_s
+        gx, gy = self.commanded_xy(target, t_grip)
+        if not self.robot_model.reachable(gx, gy):
+            raise EnvelopeError(f"part {target.part_id} leaves the reach before the grip")
+        return t_arr, t_grip
+
+    def _time_entering_reach(self, target: PickTarget, cy: float, t0: float) -> float | None:
+        spec = self.cell.robot
+        bx, by = spec.base_mm
+        if abs(cy - by) >= spec.reach_mm:
+            return None
+        x_enter = bx - math.sqrt(spec.reach_mm ** 2 - (cy - by) ** 2) + 1.0
+        cx, _ = self.commanded_xy(target, t0)
+        if cx >= x_enter or not target.tracking:
+            return None
+        return self.horizontal.time_at(self.horizontal.pos(t0) + (x_enter - cx), t0)
+
+    def grip(self, target: PickTarget, t: float) -> PickResult:
+        """Judge a grip against the truth: the nearest part must be within tolerance,
+        pickable and singulated."""
+        cx, cy = self.commanded_xy(target, t)
+        self.robot_pose = Pose(cx, cy, 0.0, target.angle_deg)
+        best, best_d = None, math.inf
+        for part in self.on_horizontal.values():
+            x, y = self.part_xy(part, t)
+            d = math.hypot(x - cx, y - cy)
+            if d < best_d:
+                best, best_d = part, d
+        tol = self.cell.robot.grip_tolerance_mm
+        if best is None or best_d > tol:
+            self.counts["grip_empty"] += 1
+            raise MissedGrab(f"nothing under the gripper at x={cx:.1f} y={cy:.1f} mm")
+        if not best.pickable or not best.singulated:
+            self.counts["grip_refused"] += 1
+            why = "not singulated" if best.pickable else f"lying {best.pose}"
+            raise MissedGrab(f"part under the gripper is {why}")
+        self.on_horizontal.pop(best.id)
+        self._untouch(best)
+        best.where = "gripper"
+        best.held_error_deg = wrap_deg(best.angle - target.angle_deg)
+        self.gripper = best.id
+        self.counts["gripped"] += 1
+        return PickResult(part_id=best.id, t=t, belt_x_mm=cx)
+
+    def release(self, pose: Pose, t: float) -> int | None:
+        """Put the held part down at ``pose``; judge its orientation against the truth."""
+        self.robot_pose = pose
+        pid, self.gripper = self.gripper, None
+        if pid is None:
+            return None
+        part = self.parts[pid]
+        part.where = "placed"
+        heapq.heappush(self.placed, (t + RECYCLE_S, pid))
+        self.placed_by_type[part.type] += 1
+        spec = self.scenario.parts[part.type]
+        if spec.place.orient and abs(part.held_error_deg) > spec.orientation_tolerance_deg:
+            self.counts["misoriented"] += 1
+        return pid
+
+    def drop_held(self, t: float) -> None:
+        """A held part falls back onto the belt (or the return chute) where the robot is."""
+        if self.gripper is None:
+            return
+        pid, self.gripper = self.gripper, None
+        part = self.parts[pid]
+        x, y = self.robot_pose.x, self.robot_pose.y
+        if 0.0 <= x < self.h_len and 0.0 <= y <= self.h_width:
+            part.where, part.x0, part.y = "horizontal", x - self.horizontal.pos(t), y
+            self.on_horizontal[pid] = part
+        else:
+            part.where = "return"
+            heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))
+        self.counts["dropped"] += 1
+
+    # ------------------------------------------------------------------ accounting
+    def census(self) -> dict[str, int]:
+        return {
+            "hopper": len(self.hopper),
+            "incline": len(self.on_incline),
+            "horizontal": len(self.on_horizontal),
+            "return": len(self.returning),
+            "gripper": 0 if self.gripper is None else 1,
+            "placed": len(self.placed),
+        }
+
+    def check_accounting(self) -> None:
+        n = sum(self.census().values())
+        if n != self.total:
+            raise AccountingError(f"simulated cell holds {n} parts, expected {self.total}: "
+                                  f"{self.census()}")
+
+    def lost(self) -> int:
+        return self.total - sum(self.census().values())
+
+
+def _grown(poly: np.ndarray, centre: tuple[float, float], by: float) -> np.ndarray:
+    c = np.asarray(centre)
+    v = poly - c
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return c + v * (1.0 + by / np.maximum(n, 1e-9))
+
+
+def _noop(t: float) -> None:
+    pass

@@ -1,0 +1,110 @@
+"""The main job: load a scenario on a cell, feed for a while, stop in order, report."""
+
+from __future__ import annotations
+
+import signal
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .cell import Cell, CellState
+from .clock import Clock, RealClock, SimClock
+from .errors import ConfigError
+from .hal.interfaces import Hal
+from .report import build_report, write_report
+from .scenario import load_scenario
+from .scenario.model import CellSpec, Scenario
+from .ticker import Ticker
+from .view import LiveView, Progress
+
+STOP_GRACE_S = 30.0        # clock time allowed for the clean-up tree after a stop
+
+
+@dataclass
+class RunOptions:
+    scenario: str
+    cell: str | None = None
+    duration: float = 60.0
+    fast: bool = False
+    seed: int = 1
+    report: str | None = None
+    hal: str = "sim"
+    view: str = "unicode"          # unicode | ascii | none
+    skip_idle: bool = True
+
+
+def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
+    if kind == "sim":
+        from .hal.sim.devices import make_sim_hal
+        clock = SimClock()
+        return make_sim_hal(scenario, cell, clock, seed), clock
+    if kind in ("emulated", "real"):
+        raise ConfigError(f"--hal {kind} needs the Galil and V+ drivers, which are not in this "
+                          "release yet; use --hal sim", key="hal")
+    raise ConfigError(f"unknown HAL {kind!r}; one of: sim, emulated, real", key="hal")
+
+
+class _StopRequest:
+    """Ctrl-C / SIGTERM ask for an orderly stop at the next tick boundary; a second Ctrl-C
+    interrupts at once (the clean-up still runs)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, signum, frame) -> None:
+        if self.requested and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self.requested = True
+
+
+def run_job(opts: RunOptions) -> dict[str, Any]:
+    scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
+    hal, clock = make_hal(opts.hal, scenario, cell_spec, opts.seed)
+    if not isinstance(clock, SimClock):
+        clock = RealClock()
+    cell = Cell(cell_spec, hal, clock)
+    ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
+    show: LiveView | Progress | None = None
+    if opts.fast:
+        show = Progress(cell, opts.duration)
+    elif opts.view != "none":
+        show = LiveView(cell, fmt=opts.view)
+
+    request = _StopRequest()
+    old = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+    wall0 = time.monotonic()
+    interrupted = False
+    t_start = clock.now()
+    t_stop = t_start
+    try:
+        cell.load(scenario)
+        cell.start()
+        try:
+            ticker.run(until=t_start + opts.duration,
+                       stop=lambda: request.requested
+                       or cell.state in (CellState.FAULT, CellState.STOPPED),
+                       every=show.update if show else None)
+        except KeyboardInterrupt:
+            pass
+        interrupted = request.requested
+        t_stop = clock.now()
+        cell.stop()
+        ticker.fast = ticker.skip_idle = isinstance(clock, SimClock)
+        ticker.run(until=clock.now() + STOP_GRACE_S,
+                   stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT))
+        if show:
+            show.update(force=True)
+            if isinstance(show, Progress):
+                show.close()
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        hal.close()
+    report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
+                          sim_seconds=clock.now() - t_start, feed_seconds=t_stop - t_start,
+                          wall_seconds=time.monotonic() - wall0, interrupted=interrupted)
+    if opts.report:
+        Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
+        write_report(report, opts.report)
+    return report

@@ -1,0 +1,242 @@
+"""The scenario and cell models: what the YAML files mean once validated.
+
+``loader.py`` builds these from YAML and reports every problem as ``FILE:LINE: key: what``.
+Units are in the names: ``_mm``, ``_mm_s``, ``_s``, ``_pct``, ``_deg``, ``_px``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+# ---------------------------------------------------------------------------- parts
+
+
+@dataclass
+class Shape:
+    """A part's outline in its own frame, origin at the outline's area centroid.
+
+    ``kind`` is ``disc`` (``diameter_mm``), ``rect`` (``size_mm``) or ``polygon``
+    (``points_mm``, recentred on the area centroid by the loader).
+    """
+
+    kind: str
+    diameter_mm: float = 0.0
+    size_mm: tuple[float, float] = (0.0, 0.0)
+    points_mm: list[tuple[float, float]] = field(default_factory=list)
+
+
+@dataclass
+class StablePose:
+    name: str
+    probability: float
+    pickable: bool
+    mirror: bool = False                 # lies on its other face: silhouette mirrored
+    silhouette: Shape | None = None      # None: the part's own outline
+
+
+@dataclass
+class PlacePose:
+    x: float
+    y: float
+    z: float = 0.0
+    orient: bool = False                 # rotate the part to angle 0 when placing
+
+
+@dataclass
+class PartSpec:
+    name: str
+    shape: Shape
+    poses: dict[str, StablePose]
+    place: PlacePose
+    tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation_tolerance_deg: float = 5.0
+
+
+# ---------------------------------------------------------------------------- vision
+
+
+@dataclass
+class Threshold:
+    method: str = "fixed"                # fixed | otsu | adaptive
+    value: float = 40.0                  # fixed: grey-level difference
+    block_px: int = 51                   # adaptive: neighbourhood
+    c: float = 5.0                       # adaptive: constant subtracted
+
+
+@dataclass
+class Morphology:
+    open_px: int = 0
+    close_px: int = 0
+
+
+@dataclass
+class VisionClass:
+    """A feature box: a blob whose features all fall in the ranges is this part in this pose."""
+
+    part: str
+    pose: str
+    pickable: bool
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # feature -> [lo, hi]
+    mirrored: bool | None = None         # for chiral outlines (cut_corner): face seen
+
+
+@dataclass
+class VisionRecipe:
+    backlight: bool = True
+    golden_image: bool = True
+    threshold: Threshold = field(default_factory=Threshold)
+    morphology: Morphology = field(default_factory=Morphology)
+    min_area_mm2: float = 100.0
+    classes: list[VisionClass] = field(default_factory=list)
+    orientation: str = "none"            # none | cut_corner | principal_axis
+    leaf: str | None = None              # optional import path "pkg.mod:Class" of a locator
+
+
+# ---------------------------------------------------------------------------- behaviour
+
+
+@dataclass
+class PresentParams:
+    mode: str = "continuous"             # continuous | incremental
+    horizontal_mm_s: float = 150.0
+    incline_pct: float = 40.0            # inclined speed as % of horizontal
+    big_advance_mm: float = 1100.0       # incremental: load the horizontal belt
+    small_advance_mm: float = 240.0      # incremental: about half the camera window
+    big_advance_incline_mm: float = 400.0
+
+
+@dataclass
+class LocateParams:
+    frame_spacing_mm: float = 300.0
+    dedupe_mm: float = 12.0
+    leaf: str | None = None
+
+
+@dataclass
+class RetrieveParams:
+    policy: str = "fifo"                 # fifo | earliest_deadline
+    robot_speed_pct: float = 100.0
+    tracking: bool = True
+    too_far_mm: float = 1190.0
+    reach_time_s: float = 0.35           # expected time from decision to grip, for too_far
+    sequence: list[str] = field(default_factory=list)   # optional part-type order
+    leaf: str | None = None
+
+
+@dataclass
+class AdjustParams:
+    algorithm: str = "none"              # none | water_marks | queue_proportional
+    period_s: float = 0.5
+    params: dict[str, float] = field(default_factory=dict)
+    leaf: str | None = None
+
+
+@dataclass
+class Scenario:
+    name: str
+    path: Path
+    cell_path: Path
+    parts: dict[str, PartSpec]
+    hopper: dict[str, int]
+    vision: VisionRecipe
+    present: PresentParams = field(default_factory=PresentParams)
+    locate: LocateParams = field(default_factory=LocateParams)
+    retrieve: RetrieveParams = field(default_factory=RetrieveParams)
+    adjust: AdjustParams = field(default_factory=AdjustParams)
+    tick_hz: float = 50.0
+
+
+# ---------------------------------------------------------------------------- cell
+
+
+@dataclass
+class ConveyorSpec:
+    length_mm: float = 1219.0
+    width_mm: float = 610.0
+    max_mm_s: float = 400.0
+    accel_mm_s2: float = 1500.0
+
+
+@dataclass
+class CameraCalibration:
+    """Pixel (u, v) -> belt frame (x, y) in mm, at the latch.
+
+    x = origin_x + mm_per_px * (v cos r - u sin r)... see ``feeder_bt.vision.calibration``.
+    """
+
+    origin_mm: tuple[float, float] = (80.0, -15.0)
+    mm_per_px: float = 1.0
+    rotation_deg: float = 0.0
+
+
+@dataclass
+class RenderSpec:
+    backlight: float = 225.0
+    falloff: float = 0.22
+    part_grey: float = 40.0
+    noise_sigma: float = 3.0
+    blur_px: float = 0.8
+
+
+@dataclass
+class CameraSpec:
+    width_px: int = 640
+    height_px: int = 484
+    exposure_ms: float = 2.0
+    grab_s: float = 0.040
+    vision_latency_s: float = 0.030      # virtual time a recipe takes on a fast run
+    calibration: CameraCalibration = field(default_factory=CameraCalibration)
+    render: RenderSpec = field(default_factory=RenderSpec)
+
+
+@dataclass
+class RobotSpec:
+    model: str = "cobra600"
+    base_mm: tuple[float, float] = (1370.0, 305.0)
+    reach_mm: float = 600.0
+    inner_reach_mm: float = 160.0
+    v_max_mm_s: float = 4000.0
+    a_max_mm_s2: float = 21000.0
+    approach_mm: float = 25.0
+    grip_s: float = 0.060
+    release_s: float = 0.040
+    track_settle_s: float = 0.030
+    safe_mm: tuple[float, float] = (1370.0, -150.0)
+    grip_tolerance_mm: float = 4.0
+
+
+@dataclass
+class EncoderSpec:
+    counts_per_mm: float = 20.0
+    conveyor_bits: int = 32
+    robot_bits: int = 24
+    robot_start: int = 0
+
+
+@dataclass
+class HopperSpec:
+    release_per_mm: float = 0.030
+    nominal_fill: int = 150
+
+
+@dataclass
+class IoSignal:
+    controller: str
+    bit: int
+    dir: str = "out"                     # in | out
+
+
+@dataclass
+class CellSpec:
+    name: str
+    path: Path
+    hal: str = "sim"                     # sim | emulated | real
+    conveyors: dict[str, ConveyorSpec] = field(default_factory=lambda: {
+        "horizontal": ConveyorSpec(), "incline": ConveyorSpec()})
+    return_transit_s: float = 12.0
+    encoder: EncoderSpec = field(default_factory=EncoderSpec)
+    hopper: HopperSpec = field(default_factory=HopperSpec)
+    camera: CameraSpec = field(default_factory=CameraSpec)
+    robot: RobotSpec = field(default_factory=RobotSpec)
+    io: dict[str, IoSignal] = field(default_factory=dict)

@@ -1,0 +1,16 @@
+"""adjust: every period_s, the scenario's adjuster writes new speeds."""
+
+from __future__ import annotations
+
+import py_trees
+from py_trees.composites import Sequence
+
+from ..behaviours.adjust import Adjust
+from ..behaviours.common import Ctx, Wait
+
+
+def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    return Sequence("adjust", memory=True, children=[
+        Wait("period", ctx, ctx.scenario.adjust.period_s),
+        Adjust(f"adjust ({ctx.scenario.adjust.algorithm})", ctx),
+    ])

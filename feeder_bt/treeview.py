@@ -1,0 +1,39 @@
+"""Draw a scenario's trees without any hardware: built over the mock HAL."""
+
+from __future__ import annotations
+
+import shutil
+
+import py_trees
+
+from .behaviours.common import Ctx, Stats, init_blackboard
+from .clock import SimClock
+from .encoder import EncoderSync
+from .errors import FeederError
+from .hal.mock import MockHal
+from .parts import PartsQueue
+from .scenario import load_scenario
+from .trees import build_cleanup, build_feeding, build_setup
+
+
+def scenario_tree(path: str, part: str = "feeding") -> py_trees.behaviour.Behaviour:
+    scenario, cell = load_scenario(path)
+    init_blackboard(scenario)
+    ctx = Ctx(hal=MockHal(), clock=SimClock(), scenario=scenario, cell=cell,
+              queue=PartsQueue(list(scenario.parts)), encoder=EncoderSync(), stats=Stats())
+    return {"feeding": build_feeding, "setup": build_setup, "cleanup": build_cleanup}[part](ctx)
+
+
+def render_tree(path: str, fmt: str, part: str = "feeding") -> str | bytes:
+    root = scenario_tree(path, part)
+    if fmt == "ascii":
+        return py_trees.display.ascii_tree(root)
+    if fmt == "unicode":
+        return py_trees.display.unicode_tree(root)
+    graph = py_trees.display.dot_tree(root, with_blackboard_variables=False)
+    if fmt == "dot":
+        return graph.to_string()
+    if shutil.which("dot") is None:
+        raise FeederError(f"--format {fmt} needs Graphviz's `dot` program (Debian: apt-get "
+                          "install graphviz); --format dot works without it")
+    return graph.create(format=fmt)

@@ -1,0 +1,1 @@
+"""Vision: recipes that turn pixels into part poses (OpenCV)."""
