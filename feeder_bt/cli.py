@@ -22,9 +22,17 @@ def _positive(text: str) -> float:
     return v
 
 
+class _Parser(argparse.ArgumentParser):
+    """One line for a usage mistake, like every other error (``feeder X --help`` for more)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="feeder", description=__doc__.split("\n")[0])
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    p = _Parser(prog="feeder", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                           parser_class=_Parser)
 
     r = sub.add_parser("run", help="feed parts: the main job (simulated cell by default)")
     r.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")

@@ -90,7 +90,7 @@ class VisionRecipe:
     min_area_mm2: float = 100.0
     classes: list[VisionClass] = field(default_factory=list)
     orientation: str = "none"            # none | cut_corner | principal_axis
-    leaf: str | None = None              # optional import path "pkg.mod:Class" of a locator
+    leaf: str | None = None              # "pkg.mod:Class": a locator class used instead of ours
 
 
 # ---------------------------------------------------------------------------- behaviour
@@ -110,7 +110,7 @@ class PresentParams:
 class LocateParams:
     frame_spacing_mm: float = 300.0
     dedupe_mm: float = 12.0
-    leaf: str | None = None
+    leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the recipe step
 
 
 @dataclass
@@ -121,7 +121,7 @@ class RetrieveParams:
     too_far_mm: float = 1190.0
     reach_time_s: float = 0.35           # expected time from decision to grip, for too_far
     sequence: list[str] = field(default_factory=list)   # optional part-type order
-    leaf: str | None = None
+    leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the pick step
 
 
 @dataclass
@@ -129,7 +129,7 @@ class AdjustParams:
     algorithm: str = "none"              # none | water_marks | queue_proportional
     period_s: float = 0.5
     params: dict[str, float] = field(default_factory=dict)
-    leaf: str | None = None
+    leaf: str | None = None              # "pkg.mod:Class": an Adjuster used instead of algorithm
 
 
 @dataclass

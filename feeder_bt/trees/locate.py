@@ -7,21 +7,24 @@ from py_trees.composites import Selector, Sequence
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Wait
 from ..behaviours.locate import AdvanceIfNothing, Enqueue, Grab, QueueEmpty, Recognise, WaitTravel
+from ..scenario.plugins import load_class
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    # a scenario may replace the recipe step with a leaf class of its own (locate.leaf)
+    recipe = load_class(ctx.scenario.locate.leaf) if ctx.scenario.locate.leaf else Recognise
     if ctx.scenario.present.mode == "continuous":
         frame = Sequence("frame", memory=True, children=[
             WaitTravel("wait belt travel", ctx),
             Grab("grab + latch", ctx),
-            Recognise("recipe", ctx),
+            recipe("recipe", ctx),
             Enqueue("enqueue", ctx),
         ])
     else:
         frame = Sequence("look", memory=True, children=[
             QueueEmpty("queue empty?", ctx),
             Grab("grab + latch", ctx),
-            Recognise("recipe", ctx),
+            recipe("recipe", ctx),
             Enqueue("enqueue", ctx),
             AdvanceIfNothing("advance if nothing", ctx),
         ])

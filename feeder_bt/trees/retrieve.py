@@ -7,15 +7,18 @@ from py_trees.composites import Selector, Sequence
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
 from ..behaviours.retrieve import FollowRobotSpeed, MoveSafe, NextPart, Pick, Place, Recover
+from ..scenario.plugins import load_class
 
 KEY = "/retrieve/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    # a scenario may replace the pick step with a leaf class of its own (retrieve.leaf)
+    pick = load_class(ctx.scenario.retrieve.leaf) if ctx.scenario.retrieve.leaf else Pick
     pick_and_place = Sequence("pick and place", memory=True, children=[
         FollowRobotSpeed("robot speed", ctx),
         NextPart("next part", ctx),
-        Pick("pick", ctx),
+        pick("pick", ctx),
         Place("place", ctx),
     ])
     missed = Sequence("missed grab", memory=True, children=[
@@ -31,7 +34,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         CountFault("count servo fault", ctx, KEY),
         Recover("run recovery program", ctx),
         MoveSafe("move to safe", ctx),
-        Pick("retry pick", ctx),
+        pick("retry pick", ctx),
         Place("place", ctx),
     ])
     return Selector("retrieve", memory=True, children=[

@@ -1,0 +1,123 @@
+"""The command line: one-line errors with the right exit codes, reports, tree drawings."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from feeder_bt.cli import main
+
+LENSES = Path("scenarios/lenses.yaml").read_text()
+
+
+def feeder(*args: str) -> subprocess.CompletedProcess:
+    """The real entry point in a child process: what a user sees, tracebacks included."""
+    return subprocess.run([sys.executable, "-m", "feeder_bt.cli", *args],
+                          capture_output=True, text=True, timeout=300)
+
+
+def bad_scenario(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in LENSES
+    p = tmp_path / "bad.yaml"
+    p.write_text(LENSES.replace(old, new).replace("cell: ../cells/sim.yaml",
+                                                  f"cell: {Path('cells/sim.yaml').resolve()}"))
+    return p
+
+
+@pytest.mark.parametrize("old,new,key", [
+    ("horizontal_mm_s: 150", "horizontal_mm_s: 5000", "present.horizontal_mm_s"),
+    ("horizontal_mm_s: 150", "horizontal_mm_sec: 150", "present.horizontal_mm_sec"),
+    ("policy: fifo", "policy: random", "retrieve.policy"),
+    ("{probability: 0.85, pickable: true}", "{probability: 0.95, pickable: true}",
+     "parts.lens.poses"),
+    ("frame_spacing_mm: 300", "frame_spacing_mm: [300", None),
+])
+def test_bad_scenario_is_one_line_and_exit_2(tmp_path, old, new, key):
+    path = bad_scenario(tmp_path, old, new)
+    res = feeder("run", str(path), "--fast", "--duration", "5")
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "Traceback" not in res.stderr
+    assert str(path) in lines[0]
+    if key:
+        assert f": {key}:" in lines[0]
+
+
+def test_missing_file_and_bad_arguments(tmp_path):
+    res = feeder("run", str(tmp_path / "nope.yaml"))
+    assert res.returncode == 2 and "nope.yaml" in res.stderr and "Traceback" not in res.stderr
+    res = feeder("run", "scenarios/lenses.yaml", "--duration", "-1")
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+    res = feeder("run", "scenarios/lenses.yaml", "--hal", "real")
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+
+
+def test_check_reports_every_bad_file(tmp_path, capsys):
+    good = "scenarios/lenses.yaml"
+    bad = bad_scenario(tmp_path, "tick_hz: 50", "tick_hz: 2")
+    assert main(["check", good, str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tick_hz" in err[0]
+    assert main(["check", good, "scenarios/squares.yaml", "cells/sim.yaml"]) == 0
+
+
+def test_run_writes_the_report(tmp_path, capsys):
+    out = tmp_path / "r.json"
+    rc = main(["run", "scenarios/lenses.yaml", "--fast", "--duration", "60", "--seed", "5",
+               "--report", str(out)])
+    assert rc == 0
+    rep = json.loads(out.read_text())
+    for key in ("scenario", "seed", "hal", "sim_seconds", "wall_seconds", "parts_per_minute",
+                "faults", "recoveries"):
+        assert key in rep
+    for key in ("retrieved", "located", "missed", "recirculated", "misoriented", "lost"):
+        assert key in rep["parts"]
+    for key in ("hz", "p50_ms", "p99_ms", "max_ms", "overruns"):
+        assert key in rep["tick"]
+    for key in ("frames", "p50_ms", "p99_ms"):
+        assert key in rep["vision"]
+    assert rep["seed"] == 5 and rep["hal"] == "sim" and rep["parts"]["lost"] == 0
+    assert "retrieved" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("fmt,needle", [("ascii", "retrieve"), ("unicode", "retrieve"),
+                                         ("dot", "digraph")])
+def test_tree_formats(fmt, needle, capsys):
+    assert main(["tree", "scenarios/lenses.yaml", "--format", fmt]) == 0
+    out = capsys.readouterr().out
+    assert needle in out
+    for branch in ("present", "locate", "retrieve", "adjust"):
+        assert branch in out
+
+
+@pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz not installed")
+def test_tree_svg(tmp_path):
+    out = tmp_path / "t.svg"
+    assert main(["tree", "scenarios/squares.yaml", "--format", "svg", "-o", str(out)]) == 0
+    assert out.read_text().lstrip().startswith(("<?xml", "<svg"))
+
+
+def test_sigint_stops_in_order_and_still_reports(tmp_path):
+    out = tmp_path / "r.json"
+    proc = subprocess.Popen([sys.executable, "-m", "feeder_bt.cli", "run",
+                             "scenarios/lenses.yaml", "--view", "ascii", "--duration", "600",
+                             "--report", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # wait for the first status line: the cell is running in real time
+        line = proc.stdout.readline()
+        assert "STARTING" in line or "RUNNING" in line, line
+        proc.send_signal(2)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, stderr
+    rep = json.loads(out.read_text())
+    assert rep["interrupted"] is True and rep["state"] == "STOPPED"
+    assert rep["parts"]["lost"] == 0

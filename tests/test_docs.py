@@ -1,0 +1,62 @@
+"""Examples in the README and docs/ must run: every `feeder ...` line in a sh block is run.
+
+Runs are shortened (at most 60 virtual seconds, --fast, no live view) so the suite stays
+quick; everything else on the line is used as written."""
+
+from __future__ import annotations
+
+import re
+import shlex
+from pathlib import Path
+
+import pytest
+
+from feeder_bt.cli import main
+
+DOCS = [Path("README.md"), *sorted(Path("docs").glob("*.md"))]
+
+
+def commands() -> list[tuple[str, str]]:
+    out = []
+    for doc in DOCS:
+        for block in re.findall(r"```sh\n(.*?)```", doc.read_text(), flags=re.S):
+            for line in block.splitlines():
+                line = line.split("&&")[-1].strip()
+                if line.startswith("feeder "):
+                    out.append((doc.name, line))
+    return out
+
+
+def shortened(argv: list[str]) -> list[str]:
+    if argv[0] != "run":
+        return argv
+    argv = list(argv)
+    if "--duration" in argv:
+        i = argv.index("--duration")
+        argv[i + 1] = str(min(float(argv[i + 1]), 60.0))
+    else:
+        argv += ["--duration", "60"]
+    if "--fast" not in argv:
+        argv.append("--fast")
+    return argv
+
+
+def test_docs_have_examples():
+    assert len(commands()) >= 8
+
+
+@pytest.mark.parametrize("doc,line", commands())
+def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
+    argv = shortened(shlex.split(line)[1:])
+    for flag in ("-o", "--report"):           # write outputs into a scratch folder
+        if flag in argv:
+            i = argv.index(flag)
+            argv[i + 1] = str(tmp_path / Path(argv[i + 1]).name)
+    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/")) else a for a in argv]
+    if argv[0] == "check":                    # expand globs the shell would expand
+        argv = [argv[0]] + [str(p) for a in argv[1:] for p in sorted(Path.cwd().glob(
+            a[len(str(Path.cwd())) + 1:])) or [Path(a)]]
+    if argv[0] == "tree" and argv[argv.index("--format") + 1] in ("svg", "png"):
+        pytest.importorskip("shutil").which("dot") or pytest.skip("Graphviz not installed")
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 0, f"{doc}: {line}"
