@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import heapq
 import time
-from concurrent.futures import Future
+from concurrent.futures import CancelledError, Future
+
+EPS = 1e-9      # times this close count as the same instant (float sums of tick periods)
 
 
 class Clock:
@@ -64,7 +66,7 @@ class SimClock(Clock):
 
     def next_wake(self) -> float | None:
         """Earliest hinted time strictly after now, or None."""
-        while self._wakes and self._wakes[0] <= self._now:
+        while self._wakes and self._wakes[0] <= self._now + EPS:
             heapq.heappop(self._wakes)
         return self._wakes[0] if self._wakes else None
 
@@ -72,9 +74,12 @@ class SimClock(Clock):
         """Move virtual time forward, first waiting for worker results due by then."""
         if t < self._now:
             raise ValueError(f"SimClock cannot go back from {self._now} to {t}")
-        while self._gates and self._gates[0][0] <= t:
+        while self._gates and self._gates[0][0] <= t + EPS:
             _, _, fut = heapq.heappop(self._gates)
-            fut.exception()  # waits; the job reads the result itself
+            try:
+                fut.exception()  # waits; the job reads the result itself
+            except CancelledError:
+                pass
         self._now = t
 
     def advance(self, dt: float) -> None:

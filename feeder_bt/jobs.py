@@ -12,7 +12,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any
 
-from .clock import Clock
+from .clock import EPS, Clock
 from .errors import HalError, JobCancelled
 
 
@@ -111,7 +111,7 @@ class FutureJob(Job):
 
     def poll(self) -> JobState:
         if self.state is JobState.RUNNING and self._future.done():
-            if self.eta is None or not self._clock.virtual or self._clock.now() >= self.eta:
+            if self.eta is None or not self._clock.virtual or self._clock.now() >= self.eta - EPS:
                 exc = self._future.exception()
                 if exc is None:
                     self.succeed(self._future.result())

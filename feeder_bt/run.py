@@ -90,7 +90,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         interrupted = request.requested
         t_stop = clock.now()
         cell.stop()
-        ticker.fast = ticker.skip_idle = isinstance(clock, SimClock)
+        if isinstance(clock, SimClock):   # no need to watch the clean-up in real time
+            ticker.fast, ticker.skip_idle = True, opts.skip_idle
         ticker.run(until=clock.now() + STOP_GRACE_S,
                    stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT))
         if show:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cell import Cell
-from .clock import SimClock
+from .clock import EPS, SimClock
 from .jobs import Job
 
 
@@ -85,7 +85,7 @@ class Ticker:
             if sig == self._last_sig:
                 wake = self.clock.next_wake()
                 target = t_end if wake is None else min(wake, t_end)
-                k_wake = math.ceil((target - self.t0) * hz - 1e-9)
+                k_wake = math.ceil((target - EPS - self.t0) * hz)
                 if k_wake > nxt:
                     self.stats.skipped += k_wake - nxt
                     nxt = k_wake

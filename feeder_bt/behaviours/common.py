@@ -13,7 +13,7 @@ from typing import Any
 import py_trees
 from py_trees.common import Access, Status
 
-from ..clock import Clock
+from ..clock import EPS, Clock
 from ..encoder import EncoderSync
 from ..errors import HalError
 from ..hal.interfaces import Hal
@@ -188,7 +188,7 @@ class Wait(Leaf):
         self.ctx.clock.wake_at(self.until)
 
     def update(self) -> Status:
-        return Status.SUCCESS if self.ctx.now() >= self.until - 1e-9 else Status.RUNNING
+        return Status.SUCCESS if self.ctx.now() >= self.until - EPS else Status.RUNNING
 
 
 class ErrorIs(Leaf):

@@ -107,6 +107,12 @@ class Place(JobLeaf):
         rz = -part.angle_deg if place.orient else 0.0
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))
 
+    def terminate(self, new_status: Status) -> None:
+        super().terminate(new_status)
+        if new_status is Status.INVALID and self.job is not None and self.job.ok \
+                and self.status is Status.RUNNING:
+            self.on_success(self.job.result)      # pre-empted, but the part was placed
+
     def on_success(self, result: object) -> Status:
         part: Part = self.bb.get("/retrieve/part")
         stats = self.ctx.stats

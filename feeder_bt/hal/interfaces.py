@@ -102,7 +102,9 @@ class Robot(Protocol):
         reach by the time the robot gets there), ``ServoTimeout``.
         """
 
-    def place(self, pose: Pose) -> Job: ...
+    def place(self, pose: Pose) -> Job:
+        """Place the held part. Never abandoned half-way: a cancelled place lets the part go
+        at the place pose and the job ends SUCCEEDED."""
 
     def move_to(self, pose: Pose) -> Job: ...
 

@@ -1,28 +1,42 @@
-"""The OpenCV locator: pixels in, part poses in the belt frame out.
+"""The OpenCV locator: a grey image -> poses of singulated parts in the belt frame.
 
-It sees only the grey image, the golden image, the recipe and the cell's calibration —
-never the simulator's truth. Pipeline: golden-image subtraction, threshold, morphology,
-external contours; blobs on the image border wait for the next frame; features are
-measured in mm through the calibration; a blob is the first recipe class whose feature
-ranges all contain it, otherwise it is rejected (two touching parts make one blob that fits
-no class). Position is the grey-level centroid of the blob; orientation comes from the
-recipe's method (``cut_corner``: the square's uneven cut corner also tells its face).
+It sees only pixels, the cell's calibration and the recipe — never ground truth.
+Pipeline: golden-image subtraction (dark parts become bright), threshold, morphology,
+external contours; blobs touching the image border or smaller than ``min_area_mm2`` are
+rejected; every feature of ``FEATURES`` is measured in mm on the contour mapped through
+the calibration; the first recipe class whose ranges all hold names the part and pose.
+Merged (touching) parts fall outside every class and are rejected, so they are never
+picked.
+
+Recipe semantics worth knowing:
+
+* ``threshold.method``: ``fixed`` (``value`` grey levels of difference), ``otsu`` (Otsu's
+  level, but never below ``value``, so an empty belt does not turn noise into blobs), or
+  ``adaptive`` (``block_px``, ``c`` above the local mean).
+* ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
+  (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
+  which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
+  fall back to the principal axis when elongated, else 0.
+
+Each call of ``locate`` uses only local state (the golden image is read, never written),
+so one ``Locator`` may serve several threads.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
-from ..geometry import shape_outline, wrap_deg
+from ..geometry import pose_outline, wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .calibration import Calibration
+from .features import FEATURES
 
-GRID_MM = 0.5                 # raster step for matching an outline against a blob
-NOISE_PX = 12                 # blobs smaller than this are not even reported as rejected
+_ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
 
 @dataclass
@@ -35,235 +49,374 @@ class Detection:
     angle_deg: float
     u_px: float
     v_px: float
-    features: dict[str, float] = field(default_factory=dict)
-    reason: str = ""                       # empty when accepted, else why rejected
+    features: dict[str, float]
+    reason: str = ""           # empty if accepted, else why rejected
 
 
 @dataclass
 class LocateResult:
     parts: list[Detection]
     rejected: list[Detection]
-    ms: float = 0.0
+    ms: float
+    contours: list[np.ndarray] = field(default_factory=list, repr=False)  # parts + rejected, px
+
+
+# ------------------------------------------------------------------- cut-corner signature
+
+
+@dataclass
+class _CornerSignature:
+    """Where a square's cut corner is and which way its long cut leg runs.
+
+    ``corner``: unit vector from the rectangle centre towards the cut corner; ``leg``: unit
+    vector along the side on which the cut is longer, pointing away from the corner.
+    ``alpha``: the minimum-area rectangle's angle (rad, mod 90°).
+    """
+
+    corner: np.ndarray
+    leg: np.ndarray
+    alpha: float
+
+
+def _rect_frame(pts: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Centre, angle (rad) and half-sizes of the minimum-area rectangle of ``pts`` (mm)."""
+    (cx, cy), (w, h), a = cv2.minAreaRect(pts.astype(np.float32))
+    return np.array([cx, cy]), math.radians(a), np.array([w / 2.0, h / 2.0])
+
+
+def _to_frame(pts: np.ndarray, centre: np.ndarray, alpha: float) -> np.ndarray:
+    c, s = math.cos(alpha), math.sin(alpha)
+    d = pts - centre
+    return np.stack([d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c], axis=1)
+
+
+def _from_frame(vec: np.ndarray, alpha: float) -> np.ndarray:
+    c, s = math.cos(alpha), math.sin(alpha)
+    return np.array([vec[0] * c - vec[1] * s, vec[0] * s + vec[1] * c])
+
+
+def _refine_alpha(q: np.ndarray, half: np.ndarray, cut: np.ndarray, cut_len: float) -> float:
+    """Small rotation (rad) that best aligns straight side points with the rectangle."""
+    num = den = 0.0
+    for axis in (0, 1):                       # sides perpendicular to this axis
+        other = 1 - axis
+        for sign in (-1.0, 1.0):
+            near = np.abs(q[:, axis] - sign * half[axis]) < 1.5
+            along = q[:, other]
+            inner = np.abs(along) < half[other] - 4.0
+            corner = np.array([0.0, 0.0])
+            corner[axis] = sign * half[axis]
+            keep = near & inner
+            if keep.sum() < 5:
+                continue
+            p = q[keep]
+            # exclude the cut region
+            far = np.hypot(p[:, 0] - cut[0], p[:, 1] - cut[1]) > cut_len + 3.0
+            p = p[far]
+            if len(p) < 5:
+                continue
+            t = p[:, other] - p[:, other].mean()
+            n = p[:, axis] - p[:, axis].mean()
+            tt = float((t * t).sum())
+            if tt <= 0:
+                continue
+            slope = float((t * n).sum()) / tt  # d(normal)/d(along)
+            # A positive rotation of the points makes the x-side's normal grow with y
+            # (slope -angle for axis 0 along y... keep the sign per axis)
+            ang = -math.atan(slope) if axis == 1 else math.atan(slope)
+            num += ang * tt
+            den += tt
+    return num / den if den > 0 else 0.0
+
+
+def _corner_signature(pts: np.ndarray, refine: bool = True) -> _CornerSignature | None:
+    """Cut-corner signature of a closed outline given as dense points in mm."""
+    centre, alpha, half = _rect_frame(pts)
+    q = _to_frame(pts, centre, alpha)
+    corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=float) * half
+    dmin = np.array([np.min(np.hypot(q[:, 0] - c[0], q[:, 1] - c[1])) for c in corners])
+    k = int(np.argmax(dmin))
+    sx, sy = np.sign(corners[k])
+    f = q * np.array([sx, sy])                # cut corner now at (+, +)
+    tol = 1.5
+    top = f[np.abs(f[:, 1] - half[1]) < tol]
+    right = f[np.abs(f[:, 0] - half[0]) < tol]
+    if len(top) == 0 or len(right) == 0:
+        return None
+    leg_x = half[0] - float(top[:, 0].max())  # cut length along the side parallel to x
+    leg_y = half[1] - float(right[:, 1].max())
+    if refine:
+        cut = np.array([half[0] * sx, half[1] * sy])
+        alpha += _refine_alpha(q, half, cut, max(leg_x, leg_y))
+    corner = _from_frame(np.array([sx, sy]) / math.sqrt(2.0), alpha)
+    leg = _from_frame(np.array([-sx, 0.0]) if leg_x >= leg_y else np.array([0.0, -sy]), alpha)
+    return _CornerSignature(corner=corner, leg=leg, alpha=alpha)
+
+
+def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:
+    out = []
+    n = len(outline)
+    for i in range(n):
+        a, b = outline[i], outline[(i + 1) % n]
+        m = max(int(math.ceil(np.hypot(*(b - a)) / step)), 1)
+        t = np.arange(m)[:, None] / m
+        out.append(a + t * (b - a))
+    return np.concatenate(out)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _angle(v: np.ndarray) -> float:
+    return math.atan2(v[1], v[0])
+
+
+# ---------------------------------------------------------------------------- locator
 
 
 class Locator:
+    """Finds parts in backlit images with one recipe; see the module docstring."""
+
     def __init__(self, recipe: VisionRecipe, parts: dict[str, PartSpec],
                  calibration: Calibration) -> None:
-        self.recipe, self.parts, self.cal = recipe, parts, calibration
-        self.golden: np.ndarray | None = None
+        self.recipe = recipe
+        self.parts = parts
+        self.calibration = calibration
+        self._golden: np.ndarray | None = None
+        for cls in recipe.classes:
+            for name in cls.ranges:
+                if name not in FEATURES and name != "mirrored":
+                    raise ValueError(f"class {cls.part}/{cls.pose}: unknown feature {name!r}")
+        self._signatures: dict[str, _CornerSignature] = {}
+        if recipe.orientation == "cut_corner":
+            for cls in recipe.classes:
+                if cls.mirrored is None or cls.part in self._signatures:
+                    continue
+                model = _densify(pose_outline(parts[cls.part], _face_up(parts[cls.part])))
+                sig = _corner_signature(model, refine=False)
+                if sig is None:
+                    raise ValueError(f"part {cls.part}: no cut corner to orient by")
+                self._signatures[cls.part] = sig
         m = recipe.morphology
-        self._open = _kernel(m.open_px)
-        self._close = _kernel(m.close_px)
-        self._min_area_px = recipe.min_area_mm2 / calibration.mm2_per_px2
-        self._models = {name: shape_outline(p.shape) for name, p in parts.items()}
+        self._open = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (m.open_px, m.open_px))
+                      if m.open_px > 1 else None)
+        self._close = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (m.close_px, m.close_px))
+                       if m.close_px > 1 else None)
+
+    # -------------------------------------------------------------- images
 
     def set_golden(self, image: np.ndarray) -> None:
-        """The empty, lit belt: subtracted from every frame, uneven backlight and all."""
-        self.golden = cv2.GaussianBlur(image, (0, 0), 1.0)
+        """Remember the cleared belt; later frames are compared against it."""
+        self._golden = _grey(image).copy()
 
-    # ------------------------------------------------------------------ pipeline
-    def foreground(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(difference image, binary mask): dark parts on a bright backlight become bright."""
-        if self.recipe.golden_image and self.golden is not None:
-            diff = cv2.subtract(self.golden, image)
+    def foreground(self, image: np.ndarray) -> np.ndarray:
+        """Binary mask (0/255) of what the recipe considers parts."""
+        img = _grey(image)
+        golden = self._golden
+        if self.recipe.golden_image and golden is not None:
+            diff = cv2.subtract(golden, img)          # dark parts on a bright belt -> bright
         else:
-            diff = cv2.bitwise_not(image)
+            diff = cv2.bitwise_not(img)
         th = self.recipe.threshold
-        if th.method == "otsu":
-            _, mask = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-        elif th.method == "adaptive":
-            mask = cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
-                                         cv2.THRESH_BINARY, int(th.block_px) | 1, -th.c)
-        else:
+        if th.method == "fixed":
             _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
+        elif th.method == "otsu":
+            level, mask = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+            if level < th.value:
+                _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
+        elif th.method == "adaptive":
+            block = max(3, int(th.block_px) | 1)
+            mask = cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
+                                         cv2.THRESH_BINARY, block, -th.c)
+        else:
+            raise ValueError(f"unknown threshold method {th.method!r}")
         if self._open is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
         if self._close is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
-        return diff, mask
+        return mask
 
     def locate(self, image: np.ndarray) -> LocateResult:
-        diff, mask = self.foreground(image)
-        h, w = mask.shape
+        """Find, measure and classify every blob in ``image``."""
+        t0 = time.perf_counter()
+        img = _grey(image)
+        mask = self.foreground(img)
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        found: list[Detection] = []
+        h, w = img.shape[:2]
+        cal = self.calibration
+        min_px = self.recipe.min_area_mm2 / cal.mm2_per_px2
+        parts: list[Detection] = []
         rejected: list[Detection] = []
-        for contour in contours:
-            area_px = cv2.contourArea(contour)
-            if area_px < NOISE_PX:
-                continue
-            bx, by, bw, bh = cv2.boundingRect(contour)
-            det = self._measure(contour, diff, mask, (bx, by, bw, bh))
-            if bx <= 0 or by <= 0 or bx + bw >= w or by + bh >= h:
-                det.reason = "touches the image border"
+        kept: list[np.ndarray] = []
+        for c in contours:
+            bu, bv, bw, bh = cv2.boundingRect(c)
+            if bw * bh < min_px * 0.5 and cv2.contourArea(c) < min_px * 0.5:
+                continue                                  # specks: not worth reporting
+            det = self._measure(c)
+            if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h:
+                det.reason = "touches border"
             elif det.features["area_mm2"] < self.recipe.min_area_mm2:
                 det.reason = "too small"
             else:
-                self._classify(det, contour)
-            (rejected if det.reason else found).append(det)
-        return LocateResult(found, rejected)
+                self._classify(det, c)
+            (rejected if det.reason else parts).append(det)
+            kept.append(c)
+        ms = (time.perf_counter() - t0) * 1e3
+        return LocateResult(parts=parts, rejected=rejected, ms=ms, contours=kept)
 
-    # ------------------------------------------------------------------ measuring
-    def _measure(self, contour: np.ndarray, diff: np.ndarray, mask: np.ndarray,
-                 box: tuple[int, int, int, int]) -> Detection:
-        bx, by, bw, bh = box
-        # grey-level centroid over the blob (grown by a pixel so the soft edge counts)
-        roi_mask = np.zeros((bh + 4, bw + 4), np.uint8)
-        cv2.drawContours(roi_mask, [contour - np.array([bx - 2, by - 2])], -1, 255,
-                         thickness=cv2.FILLED)
-        roi_mask = cv2.dilate(roi_mask, _kernel(3))
-        y0, x0 = by - 2, bx - 2
-        ys, xs = slice(max(y0, 0), y0 + bh + 4), slice(max(x0, 0), x0 + bw + 4)
-        sub = diff[ys, xs].astype(np.float32)
-        sm = roi_mask[ys.start - y0:ys.start - y0 + sub.shape[0],
-                      xs.start - x0:xs.start - x0 + sub.shape[1]]
-        weight = np.where(sm > 0, sub, 0.0)
-        mom = cv2.moments(weight)
-        if mom["m00"] > 0:
-            u = xs.start + mom["m10"] / mom["m00"]
-            v = ys.start + mom["m01"] / mom["m00"]
+    # -------------------------------------------------------------- per blob
+
+    def _measure(self, contour: np.ndarray) -> Detection:
+        cal = self.calibration
+        uv = contour.reshape(-1, 2).astype(float)
+        xy = cal.px_to_mm(uv).astype(np.float32)
+        mom = cv2.moments(xy)
+        area = abs(mom["m00"])
+        perim = cv2.arcLength(xy, True)
+        # The contour runs through the centres of the boundary pixels: half a pixel
+        # inside the blob. Grow it back so area matches the blob's pixel area.
+        area_px = area + 0.5 * perim * cal.mm_per_px + math.pi * 0.25 * cal.mm2_per_px2
+        if area > 0:
+            cx, cy = mom["m10"] / mom["m00"], mom["m01"] / mom["m00"]
         else:
-            cm = cv2.moments(contour)
-            u, v = cm["m10"] / max(cm["m00"], 1e-9), cm["m01"] / max(cm["m00"], 1e-9)
-        x, y = (float(c) for c in self.cal.px_to_mm(np.array([[u, v]]))[0])
-
-        pts = self.cal.px_to_mm(contour.reshape(-1, 2).astype(float)).astype(np.float32)
-        pixels = float(cv2.countNonZero(mask[by:by + bh, bx:bx + bw] &
-                                        roi_mask[2:2 + bh, 2:2 + bw]))
-        area = pixels * self.cal.mm2_per_px2
-        perimeter = float(cv2.arcLength(_smooth(pts), True))
-        (_, _), (rw, rh), _ = cv2.minAreaRect(pts)
-        hull_area = float(cv2.contourArea(cv2.convexHull(pts)))
-        poly_area = float(cv2.contourArea(pts))
-        hu = cv2.HuMoments(cv2.moments(pts)).flatten()
+            cx, cy = (float(v) for v in xy.mean(axis=0))
+        (_, _), (rw, rh), _ = cv2.minAreaRect(xy)
+        rw += cal.mm_per_px
+        rh += cal.mm_per_px
+        hull = cv2.convexHull(xy)
+        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) * cal.mm_per_px
+        hu = cv2.HuMoments(mom).ravel() if area > 0 else np.zeros(7)
         feats = {
-            "area_mm2": area,
-            "perimeter_mm": perimeter,
-            "circularity": 4 * math.pi * area / max(perimeter * perimeter, 1e-9),
-            "aspect": max(rw, rh) / max(min(rw, rh), 1e-9),
-            "rectangularity": poly_area / max(rw * rh, 1e-9),
-            "solidity": poly_area / max(hull_area, 1e-9),
+            "area_mm2": area_px,
+            "perimeter_mm": perim,
+            "circularity": 4 * math.pi * area_px / (perim * perim) if perim > 0 else 0.0,
+            "aspect": max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0,
+            "rectangularity": area_px / (rw * rh) if rw * rh > 0 else 0.0,
+            "solidity": area_px / hull_area if hull_area > 0 else 0.0,
             "hu1": float(hu[0]),
             "hu2": float(hu[1]),
         }
-        return Detection(None, None, False, x, y, 0.0, float(u), float(v), feats)
+        u, v = cal.mm_to_px(np.array([[cx, cy]]))[0]
+        det = Detection(part=None, pose=None, pickable=False, x_mm=float(cx), y_mm=float(cy),
+                        angle_deg=0.0, u_px=float(u), v_px=float(v), features=feats)
+        det.angle_deg = self._principal_angle(mom) if self.recipe.orientation == \
+            "principal_axis" else 0.0
+        det._xy = xy  # type: ignore[attr-defined]  # mm contour, for the orientation step
+        return det
 
-    # ------------------------------------------------------------------ classifying
+    @staticmethod
+    def _principal_angle(mom: dict[str, float]) -> float:
+        a = 0.5 * math.atan2(2 * mom["mu11"], mom["mu20"] - mom["mu02"])
+        return wrap_deg(math.degrees(a), 180.0)
+
     def _classify(self, det: Detection, contour: np.ndarray) -> None:
-        candidates = [c for c in self.recipe.classes if _in_ranges(c, det.features)]
-        if not candidates:
-            det.reason = "fits no class (touching parts?)"
+        feats = det.features
+        matches = [c for c in self.recipe.classes if _in_ranges(c, feats)]
+        xy = det.__dict__.pop("_xy")
+        if not matches:
+            det.reason = "touching parts / no class"
             return
-        method = self.recipe.orientation
-        cls = candidates[0]
-        if method == "cut_corner" and any(c.mirrored is not None for c in candidates):
-            chiral = [c for c in candidates if c.mirrored is not None]
-            angle, mirrored, score = self._match_outline(contour, det, chiral[0].part)
-            det.features["mirrored"] = 1.0 if mirrored else 0.0
-            det.features["match"] = score
-            det.angle_deg = angle
-            same_face = [c for c in candidates if c.mirrored is None or c.mirrored == mirrored]
-            if not same_face:
-                det.reason = "fits no class for the face it shows"
-                return
-            cls = same_face[0]
-        elif method == "principal_axis":
-            det.angle_deg = self._principal_axis(contour)
-        det.part, det.pose, det.pickable = cls.part, cls.pose, cls.pickable
+        chosen: VisionClass | None = None
+        for cls in matches:
+            if cls.mirrored is None:
+                chosen = cls
+                det.angle_deg = self._symmetric_angle(cls, xy)
+                break
+            sig = self._signatures.get(cls.part) if self.recipe.orientation == "cut_corner" \
+                else None
+            if sig is None:
+                chosen = cls                  # no way to tell the faces apart: trust the class
+                break
+            oriented = self._cut_corner(sig, xy)
+            if oriented is None:
+                continue
+            angle, mirrored = oriented
+            feats["mirrored"] = 1.0 if mirrored else 0.0
+            if mirrored == cls.mirrored:
+                chosen = cls
+                det.angle_deg = angle
+                break
+        if chosen is None:
+            det.reason = "no class (face)"
+            return
+        det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
 
-    def _principal_axis(self, contour: np.ndarray) -> float:
-        pts = self.cal.px_to_mm(contour.reshape(-1, 2).astype(float)).astype(np.float32)
-        m = cv2.moments(pts)
-        return math.degrees(0.5 * math.atan2(2 * m["mu11"], m["mu20"] - m["mu02"]))
+    def _symmetric_angle(self, cls: VisionClass, xy: np.ndarray) -> float:
+        o = self.recipe.orientation
+        if o == "none":
+            return 0.0
+        mom = cv2.moments(xy)
+        if o == "principal_axis":
+            return self._principal_angle(mom)
+        (_, _), (rw, rh), _ = cv2.minAreaRect(xy)
+        if min(rw, rh) > 0 and max(rw, rh) / min(rw, rh) > _ELONGATED:
+            return self._principal_angle(mom)
+        return 0.0
 
-    def _match_outline(self, contour: np.ndarray, det: Detection,
-                       part: str) -> tuple[float, bool, float]:
-        """Angle and face of a chiral outline.
+    @staticmethod
+    def _cut_corner(model: _CornerSignature, xy: np.ndarray) -> tuple[float, bool] | None:
+        """Angle (deg) and face at which the model outline matches the blob, or None."""
+        obs = _corner_signature(xy.reshape(-1, 2).astype(float))
+        if obs is None:
+            return None
+        mirrored = (_cross(model.corner, model.leg) * _cross(obs.corner, obs.leg)) < 0
+        mc = model.corner * np.array([1.0, -1.0]) if mirrored else model.corner
+        coarse = _angle(obs.corner) - _angle(mc)
+        # fine angle: the observed rectangle's angle, moved by the model's own, mod 90°
+        fine = obs.alpha - (-model.alpha if mirrored else model.alpha)
+        k = round((coarse - fine) / (math.pi / 2))
+        return wrap_deg(math.degrees(fine + k * math.pi / 2)), mirrored
 
-        For each face, try the four right-angle turns of the minimum-area rectangle's angle
-        and refine the best by a short search (overlap of rasterised outlines). The face is
-        then decided only where the two fitted outlines differ — around the uneven cut — so
-        the rest of the outline cannot drown the evidence."""
-        model = self._models[part]
-        pts = self.cal.px_to_mm(contour.reshape(-1, 2).astype(float)) - [det.x_mm, det.y_mm]
-        (_, _), (_, _), rect_angle = cv2.minAreaRect(pts.astype(np.float32))
-        reach = float(np.sqrt((model ** 2).sum(axis=1)).max() * 1.15)
-        size = int(2 * reach / GRID_MM) + 1
-        blob = _raster(pts, reach, size)
-        fits = []
-        for mirrored in (False, True):
-            base = model * np.array([1.0, -1.0]) if mirrored else model
-            theta, score = max(((rect_angle + 90.0 * k,
-                                 _iou(blob, _raster(_rotate(base, rect_angle + 90.0 * k),
-                                                    reach, size))) for k in range(4)),
-                               key=lambda ts: ts[1])
-            for step in (1.0, 0.5):
-                for d in (-step, step):
-                    s = _iou(blob, _raster(_rotate(base, theta + d), reach, size))
-                    if s > score:
-                        theta, score = theta + d, s
-            fits.append((theta, score, _raster(_rotate(base, theta), reach, size)))
-        (t_up, s_up, r_up), (t_dn, s_dn, r_dn) = fits
-        only_up, only_dn = r_up & (1 - r_dn), r_dn & (1 - r_up)
-        cov_up = np.count_nonzero(blob & only_up) / max(np.count_nonzero(only_up), 1)
-        cov_dn = np.count_nonzero(blob & only_dn) / max(np.count_nonzero(only_dn), 1)
-        if cov_dn > cov_up:
-            return wrap_deg(t_dn), True, s_dn
-        return wrap_deg(t_up), False, s_up
+    # -------------------------------------------------------------- drawing
 
-    # ------------------------------------------------------------------ drawing
     def annotate(self, image: np.ndarray, result: LocateResult) -> np.ndarray:
-        """A colour copy of the frame with what the locator found and rejected, and why."""
-        out = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
-        _, mask = self.foreground(image)
-        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        cv2.drawContours(out, contours, -1, (160, 160, 160), 1)
+        """A BGR copy of ``image`` with parts (green), rejects (red) and their reasons."""
+        img = _grey(image)
+        out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        if result.contours:
+            cv2.drawContours(out, result.contours, -1, (255, 160, 0), 1, cv2.LINE_AA)
+        cal = self.calibration
         for det in result.parts:
-            colour = (0, 200, 0) if det.pickable else (0, 200, 220)
             c = (int(round(det.u_px)), int(round(det.v_px)))
-            cv2.circle(out, c, 3, colour, -1)
-            tip = self.cal.mm_to_px(np.array([[det.x_mm + 20 * math.cos(math.radians(
-                det.angle_deg)), det.y_mm + 20 * math.sin(math.radians(det.angle_deg))]]))[0]
-            cv2.arrowedLine(out, c, (int(tip[0]), int(tip[1])), colour, 1, tipLength=0.3)
-            cv2.putText(out, f"{det.part}/{det.pose}", (c[0] + 5, c[1] - 5),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1)
+            cv2.circle(out, c, 3, (0, 200, 0), -1, cv2.LINE_AA)
+            a = math.radians(det.angle_deg)
+            tip = cal.mm_to_px(np.array([[det.x_mm + 25 * math.cos(a),
+                                          det.y_mm + 25 * math.sin(a)]]))[0]
+            cv2.arrowedLine(out, c, (int(round(tip[0])), int(round(tip[1]))), (0, 200, 0), 1,
+                            cv2.LINE_AA, tipLength=0.25)
+            label = f"{det.part}/{det.pose}" + ("" if det.pickable else " (no pick)")
+            cv2.putText(out, label, (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                        (0, 160, 0), 1, cv2.LINE_AA)
         for det in result.rejected:
             c = (int(round(det.u_px)), int(round(det.v_px)))
-            cv2.drawMarker(out, c, (0, 0, 230), cv2.MARKER_TILTED_CROSS, 8, 1)
-            cv2.putText(out, det.reason, (c[0] + 5, c[1] + 12), cv2.FONT_HERSHEY_SIMPLEX,
-                        0.35, (0, 0, 230), 1)
+            cv2.drawMarker(out, c, (0, 0, 230), cv2.MARKER_TILTED_CROSS, 10, 2)
+            cv2.putText(out, det.reason, (c[0] + 6, c[1] + 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                        (0, 0, 230), 1, cv2.LINE_AA)
         return out
 
 
+def _grey(image: np.ndarray) -> np.ndarray:
+    if image.ndim == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.dtype != np.uint8:
+        raise TypeError("the locator takes uint8 grey images")
+    return image
+
+
+def _face_up(part: PartSpec) -> str:
+    """The pose whose silhouette is the part's own, unmirrored outline."""
+    if "face_up" in part.poses:
+        return "face_up"
+    for name, pose in part.poses.items():
+        if not pose.mirror and pose.silhouette is None:
+            return name
+    return next(iter(part.poses))
+
+
 def _in_ranges(cls: VisionClass, feats: dict[str, float]) -> bool:
-    return all(lo <= feats[name] <= hi for name, (lo, hi) in cls.ranges.items())
-
-
-def _kernel(size: int) -> np.ndarray | None:
-    if size <= 1:
-        return None
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-
-
-def _smooth(pts: np.ndarray) -> np.ndarray:
-    """A pixel contour's staircase makes its length too long; a light polygon fit doesn't."""
-    return cv2.approxPolyDP(pts.reshape(-1, 1, 2), 0.5, True)
-
-
-def _rotate(pts: np.ndarray, deg: float) -> np.ndarray:
-    a = math.radians(deg)
-    c, s = math.cos(a), math.sin(a)
-    return pts @ np.array([[c, -s], [s, c]]).T
-
-
-def _raster(pts: np.ndarray, reach: float, size: int) -> np.ndarray:
-    img = np.zeros((size, size), np.uint8)
-    grid = np.round(((pts + reach) / GRID_MM) * 16).astype(np.int32)
-    cv2.fillPoly(img, [grid.reshape(-1, 1, 2)], 1, lineType=cv2.LINE_8, shift=4)
-    return img
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    inter = int(np.count_nonzero(a & b))
-    union = int(np.count_nonzero(a | b))
-    return inter / union if union else 0.0
+    for name, (lo, hi) in cls.ranges.items():
+        v = feats.get(name)
+        if v is None or not (lo <= v <= hi):
+            return False
+    return True

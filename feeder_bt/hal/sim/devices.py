@@ -51,18 +51,18 @@ class SimConveyor:
         return job.at(t_end, lambda t: job.succeed(t))
 
     def set_speed(self, mm_s: float) -> Job:
-        return self._ends_at(f"{self.name}.set_speed", self.axis.jog(self.world.t, mm_s))
+        return self._ends_at(f"{self.name}.set_speed", self.axis.jog(self.world.now(), mm_s))
 
     def move(self, distance_mm: float, mm_s: float) -> Job:
-        return self._ends_at(f"{self.name}.move", self.axis.move(self.world.t, distance_mm, mm_s))
+        return self._ends_at(f"{self.name}.move", self.axis.move(self.world.now(), distance_mm, mm_s))
 
     def stop(self) -> Job:
-        return self._ends_at(f"{self.name}.stop", self.axis.jog(self.world.t, 0.0))
+        return self._ends_at(f"{self.name}.stop", self.axis.jog(self.world.now(), 0.0))
 
     def shake(self, amplitude_mm: float, cycles: int) -> Job:
         """Back-and-forth moves, then back to the speed it had."""
         before = self.axis.commanded
-        t = self.axis.jog(self.world.t, 0.0)
+        t = self.axis.jog(self.world.now(), 0.0)
         for _ in range(max(1, cycles)):
             t = self.axis.move(t, amplitude_mm, self.axis.max_speed)
             t = self.axis.move(t, -amplitude_mm, self.axis.max_speed)
@@ -98,7 +98,7 @@ class SimCamera:
 
     def grab(self) -> Job:
         w = self.world
-        t = w.t
+        t = w.now()
         self.frames += 1
         index = self.frames
         latch = w.galil_count(t)
@@ -146,7 +146,7 @@ class SimRobot:
             except HalError as e:
                 job.fail(e)
 
-        return job.at(self.world.t + duration, done)
+        return job.at(self.world.now() + duration, done)
 
     def pick(self, target: PickTarget) -> Job:
         w = self.world
@@ -154,18 +154,18 @@ class SimRobot:
         if err:
             return DoneJob("robot.pick", error=err)
         try:
-            _, t_grip = w.plan_pick(target, w.t)
+            _, t_grip = w.plan_pick(target, w.now())
         except HalError as e:
             return DoneJob("robot.pick", error=e)
-        return self._run("robot.pick", t_grip - w.t, lambda t: w.grip(target, t))
+        return self._run("robot.pick", t_grip - w.now(), lambda t: w.grip(target, t))
 
     def place(self, pose: Pose) -> Job:
         w = self.world
         d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
         duration = w.robot_model.arch_time(d, w.robot_speed_pct) + w.cell.robot.release_s
         job = self._run("robot.place", duration, lambda t: w.release(pose, t))
-        if isinstance(job, TimedJob):
-            job.on_cancel = lambda: w.release(pose, w.t)   # V+ finishes the place it began
+        if isinstance(job, TimedJob):     # a place is never abandoned: the part is let go
+            job.on_cancel = lambda: job.succeed(w.release(pose, w.now()))
         return job
 
     def move_to(self, pose: Pose) -> Job:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ...clock import SimClock
+from ...clock import EPS, SimClock
 from ...encoder import diff, wrap
 from ...errors import AccountingError, EnvelopeError, MissedGrab
 from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
@@ -126,11 +126,19 @@ class World:
         self._timed = [e for e in self._timed if e[1] != seq]
         heapq.heapify(self._timed)
 
+    def now(self) -> float:
+        """The clock's time, with every event up to it processed: commands issued between
+        ticks (an operator's stop, a leaf's terminate) happen at the right instant."""
+        t = self.clock.now()
+        if t > self.t:
+            self.step(t)
+        return self.t
+
     def step(self, now: float) -> None:
         """Process every event up to ``now`` in time order."""
         while True:
             t, kind = self._next_event()
-            if t is None or t > now:
+            if t is None or t > now + EPS:
                 break
             self.t = max(self.t, t)
             kind(self.t)
@@ -257,11 +265,11 @@ class World:
 
     # ------------------------------------------------------------------ sensing
     def galil_count(self, t: float | None = None) -> int:
-        t = self.t if t is None else t
+        t = self.now() if t is None else t
         return wrap(round(self.horizontal.pos(t) * self.cpm), self.cell.encoder.conveyor_bits)
 
     def robot_count(self, t: float | None = None) -> int:
-        t = self.t if t is None else t
+        t = self.now() if t is None else t
         enc = self.cell.encoder
         return wrap(enc.robot_start + round(self.horizontal.pos(t) * self.cpm), enc.robot_bits)
 
