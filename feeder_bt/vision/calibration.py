@@ -59,8 +59,3 @@ class Calibration:
         """``(N, 2)`` belt ``(x, y)`` mm -> ``(N, 2)`` pixel ``(u, v)``."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         return (xy - self._origin) @ self._inv.T
-
-    def angle_px_to_mm(self, angle_rad: float) -> float:
-        """Direction of an image vector at angle (atan2(dv, du)) -> belt-frame angle, rad."""
-        d = self._m @ np.array([math.cos(angle_rad), math.sin(angle_rad)])
-        return math.atan2(d[1], d[0])

@@ -3,8 +3,11 @@
 It sees only pixels, the cell's calibration and the recipe — never ground truth.
 Pipeline: golden-image subtraction (dark parts become bright), threshold, morphology,
 external contours; blobs touching the image border or smaller than ``min_area_mm2`` are
-rejected; every feature of ``FEATURES`` is measured in mm on the contour mapped through
-the calibration; the first recipe class whose ranges all hold names the part and pose.
+rejected; every feature of ``FEATURES`` is measured in mm (mm² for areas) through the
+calibration, corrected for pixelisation so that it is close to the physical value (a
+50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
+names the part and pose. Position is the blob's area centroid, which is the part frame's
+origin (``geometry``).
 Merged (touching) parts fall outside every class and are rejected, so they are never
 picked.
 
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
@@ -36,6 +40,7 @@ from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .calibration import Calibration
 from .features import FEATURES
 
+_FINE = 4                      # upsampling of the sub-pixel outline used for orientation
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
 
@@ -95,59 +100,26 @@ def _from_frame(vec: np.ndarray, alpha: float) -> np.ndarray:
     return np.array([vec[0] * c - vec[1] * s, vec[0] * s + vec[1] * c])
 
 
-def _refine_alpha(q: np.ndarray, half: np.ndarray, cut: np.ndarray, cut_len: float) -> float:
-    """Small rotation (rad) that best aligns straight side points with the rectangle."""
-    num = den = 0.0
-    for axis in (0, 1):                       # sides perpendicular to this axis
-        other = 1 - axis
-        for sign in (-1.0, 1.0):
-            near = np.abs(q[:, axis] - sign * half[axis]) < 1.5
-            along = q[:, other]
-            inner = np.abs(along) < half[other] - 4.0
-            corner = np.array([0.0, 0.0])
-            corner[axis] = sign * half[axis]
-            keep = near & inner
-            if keep.sum() < 5:
-                continue
-            p = q[keep]
-            # exclude the cut region
-            far = np.hypot(p[:, 0] - cut[0], p[:, 1] - cut[1]) > cut_len + 3.0
-            p = p[far]
-            if len(p) < 5:
-                continue
-            t = p[:, other] - p[:, other].mean()
-            n = p[:, axis] - p[:, axis].mean()
-            tt = float((t * t).sum())
-            if tt <= 0:
-                continue
-            slope = float((t * n).sum()) / tt  # d(normal)/d(along)
-            # A positive rotation of the points makes the x-side's normal grow with y
-            # (slope -angle for axis 0 along y... keep the sign per axis)
-            ang = -math.atan(slope) if axis == 1 else math.atan(slope)
-            num += ang * tt
-            den += tt
-    return num / den if den > 0 else 0.0
+def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
+    """Cut-corner signature of a closed outline given as dense points in mm.
 
-
-def _corner_signature(pts: np.ndarray, refine: bool = True) -> _CornerSignature | None:
-    """Cut-corner signature of a closed outline given as dense points in mm."""
+    The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
+    from the outline is the cut one; the cut is longer along one side than the other,
+    which tells the faces apart.
+    """
     centre, alpha, half = _rect_frame(pts)
     q = _to_frame(pts, centre, alpha)
     corners = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=float) * half
-    dmin = np.array([np.min(np.hypot(q[:, 0] - c[0], q[:, 1] - c[1])) for c in corners])
-    k = int(np.argmax(dmin))
-    sx, sy = np.sign(corners[k])
+    d2 = ((q[:, None, :] - corners[None, :, :]) ** 2).sum(axis=2).min(axis=0)
+    sx, sy = np.sign(corners[int(np.argmax(d2))])
     f = q * np.array([sx, sy])                # cut corner now at (+, +)
     tol = 1.5
-    top = f[np.abs(f[:, 1] - half[1]) < tol]
-    right = f[np.abs(f[:, 0] - half[0]) < tol]
+    top = f[np.abs(f[:, 1] - half[1]) < tol, 0]
+    right = f[np.abs(f[:, 0] - half[0]) < tol, 1]
     if len(top) == 0 or len(right) == 0:
         return None
-    leg_x = half[0] - float(top[:, 0].max())  # cut length along the side parallel to x
-    leg_y = half[1] - float(right[:, 1].max())
-    if refine:
-        cut = np.array([half[0] * sx, half[1] * sy])
-        alpha += _refine_alpha(q, half, cut, max(leg_x, leg_y))
+    leg_x = half[0] - float(top.max())        # cut length along the side parallel to x
+    leg_y = half[1] - float(right.max())
     corner = _from_frame(np.array([sx, sy]) / math.sqrt(2.0), alpha)
     leg = _from_frame(np.array([-sx, 0.0]) if leg_x >= leg_y else np.array([0.0, -sy]), alpha)
     return _CornerSignature(corner=corner, leg=leg, alpha=alpha)
@@ -186,7 +158,7 @@ class Locator:
         self._golden: np.ndarray | None = None
         for cls in recipe.classes:
             for name in cls.ranges:
-                if name not in FEATURES and name != "mirrored":
+                if name not in FEATURES:
                     raise ValueError(f"class {cls.part}/{cls.pose}: unknown feature {name!r}")
         self._signatures: dict[str, _CornerSignature] = {}
         if recipe.orientation == "cut_corner":
@@ -194,7 +166,7 @@ class Locator:
                 if cls.mirrored is None or cls.part in self._signatures:
                     continue
                 model = _densify(pose_outline(parts[cls.part], _face_up(parts[cls.part])))
-                sig = _corner_signature(model, refine=False)
+                sig = _corner_signature(model)
                 if sig is None:
                     raise ValueError(f"part {cls.part}: no cut corner to orient by")
                 self._signatures[cls.part] = sig
@@ -212,7 +184,10 @@ class Locator:
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
-        img = _grey(image)
+        return self._segment(_grey(image))[0]
+
+    def _segment(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray, float | None]:
+        """Mask, the difference image it was cut from, and the level (None: adaptive)."""
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
             diff = cv2.subtract(golden, img)          # dark parts on a bright belt -> bright
@@ -220,12 +195,15 @@ class Locator:
             diff = cv2.bitwise_not(img)
         th = self.recipe.threshold
         if th.method == "fixed":
+            level: float | None = float(th.value)
             _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
         elif th.method == "otsu":
             level, mask = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
             if level < th.value:
+                level = float(th.value)
                 _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
         elif th.method == "adaptive":
+            level = None
             block = max(3, int(th.block_px) | 1)
             mask = cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
                                          cv2.THRESH_BINARY, block, -th.c)
@@ -235,13 +213,13 @@ class Locator:
             mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
         if self._close is not None:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
-        return mask
+        return mask, diff, level
 
     def locate(self, image: np.ndarray) -> LocateResult:
         """Find, measure and classify every blob in ``image``."""
         t0 = time.perf_counter()
         img = _grey(image)
-        mask = self.foreground(img)
+        mask, diff, level = self._segment(img)
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         h, w = img.shape[:2]
         cal = self.calibration
@@ -251,15 +229,15 @@ class Locator:
         kept: list[np.ndarray] = []
         for c in contours:
             bu, bv, bw, bh = cv2.boundingRect(c)
-            if bw * bh < min_px * 0.5 and cv2.contourArea(c) < min_px * 0.5:
+            if bw * bh < min_px * 0.5:
                 continue                                  # specks: not worth reporting
-            det = self._measure(c)
+            det, xy = self._measure(c)
             if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h:
                 det.reason = "touches border"
             elif det.features["area_mm2"] < self.recipe.min_area_mm2:
                 det.reason = "too small"
             else:
-                self._classify(det, c)
+                self._classify(det, xy, lambda c=c: self._fine_contour(diff, level, c))
             (rejected if det.reason else parts).append(det)
             kept.append(c)
         ms = (time.perf_counter() - t0) * 1e3
@@ -267,68 +245,108 @@ class Locator:
 
     # -------------------------------------------------------------- per blob
 
-    def _measure(self, contour: np.ndarray) -> Detection:
+    def _measure(self, contour: np.ndarray) -> tuple[Detection, np.ndarray]:
+        """Features and centroid of one contour, and the contour in mm.
+
+        The calibration is a similarity (scale, rotation, reflection), so lengths scale by
+        ``mm_per_px``, areas by its square and the ratios and Hu invariants not at all:
+        shape features are measured on the pixel contour (cheaper) and scaled. Angles are
+        only ever taken from the contour mapped to mm.
+        """
         cal = self.calibration
-        uv = contour.reshape(-1, 2).astype(float)
-        xy = cal.px_to_mm(uv).astype(np.float32)
-        mom = cv2.moments(xy)
+        s, s2 = cal.mm_per_px, cal.mm2_per_px2
+        mom = cv2.moments(contour)
         area = abs(mom["m00"])
-        perim = cv2.arcLength(xy, True)
-        # The contour runs through the centres of the boundary pixels: half a pixel
-        # inside the blob. Grow it back so area matches the blob's pixel area.
-        area_px = area + 0.5 * perim * cal.mm_per_px + math.pi * 0.25 * cal.mm2_per_px2
+        uv = contour.reshape(-1, 2)
+        # The contour runs through the centres of the boundary pixels; by Pick's theorem
+        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
+        area_px = area + 0.5 * len(uv) + 1.0
+        # A pixel staircase is up to 8 % longer than the edge it follows: measure the
+        # contour smoothed along itself instead, then move it out the half pixel to the
+        # blob's edge (which adds 2·π·0.5 to a closed convex outline).
+        perim = _smooth_length(uv.astype(float)) + math.pi
         if area > 0:
-            cx, cy = mom["m10"] / mom["m00"], mom["m01"] / mom["m00"]
+            cu, cv = mom["m10"] / mom["m00"], mom["m01"] / mom["m00"]
         else:
-            cx, cy = (float(v) for v in xy.mean(axis=0))
-        (_, _), (rw, rh), _ = cv2.minAreaRect(xy)
-        rw += cal.mm_per_px
-        rh += cal.mm_per_px
-        hull = cv2.convexHull(xy)
-        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) * cal.mm_per_px
+            cu, cv = (float(v) for v in uv.mean(axis=0))
+        (_, _), (rw, rh), _ = cv2.minAreaRect(contour)
+        rw, rh = rw + 1.0, rh + 1.0
+        hull = cv2.convexHull(contour)
+        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
         hu = cv2.HuMoments(mom).ravel() if area > 0 else np.zeros(7)
         feats = {
-            "area_mm2": area_px,
-            "perimeter_mm": perim,
+            "area_mm2": area_px * s2,
+            "perimeter_mm": perim * s,
             "circularity": 4 * math.pi * area_px / (perim * perim) if perim > 0 else 0.0,
             "aspect": max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0,
             "rectangularity": area_px / (rw * rh) if rw * rh > 0 else 0.0,
-            "solidity": area_px / hull_area if hull_area > 0 else 0.0,
+            "solidity": min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0,
             "hu1": float(hu[0]),
             "hu2": float(hu[1]),
         }
-        u, v = cal.mm_to_px(np.array([[cx, cy]]))[0]
-        det = Detection(part=None, pose=None, pickable=False, x_mm=float(cx), y_mm=float(cy),
-                        angle_deg=0.0, u_px=float(u), v_px=float(v), features=feats)
-        det.angle_deg = self._principal_angle(mom) if self.recipe.orientation == \
-            "principal_axis" else 0.0
-        det._xy = xy  # type: ignore[attr-defined]  # mm contour, for the orientation step
-        return det
+        x, y = cal.px_to_mm(np.array([[cu, cv]]))[0]
+        det = Detection(part=None, pose=None, pickable=False, x_mm=float(x), y_mm=float(y),
+                        angle_deg=0.0, u_px=float(cu), v_px=float(cv), features=feats)
+        xy = cal.px_to_mm(uv).astype(np.float32)
+        if self.recipe.orientation == "principal_axis":
+            det.angle_deg = self._principal_angle(cv2.moments(xy))
+        return det, xy
+
+    def _fine_contour(self, diff: np.ndarray, level: float | None,
+                      contour: np.ndarray) -> np.ndarray | None:
+        """The blob's outline in mm to a fraction of a pixel, for orientation.
+
+        A binary contour moves in whole pixels, which limits the angle of a near-axis edge
+        to about 1°. Interpolating the difference image at ``_FINE``x and cutting it at
+        the same level puts the edge where the grey levels say it is.
+        """
+        if level is None:
+            return None
+        h, w = diff.shape
+        bu, bv, bw, bh = cv2.boundingRect(contour)
+        u0, v0 = max(bu - 2, 0), max(bv - 2, 0)
+        u1, v1 = min(bu + bw + 2, w), min(bv + bh + 2, h)
+        k = _FINE
+        up = cv2.resize(diff[v0:v1, u0:u1], ((u1 - u0) * k, (v1 - v0) * k),
+                        interpolation=cv2.INTER_LINEAR)
+        _, m = cv2.threshold(up, level, 255, cv2.THRESH_BINARY)
+        # SIMPLE keeps every vertex of the staircase: the hull and the extremes are intact
+        cs, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if not cs:
+            return None
+        best = max(cs, key=cv2.contourArea)
+        uv = (best.reshape(-1, 2).astype(float) + 0.5) / k - 0.5 + np.array([u0, v0])
+        return self.calibration.px_to_mm(uv)
 
     @staticmethod
     def _principal_angle(mom: dict[str, float]) -> float:
         a = 0.5 * math.atan2(2 * mom["mu11"], mom["mu20"] - mom["mu02"])
         return wrap_deg(math.degrees(a), 180.0)
 
-    def _classify(self, det: Detection, contour: np.ndarray) -> None:
+    def _classify(self, det: Detection, xy: np.ndarray,
+                  fine: Callable[[], np.ndarray | None]) -> None:
+        """First class whose ranges (and face, for chiral parts) fit; else a reason."""
         feats = det.features
         matches = [c for c in self.recipe.classes if _in_ranges(c, feats)]
-        xy = det.__dict__.pop("_xy")
         if not matches:
             det.reason = "touching parts / no class"
             return
         chosen: VisionClass | None = None
+        faces: dict[str, tuple[float, bool] | None] = {}    # part -> (angle, mirrored)
         for cls in matches:
             if cls.mirrored is None:
                 chosen = cls
-                det.angle_deg = self._symmetric_angle(cls, xy)
+                det.angle_deg = self._symmetric_angle(det, xy)
                 break
             sig = self._signatures.get(cls.part) if self.recipe.orientation == "cut_corner" \
                 else None
             if sig is None:
                 chosen = cls                  # no way to tell the faces apart: trust the class
                 break
-            oriented = self._cut_corner(sig, xy)
+            if cls.part not in faces:
+                fxy = fine()
+                faces[cls.part] = self._cut_corner(sig, xy if fxy is None else fxy)
+            oriented = faces[cls.part]
             if oriented is None:
                 continue
             angle, mirrored = oriented
@@ -342,16 +360,13 @@ class Locator:
             return
         det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
 
-    def _symmetric_angle(self, cls: VisionClass, xy: np.ndarray) -> float:
+    def _symmetric_angle(self, det: Detection, xy: np.ndarray) -> float:
+        """Angle of a class without a face to tell: its long axis if it has one, else 0."""
         o = self.recipe.orientation
         if o == "none":
             return 0.0
-        mom = cv2.moments(xy)
-        if o == "principal_axis":
-            return self._principal_angle(mom)
-        (_, _), (rw, rh), _ = cv2.minAreaRect(xy)
-        if min(rw, rh) > 0 and max(rw, rh) / min(rw, rh) > _ELONGATED:
-            return self._principal_angle(mom)
+        if o == "principal_axis" or det.features["aspect"] > _ELONGATED:
+            return self._principal_angle(cv2.moments(xy))
         return 0.0
 
     @staticmethod
@@ -386,14 +401,35 @@ class Locator:
             cv2.arrowedLine(out, c, (int(round(tip[0])), int(round(tip[1]))), (0, 200, 0), 1,
                             cv2.LINE_AA, tipLength=0.25)
             label = f"{det.part}/{det.pose}" + ("" if det.pickable else " (no pick)")
-            cv2.putText(out, label, (c[0] + 6, c[1] - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
-                        (0, 160, 0), 1, cv2.LINE_AA)
+            _label(out, label, c, -6, (0, 160, 0))
         for det in result.rejected:
             c = (int(round(det.u_px)), int(round(det.v_px)))
             cv2.drawMarker(out, c, (0, 0, 230), cv2.MARKER_TILTED_CROSS, 10, 2)
-            cv2.putText(out, det.reason, (c[0] + 6, c[1] + 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
-                        (0, 0, 230), 1, cv2.LINE_AA)
+            _label(out, det.reason, c, 14, (0, 0, 230))
         return out
+
+
+def _label(out: np.ndarray, text: str, at: tuple[int, int], dy: int,
+           colour: tuple[int, int, int]) -> None:
+    """Text beside a point, kept inside the image."""
+    (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.4, 1)
+    x = min(at[0] + 6, out.shape[1] - tw - 2)
+    y = min(max(at[1] + dy, th + 2), out.shape[0] - 4)
+    cv2.putText(out, text, (max(x, 0), y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
+                cv2.LINE_AA)
+
+
+def _smooth_length(uv: np.ndarray, window: int = 5) -> float:
+    """Length of a closed pixel contour after a circular moving average of its points."""
+    n = len(uv)
+    if n < 2 * window:
+        return float(cv2.arcLength(uv.astype(np.float32), True))
+    h = window // 2
+    padded = np.concatenate([uv[-h - 1:], uv, uv[:h]])
+    c = np.cumsum(padded, axis=0)
+    sm = (c[window:] - c[:-window]) / window
+    d = np.diff(np.concatenate([sm, sm[:1]]), axis=0)
+    return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
