@@ -7,6 +7,11 @@ print one clear line and exit non-zero instead of a traceback.
 from __future__ import annotations
 
 
+def one_line(text: str) -> str:
+    """Escape anything that would break a one-line message (a newline inside a YAML key)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class FeederError(Exception):
     """Base of every error the project raises deliberately."""
 
@@ -24,7 +29,7 @@ class ConfigError(FeederError):
         where = ""
         if file:
             where = f"{file}:{line}: " if line else f"{file}: "
-        super().__init__(f"{where}{key + ': ' if key else ''}{message}")
+        super().__init__(one_line(f"{where}{key + ': ' if key else ''}{message}"))
 
 
 class HalError(FeederError):

@@ -10,6 +10,7 @@ from treeutil import bb_get, bb_set, fail, finish, make_ctx, part, pending, scen
 
 from feeder_bt.errors import CommsLost, EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.hal.interfaces import PickTarget, Pose
+from feeder_bt.parts import Part
 from feeder_bt.trees import retrieve
 
 MOTION = ("robot.pick", "robot.place", "robot.move_to", "robot.move_safe", "robot.recover")
@@ -254,3 +255,16 @@ def test_halt_while_picking_cancels_the_pick(tree):
     job = pending(ctx.hal, "robot", "pick")
     root.stop(Status.INVALID)
     assert job.cancelled
+
+
+def test_pick_pre_empted_before_the_grip_puts_the_part_back():
+    ctx = make_ctx()
+    root = retrieve.build(ctx)
+    ctx.queue.put(Part(id=7, type="lens", x_mm=900.0, y_mm=300.0, angle_deg=0.0, latch=0,
+                       located_at=0.0))
+    tick(root, ctx)
+    pick = ctx.hal.last("robot", "pick")
+    assert not pick.done and len(ctx.queue) == 0
+    root.stop(Status.INVALID)                  # the cell pauses mid-pick
+    assert pick.cancelled
+    assert [p.id for p in ctx.queue.peek_all()] == [7]

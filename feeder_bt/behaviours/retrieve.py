@@ -77,15 +77,23 @@ class NextPart(Leaf):
         return Status.SUCCESS
 
 
-class Pick(JobLeaf):
+class PartJob(JobLeaf):
+    """A robot job about the part the retriever chose (``/retrieve/part``)."""
+
     fault_key = "/retrieve/error"
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
         self.bb = client(self, read=("/retrieve/part",))
 
+    @property
+    def part(self) -> Part:
+        return self.bb.get("/retrieve/part")
+
+
+class Pick(PartJob):
     def start(self) -> Job:
-        part: Part = self.bb.get("/retrieve/part")
+        part = self.part
         spec = self.ctx.scenario.parts[part.type]
         self.feedback_message = f"picking part {part.id}"
         return self.ctx.hal.robot.pick(PickTarget(
@@ -93,16 +101,17 @@ class Pick(JobLeaf):
             latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
             tool_offset=tuple(spec.tool_offset)))
 
+    def terminate(self, new_status: Status) -> None:
+        was_running = self.status is Status.RUNNING and self.job is not None and not self.job.done
+        super().terminate(new_status)
+        if new_status is Status.INVALID and was_running:
+            # pre-empted (pause, stop) before the grip: the part is still on the belt
+            self.ctx.queue.put_front(self.part)
 
-class Place(JobLeaf):
-    fault_key = "/retrieve/error"
 
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part",))
-
+class Place(PartJob):
     def start(self) -> Job:
-        part: Part = self.bb.get("/retrieve/part")
+        part = self.part
         place = self.ctx.scenario.parts[part.type].place
         rz = -part.angle_deg if place.orient else 0.0
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))
@@ -114,7 +123,7 @@ class Place(JobLeaf):
             self.on_success(self.job.result)      # pre-empted, but the part was placed
 
     def on_success(self, result: object) -> Status:
-        part: Part = self.bb.get("/retrieve/part")
+        part = self.part
         stats = self.ctx.stats
         stats.retrieved[part.type] += 1
         stats.last_retrieved = part.type
