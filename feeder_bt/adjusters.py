@@ -5,6 +5,7 @@ Each class declares its parameters and defaults in ``PARAMS`` so a scenario vali
 reject a misspelt key before a run starts. The thesis's two algorithms are baselines:
 ``queue_proportional`` (its first attempt) and ``water_marks`` (its Figure 8-2). Both
 change only the horizontal belt speed; the incline and robot speeds pass through.
+``supply_queue`` (ours) controls the supply — the incline — instead; see docs/performance.md.
 """
 
 from __future__ import annotations
@@ -175,6 +176,52 @@ class WaterMarks(Adjuster):
         else:
             new = cur + p["gain"] * (p["median_mm_s"] - cur)
         return self._with_horizontal(inp, self._clamp(new))
+
+
+class SupplyQueue(Adjuster):
+    """Control the supply, not only the conveyor: the incline speed sets how many parts
+    leave the hopper (about ``release_per_mm`` per mm of incline travel), so it is the
+    incline — not the horizontal belt — that decides whether the robot has parts to choose
+    from. Every period the incline % moves by ``gain_pct`` per part of error between the
+    queue and ``target_queue`` (an integral controller), within [``min_incline_pct``,
+    ``max_incline_pct``]; the horizontal speed is pulled a fraction ``pull`` of the way to
+    ``horizontal_mm_s`` each period, which sets the density the supply lands at.
+
+    Unlike the thesis's adjusters, a long queue on a crawling belt does not satisfy it:
+    the belt speed is held, so a long queue means parts passing the robot, and the supply
+    is cut back.
+    """
+
+    NAME = "supply_queue"
+    PARAMS: ClassVar[dict[str, float]] = {
+        "target_queue": 8.0,
+        "gain_pct": 1.0,
+        "min_incline_pct": 20.0,
+        "max_incline_pct": 120.0,
+        "horizontal_mm_s": 200.0,
+        "pull": 0.2,
+        "min_mm_s": 50.0,
+        "max_mm_s": 300.0,
+    }
+
+    def _check(self) -> None:
+        self._check_range()
+        p = self.params
+        if p["min_incline_pct"] > p["max_incline_pct"]:
+            raise AdjusterParamError("min_incline_pct", "must not exceed max_incline_pct")
+        if p["min_incline_pct"] < 0:
+            raise AdjusterParamError("min_incline_pct", "must not be negative")
+        if not 0.0 <= p["pull"] <= 1.0:
+            raise AdjusterParamError("pull", "must be in [0, 1] or the pull overshoots")
+        if not p["min_mm_s"] <= p["horizontal_mm_s"] <= p["max_mm_s"]:
+            raise AdjusterParamError("horizontal_mm_s", "must lie within [min_mm_s, max_mm_s]")
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        p = self.params
+        incline = inp.incline_pct + p["gain_pct"] * (p["target_queue"] - inp.queue_len)
+        incline = min(max(incline, p["min_incline_pct"]), p["max_incline_pct"])
+        h = inp.horizontal_mm_s + p["pull"] * (p["horizontal_mm_s"] - inp.horizontal_mm_s)
+        return Speeds(self._clamp(h), incline, inp.robot_speed_pct)
 
 
 def make_adjuster(name: str, params: Mapping[str, float] | None = None) -> Adjuster:

@@ -4,12 +4,16 @@ traceback (set FEEDER_DEBUG=1 to see one)."""
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
 from pathlib import Path
 
 from .errors import FeederError
+
+# feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
+TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest")
 
 
 def _positive(text: str) -> float:
@@ -30,7 +34,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="feeder", description=__doc__.split("\n")[0])
+    p = _Parser(prog="feeder", description="feeder_bt: a behaviour-tree cell controller for "
+                "vision-based flexible parts feeders, with a simulated cell. Errors are one line; "
+                "set FEEDER_DEBUG=1 for a traceback.")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND",
                            parser_class=_Parser)
 
@@ -49,6 +55,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="live tree view in real-time runs (default unicode)")
     r.add_argument("--no-skip", dest="skip_idle", action="store_false",
                    help="fast runs: tick every tick even when nothing can change")
+    from .run import add_db_options
+    add_db_options(r)
 
     t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
     t.add_argument("scenario")
@@ -60,6 +68,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("check", help="validate scenario and cell YAML files")
     c.add_argument("files", nargs="+")
+
+    r.set_defaults(handler=cmd_run)
+    t.set_defaults(handler=cmd_tree)
+    c.set_defaults(handler=cmd_check)
+    for tool in TOOLS:                  # each tool module adds its own sub-command
+        importlib.import_module(f".tools.{tool}", __package__).add_parser(sub)
     return p
 
 
@@ -70,7 +84,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                           "in real time")
     report = run_job(RunOptions(scenario=args.scenario, cell=args.cell, duration=args.duration,
                                 fast=args.fast, seed=args.seed, report=args.report,
-                                hal=args.hal, view=args.view, skip_idle=args.skip_idle))
+                                hal=args.hal, view=args.view, skip_idle=args.skip_idle,
+                                db=args.db))
     p = report["parts"]
     print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
           f"({report['wall_seconds']:.1f} s wall): retrieved "
@@ -110,9 +125,8 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    handler = {"run": cmd_run, "tree": cmd_tree, "check": cmd_check}[args.command]
     try:
-        return handler(args)
+        return args.handler(args)
     except FeederError as e:
         if os.environ.get("FEEDER_DEBUG"):
             raise

@@ -9,11 +9,39 @@ from typing import Any
 import numpy as np
 
 from .cell import Cell
+from .hal.sim.robot_model import RobotModel
+from .scenario.model import CellSpec, Scenario
 from .ticker import Ticker
 
 
 def _pct(values: list[float], q: float) -> float:
     return round(float(np.percentile(values, q)), 3) if values else 0.0
+
+
+def pick_window(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float, float, float]:
+    """Where a part's centre can be when picked: along the belt up to ``too_far`` (or the
+    belt's end), across it inside the side rails. (x_lo, x_hi, y_lo, y_hi) in mm."""
+    from .hal.sim.world import EDGE_MARGIN_MM
+
+    belt = cell_spec.conveyors["horizontal"]
+    x_hi = min(scenario.retrieve.too_far_mm, belt.length_mm)
+    return 0.0, x_hi, EDGE_MARGIN_MM, belt.width_mm - EDGE_MARGIN_MM
+
+
+def robot_bound(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float]:
+    """(cycle s, parts/min): the shortest pick-and-place cycle the robot model allows at the
+    scenario's robot speed — pick at the best point of the pick window, place, back — and
+    the throughput no feeder setting can beat with this robot. Over part types, the best."""
+    model = RobotModel(cell_spec.robot)
+    window = pick_window(cell_spec, scenario)
+    r = scenario.retrieve
+    cycles = [model.shortest_cycle((spec.place.x, spec.place.y), window, r.robot_speed_pct,
+                                   r.tracking) for spec in scenario.parts.values()]
+    valid = [c for c in cycles if c is not None and c > 0]
+    if not valid:
+        return 0.0, 0.0
+    cycle = min(valid)
+    return cycle, 60.0 / cycle
 
 
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
@@ -36,6 +64,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "misoriented": world.counts["misoriented"] if world else None,
         "lost": world.lost() if world else None,
     }
+    bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario) if cell.scenario
+                              else (0.0, 0.0))
     report: dict[str, Any] = {
         "scenario": cell.scenario.name if cell.scenario else None,
         "cell": cell.cell.name,
@@ -48,6 +78,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "feed_seconds": round(feed_seconds, 3),
         "wall_seconds": round(wall_seconds, 3),
         "parts_per_minute": round(total * 60.0 / feed_seconds, 3) if feed_seconds > 0 else 0.0,
+        "robot_bound_ppm": round(bound_ppm, 3),
+        "robot_bound_cycle_s": round(bound_cycle, 4),
         "parts": parts,
         "faults": dict(s.faults),
         "recoveries": dict(s.recoveries),

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import argparse
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from .cell import Cell, CellState
 from .clock import Clock, RealClock, SimClock
 from .errors import ConfigError
+from .eventlog import EventLog
 from .hal.interfaces import Hal
 from .report import build_report, write_report
 from .scenario import load_scenario
@@ -19,6 +21,7 @@ from .ticker import Ticker
 from .view import LiveView, Progress
 
 STOP_GRACE_S = 30.0        # clock time allowed for the clean-up tree after a stop
+DEFAULT_DB = "runs/feeder.db"   # the command line's event log unless --db / --no-db
 
 
 @dataclass
@@ -32,6 +35,23 @@ class RunOptions:
     hal: str = "sim"
     view: str = "unicode"          # unicode | ascii | none
     skip_idle: bool = True
+    db: str | None = None          # SQLite event log; None or "" for none (CLI: DEFAULT_DB)
+
+
+def add_db_options(parser: argparse.ArgumentParser) -> None:
+    """``--db FILE`` / ``--no-db`` for ``feeder run`` (every CLI run is logged by default)."""
+    parser.add_argument("--db", metavar="FILE.db", default=DEFAULT_DB,
+                        help=f"SQLite event log for `feeder report` (default {DEFAULT_DB})")
+    parser.add_argument("--no-db", dest="db", action="store_const", const=None,
+                        help="do not write the event log")
+
+
+def _start_log(log: EventLog, opts: RunOptions, scenario: Scenario, cell: Cell) -> None:
+    log.start_run({**asdict(opts), "scenario_file": opts.scenario, "cell_file": opts.cell,
+                   "scenario": scenario.name, "cell": cell.cell.name,
+                   "adjust": {"algorithm": scenario.adjust.algorithm,
+                              "params": scenario.adjust.params}})
+    log.attach(cell)
 
 
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
@@ -60,16 +80,22 @@ class _StopRequest:
 
 def run_job(opts: RunOptions) -> dict[str, Any]:
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
+    log = EventLog(opts.db) if opts.db else None      # a bad --db fails before the HAL opens
     hal, clock = make_hal(opts.hal, scenario, cell_spec, opts.seed)
     if not isinstance(clock, SimClock):
         clock = RealClock()
     cell = Cell(cell_spec, hal, clock)
+    if log:
+        _start_log(log, opts, scenario, cell)
     ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
     show: LiveView | Progress | None = None
     if opts.fast:
         show = Progress(cell, opts.duration)
     elif opts.view != "none":
         show = LiveView(cell, fmt=opts.view)
+    every = show.update if show else None
+    if log:     # after each tick: the view, then the log's batch (cheap when not due)
+        every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
 
     request = _StopRequest()
     old = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -84,7 +110,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             ticker.run(until=t_start + opts.duration,
                        stop=lambda: request.requested
                        or cell.state in (CellState.FAULT, CellState.STOPPED),
-                       every=show.update if show else None)
+                       every=every)
         except KeyboardInterrupt:
             pass
         interrupted = request.requested
@@ -102,10 +128,15 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         for sig, handler in old.items():
             signal.signal(sig, handler)
         hal.close()
+        if log:
+            log.flush()               # even when interrupted: nothing buffered is lost
     report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
                           sim_seconds=clock.now() - t_start, feed_seconds=t_stop - t_start,
                           wall_seconds=time.monotonic() - wall0, interrupted=interrupted)
     if opts.report:
         Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
         write_report(report, opts.report)
+    if log:
+        log.finish(report)
+        log.close()
     return report

@@ -14,6 +14,7 @@ import pytest
 from feeder_bt.cli import main
 
 DOCS = [Path("README.md"), *sorted(Path("docs").glob("*.md"))]
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def commands() -> list[tuple[str, str]]:
@@ -47,16 +48,32 @@ def test_docs_have_examples():
 
 @pytest.mark.parametrize("doc,line", commands())
 def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
+    args = shlex.split(line)[1:]
+    if args[0] in ("locate", "recipe", "report"):  # they read what `render` / `run --db` wrote
+        cmds = commands()
+        for d, earlier in cmds[:cmds.index((doc, line))]:
+            prev = shlex.split(earlier)[1:]
+            if d == doc and (prev[0] == "render" if args[0] != "report" else args[1] in prev):
+                _run(doc, earlier, tmp_path, monkeypatch)
+    _run(doc, line, tmp_path, monkeypatch)
+
+
+def _run(doc, line, tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)
     argv = shortened(shlex.split(line)[1:])
     for flag in ("-o", "--report"):           # write outputs into a scratch folder
         if flag in argv:
             i = argv.index(flag)
             argv[i + 1] = str(tmp_path / Path(argv[i + 1]).name)
-    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/")) else a for a in argv]
+    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/")) else a
+            for a in argv]
     if argv[0] == "check":                    # expand globs the shell would expand
         argv = [argv[0]] + [str(p) for a in argv[1:] for p in sorted(Path.cwd().glob(
             a[len(str(Path.cwd())) + 1:])) or [Path(a)]]
     if argv[0] == "tree" and argv[argv.index("--format") + 1] in ("svg", "png"):
         pytest.importorskip("shutil").which("dot") or pytest.skip("Graphviz not installed")
     monkeypatch.chdir(tmp_path)
+    argv = [str(p) for a in argv                # globs over files earlier commands wrote
+            for p in (sorted(Path().glob(a)) if "*" in a and not Path(a).is_absolute() else [a])]
     assert main(argv) == 0, f"{doc}: {line}"

@@ -139,11 +139,19 @@ class Enqueue(Leaf):
 
 
 class QueueEmpty(Leaf):
-    """Incremental mode: look again only when the robot has taken what was found."""
+    """Incremental mode: look again only when every part found has been dealt with — placed,
+    missed, out of reach or too far — and the gripper is empty. An empty queue alone is
+    not enough: the part just taken from it is still on the belt until the grip, and an
+    advance requested meanwhile would move it from under the robot (thesis 1.2.3.4: the
+    original feeder ran find, advance, pick strictly in series)."""
 
     def update(self) -> Status:
-        robot_busy = self.ctx.hal.robot.holding()
-        return Status.SUCCESS if len(self.ctx.queue) == 0 and not robot_busy else Status.RUNNING
+        if len(self.ctx.queue) or self.ctx.hal.robot.holding():
+            return Status.RUNNING
+        c = self.ctx.stats.counts
+        dealt = (self.ctx.stats.total_retrieved + c["missed"] + c["unreachable"]
+                 + c["too_far"])
+        return Status.SUCCESS if dealt >= c["located"] else Status.RUNNING
 
 
 class AdvanceIfNothing(Leaf):

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import importlib
 import inspect
 import math
 import os
@@ -57,6 +56,7 @@ from feeder_bt.scenario.model import (
     VisionClass,
     VisionRecipe,
 )
+from feeder_bt.scenario.plugins import import_near
 from feeder_bt.vision.features import FEATURES
 
 __all__ = [
@@ -69,7 +69,7 @@ __all__ = [
 # ============================================================================ allowed values
 
 PRESENT_MODES: tuple[str, ...] = ("continuous", "incremental")
-RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline")
+RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline", "shortest_cycle")
 THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
@@ -197,6 +197,12 @@ ADJUST_PARAMS: dict[str, dict[str, Range]] = {
         "target": NON_NEGATIVE, "gain": POSITIVE,
         "min_mm_s": POSITIVE, "max_mm_s": POSITIVE, "nominal_mm_s": POSITIVE,
     },
+    "supply_queue": {
+        "target_queue": NON_NEGATIVE, "gain_pct": NON_NEGATIVE,
+        "min_incline_pct": Range(0, 200), "max_incline_pct": Range(0, 200),
+        "horizontal_mm_s": POSITIVE, "pull": Range(0, 1),
+        "min_mm_s": POSITIVE, "max_mm_s": POSITIVE,
+    },
 }
 ADJUST_ALGORITHMS: tuple[str, ...] = tuple(ADJUST_PARAMS)
 ENUMS[(AdjustParams, "algorithm")] = ADJUST_ALGORITHMS
@@ -210,6 +216,10 @@ ADJUST_ORDER: tuple[tuple[str, str, str, bool], ...] = (
     ("queue_proportional", "min_mm_s", "nominal_mm_s", False),
     ("queue_proportional", "nominal_mm_s", "max_mm_s", False),
     ("queue_proportional", "min_mm_s", "max_mm_s", False),
+    ("supply_queue", "min_incline_pct", "max_incline_pct", False),
+    ("supply_queue", "min_mm_s", "horizontal_mm_s", False),
+    ("supply_queue", "horizontal_mm_s", "max_mm_s", False),
+    ("supply_queue", "min_mm_s", "max_mm_s", False),
 )
 
 LEAF_RE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*$")
@@ -570,7 +580,7 @@ class _Ctx:
                                    f"got {_short(spec)}")
         mod_name, cls_name = spec.split(":")
         try:
-            mod = importlib.import_module(mod_name)
+            mod = import_near(mod_name, Path(self.file).parent)
         except BaseException as e:  # noqa: BLE001 - any failure of foreign code is one line
             if isinstance(e, KeyboardInterrupt):
                 raise
@@ -756,17 +766,23 @@ def _compose(path: Path, ctx: _Ctx) -> MappingNode:
     return root
 
 
-def _load_cell(path: Path) -> tuple[CellSpec, _Ctx]:
+def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _Ctx]:
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
     cell = ctx.dataclass(CellSpec, root, "", fill={"path": path})
     _check_cell(cell, ctx)
+    if calibration_files:
+        from ..calibration.files import apply_calibration_file  # local: avoids a cycle
+        cell = apply_calibration_file(cell, line=ctx.line("camera.calibration_file"))
     return cell, ctx
 
 
-def load_cell(path: str | Path) -> CellSpec:
-    """Load and validate a cell description (the hardware a scenario runs on)."""
-    return _load_cell(Path(path))[0]
+def load_cell(path: str | Path, calibration_files: bool = True) -> CellSpec:
+    """Load and validate a cell description (the hardware a scenario runs on).
+
+    ``calibration_files=False`` leaves out the calibration files the cell names: the
+    calibration commands load the cell before they write those files."""
+    return _load_cell(Path(path), calibration_files)[0]
 
 
 def load_scenario(path: str | Path, cell: str | Path | None = None

@@ -187,6 +187,9 @@ class CameraSpec:
     grab_s: float = 0.040
     vision_latency_s: float = 0.030      # virtual time a recipe takes on a fast run
     calibration: CameraCalibration = field(default_factory=CameraCalibration)
+    # simulated cell only: how the simulated camera really maps (None: exactly as calibrated)
+    sim_truth: CameraCalibration | None = None
+    calibration_file: str | None = None  # YAML replacing `calibration` (calibration.files)
     render: RenderSpec = field(default_factory=RenderSpec)
 
 

@@ -4,13 +4,33 @@
 from __future__ import annotations
 
 import importlib
+import sys
+from pathlib import Path
+from types import ModuleType
 
 from ..errors import ConfigError
 
 
-def load_class(spec: str) -> type:
+def import_near(mod_name: str, base: Path | None = None) -> ModuleType:
+    """Import a scenario's leaf module; a project's own package (``examples.leaves`` next
+    to its scenarios) is found from the current folder or the scenario's folder and its
+    parent, as a user running ``feeder`` there would expect."""
+    try:
+        return importlib.import_module(mod_name)
+    except ModuleNotFoundError as e:
+        if e.name != mod_name.split(".")[0]:
+            raise
+        dirs = [Path.cwd()] + ([base, base.parent] if base is not None else [])
+        added = [str(d.resolve()) for d in dirs if str(d.resolve()) not in sys.path]
+        if not added:
+            raise
+        sys.path.extend(added)
+        return importlib.import_module(mod_name)
+
+
+def load_class(spec: str, base: Path | None = None) -> type:
     mod_name, _, cls_name = spec.partition(":")
     try:
-        return getattr(importlib.import_module(mod_name), cls_name)
+        return getattr(import_near(mod_name, base), cls_name)
     except (ImportError, AttributeError) as e:
         raise ConfigError(f"cannot load leaf class {spec!r}: {e}") from None

@@ -243,6 +243,31 @@ class Locator:
         ms = (time.perf_counter() - t0) * 1e3
         return LocateResult(parts=parts, rejected=rejected, ms=ms, contours=kept)
 
+    def measure_blobs(self, image: np.ndarray) -> list[Detection]:
+        """Every blob's features, unclassified, measured exactly as ``locate`` measures them.
+
+        For tools that tune a recipe (``feeder recipe suggest``): one feature extractor for
+        tuning and feeding. ``reason`` marks blobs ``locate`` would reject before
+        classification ("touches border", "too small"); ``part`` is always None.
+        """
+        img = _grey(image)
+        mask = self._segment(img)[0]
+        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        h, w = img.shape[:2]
+        min_px = self.recipe.min_area_mm2 / self.calibration.mm2_per_px2
+        out: list[Detection] = []
+        for c in contours:
+            bu, bv, bw, bh = cv2.boundingRect(c)
+            if bw * bh < min_px * 0.5:
+                continue
+            det, _ = self._measure(c)
+            if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h:
+                det.reason = "touches border"
+            elif det.features["area_mm2"] < self.recipe.min_area_mm2:
+                det.reason = "too small"
+            out.append(det)
+        return out
+
     # -------------------------------------------------------------- per blob
 
     def _measure(self, contour: np.ndarray) -> tuple[Detection, np.ndarray]:

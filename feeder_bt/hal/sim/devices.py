@@ -85,7 +85,7 @@ class SimConveyor:
 class SimCamera:
     def __init__(self, world: World, cell: CellSpec, seed: int) -> None:
         self.world, self.cell, self.seed = world, cell, seed
-        self.renderer = Renderer(cell.camera)
+        self.renderer = Renderer(cell.camera, truth=cell.camera.sim_truth)
         self.calibration = Calibration(cell.camera.calibration)
         cam = cell.camera
         corners = self.calibration.px_to_mm(np.array(

@@ -40,3 +40,43 @@ class RobotModel:
         bx, by = self.spec.base_mm
         r = math.hypot(x - bx, y - by)
         return self.spec.inner_reach_mm <= r <= self.spec.reach_mm
+
+    def pick_place_time(self, start: tuple[float, float], pick: tuple[float, float],
+                        place: tuple[float, float], speed_pct: float,
+                        tracking: bool = True) -> float:
+        """One pick-and-place from ``start``: arch to the pick, (settle), grip, arch to the
+        place, release — the same sum the simulated robot's jobs take."""
+        sp = self.spec
+        return (self.arch_time(math.dist(start, pick), speed_pct)
+                + (sp.track_settle_s if tracking else 0.0) + sp.grip_s
+                + self.arch_time(math.dist(pick, place), speed_pct) + sp.release_s)
+
+    def best_pick_point(self, place: tuple[float, float],
+                        window: tuple[float, float, float, float]) -> tuple[float, float] | None:
+        """The reachable point of ``window`` (x_lo, x_hi, y_lo, y_hi) nearest ``place``:
+        where a part would have to lie for the shortest possible cycle; None if none is."""
+        x_lo, x_hi, y_lo, y_hi = window
+        near = (min(max(place[0], x_lo), x_hi), min(max(place[1], y_lo), y_hi))
+        if self.reachable(*near):
+            return near
+        best: tuple[float, float] | None = None
+        steps = 200
+        for i in range(steps + 1):           # the reach cuts the rectangle: search it
+            x = x_lo + (x_hi - x_lo) * i / steps
+            for j in range(steps + 1):
+                y = y_lo + (y_hi - y_lo) * j / steps
+                if self.reachable(x, y) and (best is None
+                                             or math.dist((x, y), place) < math.dist(best, place)):
+                    best = (x, y)
+        return best
+
+    def shortest_cycle(self, place: tuple[float, float],
+                       window: tuple[float, float, float, float], speed_pct: float,
+                       tracking: bool = True) -> float | None:
+        """The shortest pick-and-place cycle the model allows: start at the place pose,
+        pick at the best point of ``window``, come back and release. Throughput can never
+        beat ``60 / shortest_cycle`` parts/min at this speed."""
+        pick = self.best_pick_point(place, window)
+        if pick is None:
+            return None
+        return self.pick_place_time(place, pick, place, speed_pct, tracking)

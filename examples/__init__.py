@@ -1,0 +1,1 @@
+"""Example leaf classes a scenario names by import path (``examples.leaves:Class``)."""

@@ -1,0 +1,29 @@
+"""Guided calibration (thesis 8.2.1.7): camera <-> belt, belt <-> robot, tool offsets.
+
+Pure fitting functions (``fit_camera``, ``fit_belt``, ``fit_tool``) and small procedures
+that drive a cell through the HAL interfaces only, so they run on the simulated cell now
+and on a real cell once its drivers exist. ``files`` reads and writes calibration files.
+"""
+
+from .belt import BeltFit, BeltTouch, belt_procedure, fit_belt
+from .camera import (
+    DEFAULT_TARGETS,
+    CameraFit,
+    Target,
+    TargetPose,
+    calibrate_camera_image,
+    camera_procedure,
+    fit_camera,
+    window_error_mm,
+)
+from .common import CalibrationError, sim_waiter
+from .files import apply_calibration_file, read_camera_calibration, write_calibration_file
+from .tool import ToolFit, ToolTouch, fit_tool, tool_procedure
+
+__all__ = [
+    "DEFAULT_TARGETS", "BeltFit", "BeltTouch", "CalibrationError", "CameraFit", "Target",
+    "TargetPose", "ToolFit", "ToolTouch", "apply_calibration_file", "belt_procedure",
+    "calibrate_camera_image", "camera_procedure", "fit_belt", "fit_camera", "fit_tool",
+    "read_camera_calibration", "sim_waiter", "tool_procedure", "window_error_mm",
+    "write_calibration_file",
+]

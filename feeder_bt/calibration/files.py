@@ -1,0 +1,140 @@
+"""Calibration files: what ``feeder calibrate ... --write`` writes, and how a cell uses one.
+
+A cell description may name its camera calibration file instead of (or as well as)
+writing the numbers inline::
+
+    camera:
+      calibration_file: calibration/camera.yaml     # relative to the cell file
+
+The file's ``origin_mm``, ``mm_per_px`` and ``rotation_deg`` then replace
+``camera.calibration``; anything else in it (residuals, date, target) is a record for
+people. So recalibrating a cell rewrites one small file and never the cell description.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import yaml
+from yaml.nodes import MappingNode, ScalarNode, SequenceNode
+
+from ..errors import ConfigError
+from ..scenario.model import CameraCalibration, CellSpec
+
+REQUIRED = ("origin_mm", "mm_per_px", "rotation_deg")
+_CONSTRUCT = yaml.constructor.SafeConstructor()
+
+
+def write_calibration_file(path: str | Path, values: dict[str, Any], header: str) -> Path:
+    """Write ``values`` as YAML under a ``# header`` comment; returns the path written."""
+    path = Path(path)
+    text = "".join(f"# {line}\n" for line in header.splitlines())
+    text += yaml.safe_dump(values, sort_keys=False, default_flow_style=None)
+    try:
+        if path.parent and not path.parent.exists():
+            path.parent.mkdir(parents=True)
+        path.write_text(text, encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(f"cannot write: {e.strerror or e}", file=str(path)) from None
+    return path
+
+
+def calibration_path(cell: CellSpec) -> Path | None:
+    """The camera calibration file a cell names, resolved against the cell file's folder."""
+    name = getattr(cell.camera, "calibration_file", None)
+    if not name:
+        return None
+    p = Path(name)
+    return p if p.is_absolute() else Path(os.path.normpath(Path(cell.path).parent / p))
+
+
+def read_camera_calibration(path: str | Path) -> CameraCalibration:
+    """Read and check a camera calibration file; every problem is one ``FILE:LINE: key:``
+    line."""
+    file = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError("calibration file not found (write it with `feeder calibrate "
+                          "camera CELL --write FILE`)", file=file) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"cannot read: {getattr(e, 'strerror', None) or e}",
+                          file=file) from None
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        raise ConfigError(f"YAML syntax error: {getattr(e, 'problem', None) or e}", file=file,
+                          line=mark.line + 1 if mark else None) from None
+    if not isinstance(root, MappingNode):
+        raise ConfigError("expected a mapping with origin_mm, mm_per_px, rotation_deg",
+                          file=file, line=root.start_mark.line + 1 if root else 1)
+    nodes: dict[str, Any] = {}
+    for k, v in root.value:
+        key = k.value if isinstance(k, ScalarNode) else str(k)
+        if key in nodes:
+            raise ConfigError(f"duplicate key {key!r}", file=file, line=k.start_mark.line + 1,
+                              key=key)
+        nodes[key] = v
+    for key in REQUIRED:
+        if key not in nodes:
+            raise ConfigError(f"missing required key {key!r}", file=file,
+                              line=root.start_mark.line + 1)
+
+    def number(node: Any, key: str) -> float:
+        line = node.start_mark.line + 1
+        v = _CONSTRUCT.construct_object(node) if isinstance(node, ScalarNode) else None
+        if isinstance(v, str) and node.style is None:      # PyYAML reads 1e3 as a string
+            try:
+                v = float(v)
+            except ValueError:
+                pass
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise ConfigError(f"expected a finite number, got {_show(node)}", file=file,
+                              line=line, key=key)
+        return float(v)
+
+    o = nodes["origin_mm"]
+    if not isinstance(o, SequenceNode) or len(o.value) != 2:
+        raise ConfigError(f"expected [x, y] in mm, got {_show(o)}", file=file,
+                          line=o.start_mark.line + 1, key="origin_mm")
+    origin = (number(o.value[0], "origin_mm"), number(o.value[1], "origin_mm"))
+    s = number(nodes["mm_per_px"], "mm_per_px")
+    if s <= 0:
+        raise ConfigError(f"must be > 0, got {s:g}", file=file,
+                          line=nodes["mm_per_px"].start_mark.line + 1, key="mm_per_px")
+    r = number(nodes["rotation_deg"], "rotation_deg")
+    if not -180.0 <= r <= 180.0:
+        raise ConfigError(f"must be in [-180, 180], got {r:g}", file=file,
+                          line=nodes["rotation_deg"].start_mark.line + 1, key="rotation_deg")
+    return CameraCalibration(origin_mm=origin, mm_per_px=s, rotation_deg=r)
+
+
+def _show(node: Any) -> str:
+    if isinstance(node, ScalarNode):
+        return repr(node.value)[:40]
+    return "a list" if isinstance(node, SequenceNode) else "a mapping"
+
+
+def apply_calibration_file(cell: CellSpec, line: int | None = None) -> CellSpec:
+    """The cell with ``camera.calibration`` replaced by its ``camera.calibration_file``'s.
+
+    A cell without ``calibration_file`` comes back unchanged (the same object). ``line``
+    (of the key in the cell file) only makes a missing-file message point at it.
+    """
+    path = calibration_path(cell)
+    if path is None:
+        return cell
+    if not path.is_file():
+        what = "is not a file" if path.exists() else "not found"
+        raise ConfigError(f"calibration file {cell.camera.calibration_file!r} {what} (looked "
+                          f"for {path}; write it with `feeder calibrate camera CELL --write "
+                          "FILE`)", file=str(cell.path), line=line,
+                          key="camera.calibration_file")
+    cal = read_camera_calibration(path)
+    camera = dataclasses.replace(cell.camera, calibration=cal)
+    return dataclasses.replace(cell, camera=camera)

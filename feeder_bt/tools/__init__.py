@@ -1,0 +1,1 @@
+"""Operator tools beyond `feeder run`, one module per sub-command (wired in cli.py)."""

@@ -1,0 +1,77 @@
+"""What the image tools share: one-line input errors, image reading, a scenario's locator."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import FeederError
+from ..scenario import load_scenario
+from ..scenario.model import CellSpec, Scenario
+from ..scenario.plugins import load_class
+from ..vision.calibration import Calibration
+from ..vision.locator import Locator
+
+
+class BadInput(FeederError):
+    """A missing or unreadable input file or a wrong argument: exit 2, like a YAML mistake."""
+
+    exit_code = 2
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """A grey uint8 image from a PNG/JPG/BMP file, or a one-line error naming the file."""
+    p = Path(path)
+    if not p.is_file():
+        raise BadInput(f"{p}: image not found")
+    img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise BadInput(f"{p}: cannot read as an image (PNG, JPG or BMP)")
+    return img
+
+
+def write_image(path: str | Path, image: np.ndarray) -> None:
+    """Write an image, creating its folder; a failure is one line naming the file."""
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise BadInput(f"{p.parent}: cannot create folder: {e.strerror or e}") from None
+    if not cv2.imwrite(str(p), image):
+        raise BadInput(f"{p}: cannot write image")
+
+
+def scenario_locator(path: str, cell: str | None = None
+                     ) -> tuple[Scenario, CellSpec, Locator]:
+    """The locator the cell would build for this scenario (its ``vision.leaf`` if it has one)."""
+    scenario, cell_spec = load_scenario(path, cell)
+    cls = load_class(scenario.vision.leaf) if scenario.vision.leaf else Locator
+    locator = cls(scenario.vision, scenario.parts, Calibration(cell_spec.camera.calibration))
+    return scenario, cell_spec, locator
+
+
+def load_golden(locator: Locator, golden: str | None, command: str) -> np.ndarray | None:
+    """Give the locator its golden image. Says so on stderr when the recipe wants one and
+    none was given (subtraction is then off), or when one is given but not used."""
+    if not locator.recipe.golden_image:
+        if golden:
+            print(f"{command}: note: the recipe does not subtract a golden image; "
+                  "--golden ignored", file=sys.stderr)
+        return None
+    if golden is None:
+        print(f"{command}: note: the recipe subtracts a golden image but no --golden was "
+              "given: thresholding the raw image instead", file=sys.stderr)
+        return None
+    img = read_image(golden)
+    locator.set_golden(img)
+    return img
+
+
+def check_size(path: str, image: np.ndarray, golden: np.ndarray | None) -> None:
+    """Subtraction needs the golden image and the frame to be the same size."""
+    if golden is not None and golden.shape != image.shape:
+        raise BadInput(f"{path}: image is {image.shape[1]}x{image.shape[0]} px but the "
+                       f"golden image is {golden.shape[1]}x{golden.shape[0]} px")

@@ -1,0 +1,104 @@
+"""``feeder report FILE.db``: what the event log says about past runs — a summary table,
+``--json`` for scripts, ``--plot`` for speed, queue and parts/min against time."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..errors import FeederError
+from ..eventlog import EventLogError, open_readonly
+from .runs_db import run_ids, summary
+
+COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
+           "located", "missed", "lost", "faults")
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register ``report`` on the ``feeder`` sub-command parsers."""
+    p = subparsers.add_parser("report", help="summarise and plot runs from the event log")
+    p.add_argument("db", metavar="FILE.db", help="event log written by `feeder run --db`")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--run", type=int, metavar="ID", help="only this run")
+    which.add_argument("--last", action="store_true", help="only the latest run")
+    p.add_argument("--plot", metavar="OUT.png",
+                   help="draw speed, queue and parts/min against time (the chosen run, "
+                        "else the latest)")
+    p.add_argument("--json", action="store_true", help="print the summaries as JSON")
+    p.set_defaults(handler=cmd_report)
+    return p
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Print the summaries; write the plot if asked. Errors are EventLogError (exit 2)."""
+    conn = open_readonly(args.db)
+    try:
+        ids = run_ids(conn, args.run, args.last)
+        rows = [summary(conn, i) for i in ids]
+        if args.json:
+            print(json.dumps(rows if len(rows) > 1 else rows[0], indent=2))
+        else:
+            print(format_table(rows))
+        if args.plot:
+            write_plot(conn, ids[-1], args.plot)
+            print(f"plot: {args.plot} (run {ids[-1]})")
+    finally:
+        conn.close()
+    return 0
+
+
+def write_plot(conn: Any, run_id: int, out: str | Path) -> None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise EventLogError("--plot needs matplotlib: pip install 'matplotlib>=3.7'") from None
+    from .plots import plot_run
+    fig = plot_run(conn, run_id)
+    try:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=100)
+    except (OSError, ValueError) as e:
+        raise EventLogError(f"cannot write {out}: {e}") from None
+
+
+def _cell(key: str, row: dict[str, Any]) -> str:
+    value = row.get({"parts/min": "parts_per_minute"}.get(key, key))
+    if value is None:
+        return "-"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {v}" for k, v in value.items()) or "0"
+    if isinstance(value, float):
+        return f"{value:.1f}"
+    return str(value)
+
+
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """Plain aligned columns; numbers right-aligned."""
+    cells = [COLUMNS] + [tuple(_cell(k, r) for k in COLUMNS) for r in rows]
+    widths = [max(len(c[i]) for c in cells) for i in range(len(COLUMNS))]
+    right = {"run", "seed", "duration_s", "parts/min", "located", "missed", "lost"}
+    return "\n".join("  ".join(c.rjust(w) if k in right else c.ljust(w)
+                               for k, c, w in zip(COLUMNS, line, widths, strict=True)).rstrip()
+                     for line in cells)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m feeder_bt.tools.report_cmd``: the same command without the ``feeder`` CLI."""
+    parser = argparse.ArgumentParser(prog="feeder")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except FeederError as e:
+        if os.environ.get("FEEDER_DEBUG"):
+            raise
+        print(f"feeder: {e}", file=sys.stderr)
+        return e.exit_code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

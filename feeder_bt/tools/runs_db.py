@@ -1,0 +1,122 @@
+"""Reading the event log: which runs it holds, their summaries and their time series."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..eventlog import EventLogError
+
+
+@dataclass
+class Series:
+    """One run's time series: samples (every adjust period) and retrieved events."""
+
+    t: np.ndarray
+    queue: np.ndarray
+    horizontal_mm_s: np.ndarray
+    retrieved: np.ndarray                 # cumulative, at each sample
+    retrieved_t: dict[str, np.ndarray]    # retrieval times per part type
+    faults_t: np.ndarray
+    t0: float                             # the run's first event (start command)
+
+
+def run_ids(conn: sqlite3.Connection, run: int | None = None, last: bool = False) -> list[int]:
+    """The runs asked for: one by id, the last one, or all (oldest first)."""
+    try:
+        ids = [r[0] for r in conn.execute("SELECT id FROM runs ORDER BY id")]
+    except sqlite3.Error as e:
+        raise EventLogError(f"cannot read the runs: {e}") from None
+    if run is not None:
+        if run not in ids:
+            raise EventLogError(f"no run {run} in this log (runs: {_ranges(ids) or 'none'})")
+        return [run]
+    if not ids:
+        raise EventLogError("the event log holds no runs yet")
+    return ids[-1:] if last else ids
+
+
+def _ranges(ids: list[int]) -> str:
+    return f"{ids[0]}..{ids[-1]}" if len(ids) > 1 else ", ".join(map(str, ids))
+
+
+def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
+    """The figures of one run: from its final report, or from its events if it has none
+    (a run killed before it could write one)."""
+    try:
+        row = conn.execute("SELECT * FROM runs WHERE id=?", (run_id,)).fetchone()
+        report = json.loads(row["report"]) if row["report"] else None
+        out: dict[str, Any] = {"run": run_id, "scenario": row["scenario"], "cell": row["cell"],
+                               "seed": row["seed"], "hal": row["hal"],
+                               "started": row["started"]}
+        if report is not None:
+            p = report["parts"]
+            out.update(state=report["state"], duration_s=report["feed_seconds"],
+                       parts_per_minute=report["parts_per_minute"], retrieved=p["retrieved"],
+                       located=p["located"], missed=p["missed"], lost=p["lost"],
+                       faults=report["faults"])
+            return out
+        by_type = dict(conn.execute(
+            "SELECT json_extract(data, '$.type'), count(*) FROM events "
+            "WHERE run_id=? AND kind='retrieved' GROUP BY 1", (run_id,)).fetchall())
+        located, t_end = conn.execute(
+            "SELECT sum(kind='located'), max(t) FROM events WHERE run_id=?",
+            (run_id,)).fetchone()
+        faults = dict(conn.execute(
+            "SELECT json_extract(data, '$.kind'), count(*) FROM events "
+            "WHERE run_id=? AND kind='fault' GROUP BY 1", (run_id,)).fetchall())
+    except (sqlite3.Error, json.JSONDecodeError, KeyError, TypeError) as e:
+        raise EventLogError(f"run {run_id}: damaged record ({e})") from None
+    total = sum(by_type.values())
+    duration = float(t_end or 0.0)
+    out.update(state="incomplete", duration_s=round(duration, 3),
+               parts_per_minute=round(total * 60.0 / duration, 3) if duration > 0 else 0.0,
+               retrieved=by_type, located=int(located or 0), missed=None, lost=None,
+               faults=faults)
+    return out
+
+
+def series(conn: sqlite3.Connection, run_id: int) -> Series:
+    """Samples and retrieval/fault times of one run, as arrays for plotting."""
+    try:
+        rows = conn.execute("SELECT t, queue, horizontal_mm_s, retrieved FROM samples "
+                            "WHERE run_id=? ORDER BY t", (run_id,)).fetchall()
+        ret = conn.execute("SELECT t, json_extract(data, '$.type') FROM events "
+                           "WHERE run_id=? AND kind='retrieved' ORDER BY t",
+                           (run_id,)).fetchall()
+        faults = [r[0] for r in conn.execute(
+            "SELECT t FROM events WHERE run_id=? AND kind='fault' ORDER BY t", (run_id,))]
+        t0 = conn.execute("SELECT min(t) FROM events WHERE run_id=?", (run_id,)).fetchone()[0]
+    except sqlite3.Error as e:
+        raise EventLogError(f"run {run_id}: damaged record ({e})") from None
+    arr = np.asarray([tuple(r) for r in rows], dtype=float).reshape(-1, 4)
+    by_type: dict[str, list[float]] = {}
+    for t, kind in ret:
+        by_type.setdefault(str(kind), []).append(t)
+    return Series(t=arr[:, 0], queue=arr[:, 1], horizontal_mm_s=arr[:, 2],
+                  retrieved=arr[:, 3],
+                  retrieved_t={k: np.asarray(v) for k, v in by_type.items()},
+                  faults_t=np.asarray(faults, dtype=float), t0=float(t0 or 0.0))
+
+
+def rolling_ppm(t: np.ndarray, cumulative: np.ndarray, window_s: float = 60.0,
+                t0: float = 0.0, min_span_s: float = 10.0) -> np.ndarray:
+    """Parts/min over the last ``window_s`` at each time, from a cumulative count.
+
+    Before a full window has passed, the rate is over the time since ``t0``; NaN while that
+    is shorter than ``min_span_s`` (a rate over two seconds says nothing)."""
+    t = np.asarray(t, dtype=float)
+    c = np.asarray(cumulative, dtype=float)
+    if t.size == 0:
+        return np.zeros(0)
+    start = np.maximum(t - window_s, t0)
+    before = np.interp(start, np.concatenate(([t0], t)), np.concatenate(([0.0], c)))
+    span = t - start
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ppm = (c - before) * 60.0 / span
+    ppm[span < min_span_s] = np.nan
+    return ppm

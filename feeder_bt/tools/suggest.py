@@ -1,0 +1,177 @@
+"""``feeder recipe suggest``: propose a recipe class's feature ranges from sample images.
+
+Blobs are measured by the locator itself (``Locator.measure_blobs``: the same segmentation
+and features as feeding), so the ranges fit what the cell will measure. Good images show the
+part in the pose to learn; the blobs that are not it (touching pairs, the other poses) are
+told apart as area outliers and count as bad samples, with every blob of the ``--bad``
+images. Each feature's range is the good samples' min/max widened by a margin; features are
+kept only while they exclude bad samples that the kept ones let through (area always kept),
+so the snippet is as short as the samples allow.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import polygon_area, pose_outline
+from ..scenario.model import Scenario
+from ..vision.features import FEATURES
+from ..vision.locator import Locator
+from .common import BadInput, check_size, load_golden, read_image, scenario_locator
+
+OUTLIER_AREA = 0.20        # good-image blobs further than this from the median area are not samples
+MARGIN_SPAN = 0.25         # widen each range by this fraction of its span ...
+MARGIN_VALUE = 0.03        # ... plus this fraction of its centre
+MAX_EXTRA = 3              # at most this many features besides the area
+#: Shape features in the order they are preferred when several separate equally well.
+PREFERRED = ("circularity", "aspect", "rectangularity", "solidity", "perimeter_mm",
+             "hu1", "hu2")
+
+
+@dataclass
+class Suggestion:
+    part: str
+    pose: str
+    pickable: bool
+    ranges: dict[str, tuple[float, float]]
+    good: int
+    bad: int
+    bad_let_through: int
+
+    def yaml(self) -> str:
+        """A ``vision.classes`` entry to paste into the scenario."""
+        items = [f"part: {self.part}", f"pose: {self.pose}",
+                 f"pickable: {'true' if self.pickable else 'false'}"]
+        items += [f"{k}: [{_fmt(lo)}, {_fmt(hi)}]" for k, (lo, hi) in self.ranges.items()]
+        return "- {" + ", ".join(items) + "}"
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = subparsers.add_parser("recipe", help="tools for vision recipes")
+    sub = p.add_subparsers(dest="recipe_command", required=True, metavar="COMMAND",
+                           parser_class=type(p))
+    s = sub.add_parser("suggest", help="propose feature ranges for a class from sample images")
+    s.add_argument("scenario", help="scenario YAML (its recipe segments the images)")
+    s.add_argument("--good", nargs="+", required=True, metavar="IMAGE",
+                   help="images showing the part in the pose (other blobs are told apart)")
+    s.add_argument("--bad", nargs="+", default=[], metavar="IMAGE",
+                   help="images of things the class must not match")
+    s.add_argument("--golden", metavar="IMAGE", help="the empty, lit belt")
+    s.add_argument("--part", help="part name (default: the scenario's only part)")
+    s.add_argument("--pose", help="pose name (default: the part's first pickable pose)")
+    s.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    s.set_defaults(handler=cmd_suggest)
+    return p
+
+
+def cmd_suggest(args: argparse.Namespace) -> int:
+    scenario, _, locator = scenario_locator(args.scenario, args.cell)
+    part, pose = _part_pose(scenario, args.part, args.pose)
+    golden = load_golden(locator, args.golden, "feeder recipe suggest")
+    good = _samples(locator, args.good, golden)
+    bad = _samples(locator, args.bad, golden)
+    spec = scenario.parts[part]
+    nominal = polygon_area(pose_outline(spec, pose))
+    sug = suggest(good, bad, part, pose, spec.poses[pose].pickable, nominal_area=nominal)
+    print(f"# {sug.good} good blob(s), {sug.bad} bad; the class lets through "
+          f"{sug.bad_let_through} bad", file=sys.stderr)
+    print(sug.yaml())
+    return 0
+
+
+def suggest(good: list[dict[str, float]], bad: list[dict[str, float]], part: str, pose: str,
+            pickable: bool, nominal_area: float | None = None) -> Suggestion:
+    """Ranges for ``part``/``pose`` from feature dicts of good-image and bad-image blobs.
+
+    The samples are the good-image blobs near ``nominal_area`` (the pose's silhouette area
+    from the scenario's outline), or near the median area if none is near it; the rest of
+    the good-image blobs are other poses or touching parts and count as bad.
+    """
+    if not good:
+        raise BadInput("no whole blobs in the --good images (all touch the border or are "
+                       "smaller than min_area_mm2)")
+    areas = np.array([f["area_mm2"] for f in good])
+    centre = float(np.median(areas))
+    if nominal_area and np.any(np.abs(areas - nominal_area) <= OUTLIER_AREA * nominal_area):
+        centre = nominal_area
+    near = np.abs(areas - centre) <= OUTLIER_AREA * centre
+    samples = [f for f, k in zip(good, near, strict=True) if k]
+    negatives = [f for f, k in zip(good, near, strict=True) if not k] + list(bad)
+    widened = {name: _widen([f[name] for f in samples]) for name in FEATURES}
+    chosen = {"area_mm2": widened["area_mm2"]}
+    through = [f for f in negatives if _inside(f, chosen)]
+    for _ in range(MAX_EXTRA):
+        if not through:
+            break
+        best = max((n for n in PREFERRED if n not in chosen),
+                   key=lambda n: (sum(not _inside(f, {n: widened[n]}) for f in through),
+                                  -PREFERRED.index(n)))
+        if not any(not _inside(f, {best: widened[best]}) for f in through):
+            break
+        chosen[best] = widened[best]
+        through = [f for f in through if _inside(f, chosen)]
+    if len(chosen) == 1:                 # nothing to separate: add the steadiest shape feature
+        shape = min(PREFERRED[:4], key=lambda n: _spread(samples, n))
+        chosen[shape] = widened[shape]
+    return Suggestion(part, pose, pickable, chosen, good=len(samples), bad=len(negatives),
+                      bad_let_through=len(through))
+
+
+def _samples(locator: Locator, paths: list[str], golden: np.ndarray | None
+             ) -> list[dict[str, float]]:
+    out = []
+    for path in paths:
+        img = read_image(path)
+        check_size(path, img, golden)
+        out += [d.features for d in locator.measure_blobs(img) if not d.reason]
+    return out
+
+
+def _part_pose(scenario: Scenario, part: str | None, pose: str | None) -> tuple[str, str]:
+    parts = scenario.parts
+    if part is None:
+        if len(parts) != 1:
+            raise BadInput(f"the scenario has {len(parts)} parts: give --part "
+                           f"({', '.join(parts)})")
+        part = next(iter(parts))
+    if part not in parts:
+        raise BadInput(f"--part {part!r}: not in the scenario; parts: {', '.join(parts)}")
+    poses = parts[part].poses
+    if pose is None:
+        pose = next(n for n, p in poses.items() if p.pickable)
+    if pose not in poses:
+        raise BadInput(f"--pose {pose!r}: part {part!r} has poses {', '.join(poses)}")
+    return part, pose
+
+
+def _widen(values: list[float]) -> tuple[float, float]:
+    lo, hi = min(values), max(values)
+    m = MARGIN_SPAN * (hi - lo) + MARGIN_VALUE * abs(hi + lo) / 2
+    return _round(lo - m, math.floor), _round(hi + m, math.ceil)
+
+
+def _round(v: float, how) -> float:
+    """Three significant figures, rounded outwards so the range only grows."""
+    if v == 0:
+        return 0.0
+    q = 10 ** (math.floor(math.log10(abs(v))) - 2)
+    return how(v / q) * q
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}" if abs(v) >= 1e-3 else f"{v:.3e}"
+
+
+def _inside(f: dict[str, float], ranges: dict[str, tuple[float, float]]) -> bool:
+    return all(lo <= f[n] <= hi for n, (lo, hi) in ranges.items())
+
+
+def _spread(samples: list[dict[str, float]], name: str) -> float:
+    """Relative spread (std / |mean|) of a feature over the samples: lower is steadier."""
+    v = np.array([f[name] for f in samples])
+    return float(v.std() / max(abs(v.mean()), 1e-12))
