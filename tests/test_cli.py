@@ -17,6 +17,8 @@ LENSES = Path("scenarios/lenses.yaml").read_text()
 
 def feeder(*args: str) -> subprocess.CompletedProcess:
     """The real entry point in a child process: what a user sees, tracebacks included."""
+    if args and args[0] == "run" and "--db" not in args:
+        args = (*args, "--no-db")              # keep the repository free of event logs
     return subprocess.run([sys.executable, "-m", "feeder_bt.cli", *args],
                           capture_output=True, text=True, timeout=300)
 
@@ -70,7 +72,7 @@ def test_check_reports_every_bad_file(tmp_path, capsys):
 def test_run_writes_the_report(tmp_path, capsys):
     out = tmp_path / "r.json"
     rc = main(["run", "scenarios/lenses.yaml", "--fast", "--duration", "60", "--seed", "5",
-               "--report", str(out)])
+               "--report", str(out), "--no-db"])
     assert rc == 0
     rep = json.loads(out.read_text())
     for key in ("scenario", "seed", "hal", "sim_seconds", "wall_seconds", "parts_per_minute",
@@ -107,7 +109,7 @@ def test_sigint_stops_in_order_and_still_reports(tmp_path):
     out = tmp_path / "r.json"
     proc = subprocess.Popen([sys.executable, "-m", "feeder_bt.cli", "run",
                              "scenarios/lenses.yaml", "--view", "ascii", "--duration", "600",
-                             "--report", str(out)],
+                             "--report", str(out), "--db", str(tmp_path / "r.db")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         # wait for the first status line: the cell is running in real time

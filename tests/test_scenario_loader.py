@@ -95,7 +95,9 @@ def expect(fn, file: Path | str, line: int | None, key: str | None, *fragments: 
 def test_shipped_scenarios_load(path: Path) -> None:
     sc, cell = load_scenario(path)
     assert isinstance(sc, Scenario) and isinstance(cell, CellSpec)
-    assert sc.path == path and sc.cell_path.resolve() == CELL.resolve()
+    named = yaml.safe_load(path.read_text())["cell"]
+    assert sc.path == path and sc.cell_path.resolve() == (path.parent / named).resolve()
+    assert cell.path.resolve() == sc.cell_path.resolve()
     assert sc.parts and sc.vision.classes
     for part in sc.parts.values():
         assert abs(sum(p.probability for p in part.poses.values()) - 1) < 1e-6
