@@ -15,9 +15,9 @@ import pytest
 
 from feeder_bt import run as run_mod
 from feeder_bt.behaviours.common import Stats
+from feeder_bt.cli import main as cli_main
 from feeder_bt.eventlog import EventLog, EventLogError, open_readonly
 from feeder_bt.run import RunOptions, run_job
-from feeder_bt.tools import report_cmd
 from feeder_bt.tools.runs_db import rolling_ppm
 
 LENSES = str(Path("scenarios/lenses.yaml").resolve())
@@ -84,12 +84,12 @@ def test_samples_give_the_time_series(logged):
 
 def test_report_prints_summary_and_json(logged, capsys):
     db, report = logged
-    assert report_cmd.main(["report", str(db)]) == 0
+    assert cli_main(["report", str(db)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].split()[:4] == ["run", "scenario", "seed", "state"]
     total = sum(report["parts"]["retrieved"].values())
     assert "lenses" in out[1] and f"lens {total}" in out[1] and "STOPPED" in out[1]
-    assert report_cmd.main(["report", str(db), "--last", "--json"]) == 0
+    assert cli_main(["report", str(db), "--last", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["retrieved"] == report["parts"]["retrieved"]
     assert summary["parts_per_minute"] == report["parts_per_minute"]
@@ -99,7 +99,7 @@ def test_report_prints_summary_and_json(logged, capsys):
 def test_plot_writes_png_with_labelled_axes(logged, tmp_path, capsys):
     db, _ = logged
     out = tmp_path / "plots" / "speeds.png"
-    assert report_cmd.main(["report", str(db), "--run", "1", "--plot", str(out)]) == 0
+    assert cli_main(["report", str(db), "--run", "1", "--plot", str(out)]) == 0
     data = out.read_bytes()
     assert data.startswith(PNG_MAGIC) and len(data) > 20_000
     from feeder_bt.tools.plots import plot_run
@@ -125,7 +125,7 @@ def test_plot_writes_png_with_labelled_axes(logged, tmp_path, capsys):
 def test_corrupt_or_foreign_db_is_one_line_exit_2(tmp_path, content):
     bad = tmp_path / "bad.db"
     bad.write_bytes(content)
-    p = subprocess.run([sys.executable, "-m", "feeder_bt.tools.report_cmd", "report", str(bad),
+    p = subprocess.run([sys.executable, "-m", "feeder_bt.cli", "report", str(bad),
                         "--plot", str(tmp_path / "x.png")],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
@@ -135,14 +135,14 @@ def test_corrupt_or_foreign_db_is_one_line_exit_2(tmp_path, content):
 
 
 def test_missing_and_foreign_db_and_unknown_run(tmp_path, logged, capsys):
-    assert report_cmd.main(["report", str(tmp_path / "none.db")]) == 2
+    assert cli_main(["report", str(tmp_path / "none.db")]) == 2
     foreign = tmp_path / "foreign.db"
     with sqlite3.connect(foreign) as conn:
         conn.execute("CREATE TABLE x (a)")
-    assert report_cmd.main(["report", str(foreign)]) == 2
+    assert cli_main(["report", str(foreign)]) == 2
     with pytest.raises(EventLogError, match="not a feeder event log"):
         EventLog(foreign)                     # never writes into someone else's database
-    assert report_cmd.main(["report", str(logged[0]), "--run", "99"]) == 2
+    assert cli_main(["report", str(logged[0]), "--run", "99"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 3 and all(line.startswith("feeder: ") for line in err)
 
@@ -186,7 +186,7 @@ def test_hard_interrupt_keeps_events_and_report_shows_incomplete(tmp_path, monke
     assert rows(db, "SELECT report FROM runs") == [(None,)]
     n = rows(db, "SELECT count(*) FROM events WHERE kind='retrieved'")[0][0]
     assert n > 0
-    assert report_cmd.main(["report", str(db), "--json"]) == 0
+    assert cli_main(["report", str(db), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["state"] == "incomplete"
     assert summary["retrieved"] == {"lens": n} and summary["missed"] is None
@@ -196,9 +196,9 @@ def test_runs_accumulate_and_last_selects_the_newest(tmp_path, capsys):
     db = tmp_path / "two.db"
     run(db, duration=30.0, seed=1)
     run(db, duration=30.0, seed=2)
-    assert report_cmd.main(["report", str(db)]) == 0
+    assert cli_main(["report", str(db)]) == 0
     assert len(capsys.readouterr().out.splitlines()) == 3       # header + two runs
-    assert report_cmd.main(["report", str(db), "--last", "--json"]) == 0
+    assert cli_main(["report", str(db), "--last", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["seed"] == 2
     assert rows(db, "SELECT DISTINCT run_id FROM events ORDER BY 1") == [(1,), (2,)]
 

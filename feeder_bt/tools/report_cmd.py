@@ -5,12 +5,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import sys
 from pathlib import Path
 from typing import Any
 
-from ..errors import FeederError
 from ..eventlog import EventLogError, open_readonly
 from .runs_db import run_ids, summary
 
@@ -85,20 +82,3 @@ def format_table(rows: list[dict[str, Any]]) -> str:
                                for k, c, w in zip(COLUMNS, line, widths, strict=True)).rstrip()
                      for line in cells)
 
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m feeder_bt.tools.report_cmd``: the same command without the ``feeder`` CLI."""
-    parser = argparse.ArgumentParser(prog="feeder")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return args.handler(args)
-    except FeederError as e:
-        if os.environ.get("FEEDER_DEBUG"):
-            raise
-        print(f"feeder: {e}", file=sys.stderr)
-        return e.exit_code
-
-
-if __name__ == "__main__":
-    sys.exit(main())
