@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .cell import Cell
-from .hal.sim.robot_model import RobotModel
+from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
 from .ticker import Ticker
 

@@ -10,8 +10,8 @@ from feeder_bt.clock import SimClock
 from feeder_bt.errors import EnvelopeError, MissedGrab
 from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.robot_model import RobotModel
 from feeder_bt.hal.sim.world import World
+from feeder_bt.robot_model import RobotModel
 from feeder_bt.scenario import load_scenario
 
 

@@ -10,9 +10,9 @@ from py_trees.common import Status
 
 from ..encoder import diff
 from ..hal.interfaces import PickTarget, Pose
-from ..hal.sim.robot_model import RobotModel
 from ..jobs import Job
 from ..parts import Part
+from ..robot_model import RobotModel
 from .common import Ctx, JobLeaf, Leaf, client
 
 

@@ -26,10 +26,10 @@ from ...encoder import diff, wrap
 from ...errors import AccountingError, EnvelopeError, MissedGrab
 from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
 from ...jobs import Job
+from ...robot_model import RobotModel
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import PickResult, PickTarget, Pose
 from .axis import Axis
-from .robot_model import RobotModel
 
 PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed")
 LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from ...scenario.model import RobotSpec
+from .scenario.model import RobotSpec
 
 
 def trapezoid_time(d: float, v_max: float, a_max: float) -> float:
