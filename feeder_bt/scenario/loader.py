@@ -34,12 +34,14 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.model import (
+    AdeptSpec,
     AdjustParams,
     CameraCalibration,
     CameraSpec,
     CellSpec,
     ConveyorSpec,
     EncoderSpec,
+    GalilSpec,
     HopperSpec,
     IoSignal,
     LocateParams,
@@ -182,6 +184,16 @@ RANGES: dict[tuple[type, str], Range] = {
     (RobotSpec, "track_settle_s"): NON_NEGATIVE,
     (RobotSpec, "grip_tolerance_mm"): POSITIVE,
     (IoSignal, "bit"): NON_NEGATIVE,
+    (GalilSpec, "baud"): POSITIVE,
+    (GalilSpec, "timeout_s"): POSITIVE,
+    (GalilSpec, "latch_input"): Range(1, 96),
+    (GalilSpec, "notify_mm"): POSITIVE,
+    (AdeptSpec, "motion_port"): Range(1, 65535),
+    (AdeptSpec, "position_port"): Range(1, 65535),
+    (AdeptSpec, "io_port"): Range(1, 65535),
+    (AdeptSpec, "notify_port"): Range(1, 65535),
+    (AdeptSpec, "timeout_s"): POSITIVE,
+    (AdeptSpec, "motion_timeout_s"): POSITIVE,
 }
 
 #: Adjuster algorithms and the ``adjust.params`` keys each accepts (all optional; an

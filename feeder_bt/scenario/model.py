@@ -190,6 +190,8 @@ class CameraSpec:
     # simulated cell only: how the simulated camera really maps (None: exactly as calibrated)
     sim_truth: CameraCalibration | None = None
     calibration_file: str | None = None  # YAML replacing `calibration` (calibration.files)
+    # real cell only: "0" (a device index), a stream URL, a folder of images or a video file
+    source: str = "0"
     render: RenderSpec = field(default_factory=RenderSpec)
 
 
@@ -231,6 +233,33 @@ class IoSignal:
 
 
 @dataclass
+class GalilSpec:
+    """The conveyors' motion controller (``--hal emulated|real``)."""
+
+    url: str = "socket://127.0.0.1:23"   # a serial port (/dev/ttyS0) or socket://HOST:PORT
+    baud: int = 115200                   # serial ports only
+    timeout_s: float = 2.0               # a reply slower than this is a lost connection
+    axes: dict[str, str] = field(default_factory=lambda: {"incline": "A", "horizontal": "B"})
+    latch_axis: str = "B"                # the axis whose encoder the camera trigger latches
+    latch_input: int = 1                 # digital input wired to the camera trigger (thesis 2.3)
+    programs: list[str] = field(default_factory=lambda: ["monitor.dmc"])  # in galil_programs/
+    notify_mm: float = 5.0               # distance notifier period on the latch axis
+
+
+@dataclass
+class AdeptSpec:
+    """The robot controller running the V+ servers of ``vplus/``."""
+
+    host: str = "127.0.0.1"
+    motion_port: int = 1401
+    position_port: int = 1402
+    io_port: int = 1403
+    notify_port: int = 1404
+    timeout_s: float = 5.0               # connect/reply time-out for short commands
+    motion_timeout_s: float = 20.0       # longest a pick/place/move may take
+
+
+@dataclass
 class CellSpec:
     name: str
     path: Path
@@ -243,3 +272,5 @@ class CellSpec:
     camera: CameraSpec = field(default_factory=CameraSpec)
     robot: RobotSpec = field(default_factory=RobotSpec)
     io: dict[str, IoSignal] = field(default_factory=dict)
+    galil: GalilSpec = field(default_factory=GalilSpec)
+    adept: AdeptSpec = field(default_factory=AdeptSpec)

@@ -1,0 +1,1 @@
+"""Protocol emulators of the cell's controllers, backed by the simulated cell in real time."""
