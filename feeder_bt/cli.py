@@ -13,7 +13,7 @@ from pathlib import Path
 from .errors import FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
-TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest")
+TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd")
 
 
 def _positive(text: str) -> float:

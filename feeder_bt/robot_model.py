@@ -49,7 +49,8 @@ class RobotModel:
         sp = self.spec
         return (self.arch_time(math.dist(start, pick), speed_pct)
                 + (sp.track_settle_s if tracking else 0.0) + sp.grip_s
-                + self.arch_time(math.dist(pick, place), speed_pct) + sp.release_s)
+                + self.arch_time(math.dist(pick, place), speed_pct) + sp.release_s
+                + 2 * sp.command_overhead_s)
 
     def best_pick_point(self, place: tuple[float, float],
                         window: tuple[float, float, float, float]) -> tuple[float, float] | None:

@@ -10,13 +10,12 @@ from pathlib import Path
 from typing import Any
 
 from .cell import Cell, CellState
-from .clock import Clock, RealClock, SimClock
-from .errors import ConfigError
+from .clock import RealClock, SimClock
 from .eventlog import EventLog
-from .hal.interfaces import Hal
+from .hal.factory import make_hal
 from .report import build_report, write_report
 from .scenario import load_scenario
-from .scenario.model import CellSpec, Scenario
+from .scenario.model import Scenario
 from .ticker import Ticker
 from .view import LiveView, Progress
 
@@ -52,17 +51,6 @@ def _start_log(log: EventLog, opts: RunOptions, scenario: Scenario, cell: Cell) 
                    "adjust": {"algorithm": scenario.adjust.algorithm,
                               "params": scenario.adjust.params}})
     log.attach(cell)
-
-
-def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
-    if kind == "sim":
-        from .hal.sim.devices import make_sim_hal
-        clock = SimClock()
-        return make_sim_hal(scenario, cell, clock, seed), clock
-    if kind in ("emulated", "real"):
-        raise ConfigError(f"--hal {kind} needs the Galil and V+ drivers, which are not in this "
-                          "release yet; use --hal sim", key="hal")
-    raise ConfigError(f"unknown HAL {kind!r}; one of: sim, emulated, real", key="hal")
 
 
 class _StopRequest:

@@ -108,6 +108,11 @@ class Enqueue(Leaf):
             ctx.extras["seen"] = seen
         self.seen: SeenParts = seen
 
+    @staticmethod
+    def downstream_first(parts: list) -> list:
+        """Nearest the robot first: with a limit per look, those are the ones to take."""
+        return sorted(parts, key=lambda d: -d.x_mm)
+
     def update(self) -> Status:
         frame: Frame = self.bb.get("/locate/frame")
         result = self.bb.get("/locate/result")
@@ -115,7 +120,10 @@ class Enqueue(Leaf):
         self.seen.prune(latch)
         stats, new = self.ctx.stats, 0
         tol = self.ctx.scenario.locate.dedupe_mm
-        for det in result.parts:
+        limit = self.ctx.scenario.locate.max_parts_per_look
+        dets = self.downstream_first(result.parts) if limit else result.parts
+        limit = limit or len(dets)
+        for det in dets:
             part = Part(id=next(self._ids), type=det.part, x_mm=det.x_mm, y_mm=det.y_mm,
                         angle_deg=det.angle_deg, latch=latch, located_at=frame.t,
                         pose=det.pose or "", pickable=det.pickable, frame=frame.index,
@@ -123,6 +131,8 @@ class Enqueue(Leaf):
             if not self.seen.is_new(part, tol):
                 stats.count("duplicates")
                 continue
+            if part.pickable and new >= limit:
+                continue          # not seen: the next look finds it again
             self.seen.add(part)
             if part.pickable:
                 self.ctx.queue.put(part)

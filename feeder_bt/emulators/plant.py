@@ -45,16 +45,32 @@ class Plant:
                  rate: float = 1.0) -> None:
         self.cell = cell
         self.clock = FollowClock(rate)
-        self.hal: SimHal = make_sim_hal(scenario, cell, self.clock, seed)  # type: ignore[arg-type]
-        self.world = self.hal.world
+        self.seed = seed
         self.lock = threading.RLock()
         self.cpm = cell.encoder.counts_per_mm
-        self._axes = {letter: getattr(self.world, name)
-                      for name, letter in cell.galil.axes.items()}
+        self._build(scenario)
         self._trigger_listeners: list[Callable[[float], None]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None   # an accounting error stops the plant
+
+    def _build(self, scenario: Scenario) -> None:
+        self.hal: SimHal = make_sim_hal(scenario, self.cell, self.clock,  # type: ignore[arg-type]
+                                        self.seed)
+        self.world = self.hal.world
+        self._axes = {letter.upper(): getattr(self.world, name)
+                      for name, letter in self.cell.galil.axes.items()}
+
+    def changeover(self, scenario: Scenario) -> None:
+        """The operator swaps the parts: a fresh world with the new scenario's hopper. The
+        belts restart from rest at the positions they had."""
+        with self.lock:
+            old = self.hal
+            positions = {k: a.pos(self.world.now()) for k, a in self._axes.items()}
+            self._build(scenario)
+            for k, axis in self._axes.items():
+                axis.segments[0].p0 = positions.get(k, 0.0)
+            old.close()
 
     # ---------------------------------------------------------------- life
     def start(self) -> Plant:

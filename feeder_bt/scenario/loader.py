@@ -183,6 +183,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (RobotSpec, "release_s"): NON_NEGATIVE,
     (RobotSpec, "track_settle_s"): NON_NEGATIVE,
     (RobotSpec, "grip_tolerance_mm"): POSITIVE,
+    (RobotSpec, "command_overhead_s"): NON_NEGATIVE,
+    (LocateParams, "max_parts_per_look"): NON_NEGATIVE,
     (IoSignal, "bit"): NON_NEGATIVE,
     (GalilSpec, "baud"): POSITIVE,
     (GalilSpec, "timeout_s"): POSITIVE,

@@ -110,6 +110,7 @@ class PresentParams:
 class LocateParams:
     frame_spacing_mm: float = 300.0
     dedupe_mm: float = 12.0
+    max_parts_per_look: int = 0          # 0: every part found; 1: the original feeder's "GO"
     leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the recipe step
 
 
@@ -209,6 +210,9 @@ class RobotSpec:
     track_settle_s: float = 0.030
     safe_mm: tuple[float, float] = (1370.0, -150.0)
     grip_tolerance_mm: float = 4.0
+    # controller time per pick and per place before the arm moves: command round trips,
+    # program start-up (0 for our V+ servers, which get one line per pick or place)
+    command_overhead_s: float = 0.0
 
 
 @dataclass

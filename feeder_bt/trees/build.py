@@ -8,12 +8,14 @@ from py_trees.common import ParallelPolicy
 from py_trees.composites import Parallel, Sequence
 from py_trees.decorators import SuccessIsRunning
 
-from ..behaviours.common import Ctx
+from ..behaviours.common import Ctx, Wait
 from ..behaviours.locate import GrabGolden
 from ..behaviours.present import StopConveyors
 from ..behaviours.retrieve import MoveSafe, SetRobotSpeed
 from ..behaviours.setup import ClearWindow, SetSignal, SyncEncoders
 from . import adjust, locate, present, retrieve
+
+SETTLE_S = 0.25        # after the conveyors stop, before the encoders are tied together
 
 
 def build_feeding(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -35,7 +37,8 @@ def build_setup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         steps.append(SetSignal("backlight on", ctx, "backlight", True))
     if vision.golden_image:
         steps += [ClearWindow("clear the window", ctx), GrabGolden("golden image", ctx)]
-    steps.append(SyncEncoders("sync encoders", ctx))
+    # the belt must be at rest, and a real controller's cached counts fresh, for the sync
+    steps += [Wait("belt at rest", ctx, SETTLE_S), SyncEncoders("sync encoders", ctx)]
     return Sequence("set-up", memory=True, children=steps)
 
 

@@ -96,23 +96,27 @@ class SimCamera:
         self.frames = 0
         self.exposure_ms = cam.exposure_ms
 
+    def snapshot(self, t: float, index: int):
+        """What the camera sees at ``t`` (read under the world's time), and a function that
+        renders it — slow, so it runs off the tick on a worker."""
+        lit = self.world.io.get("backlight", True)
+        outlines = self.world.visible_outlines(t, self.x_range) if lit else []
+        rng = np.random.default_rng([self.seed, index])
+
+        def render() -> np.ndarray:
+            img = self.renderer.render(outlines, rng)
+            return img if lit else (img * 0.08).astype(np.uint8)
+
+        return render
+
     def grab(self) -> Job:
         w = self.world
         t = w.now()
         self.frames += 1
         index = self.frames
         latch = w.galil_count(t)
-        lit = w.io.get("backlight", True)
-        outlines = w.visible_outlines(t, self.x_range) if lit else []
-        rng = np.random.default_rng([self.seed, index])
-
-        def render() -> Frame:
-            img = self.renderer.render(outlines, rng)
-            if not lit:
-                img = (img * 0.08).astype(np.uint8)
-            return Frame(image=img, latch=latch, t=t, index=index)
-
-        future = self.worker.submit(render)
+        render = self.snapshot(t, index)
+        future = self.worker.submit(lambda: Frame(image=render(), latch=latch, t=t, index=index))
         return FutureJob("camera.grab", future, w.clock, eta=t + self.cell.camera.grab_s)
 
     def set_exposure(self, ms: float) -> Job:
@@ -154,7 +158,7 @@ class SimRobot:
         if err:
             return DoneJob("robot.pick", error=err)
         try:
-            _, t_grip = w.plan_pick(target, w.now())
+            _, t_grip = w.plan_pick(target, w.now() + w.cell.robot.command_overhead_s)
         except HalError as e:
             return DoneJob("robot.pick", error=e)
         return self._run("robot.pick", t_grip - w.now(), lambda t: w.grip(target, t))
@@ -162,7 +166,8 @@ class SimRobot:
     def place(self, pose: Pose) -> Job:
         w = self.world
         d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
-        duration = w.robot_model.arch_time(d, w.robot_speed_pct) + w.cell.robot.release_s
+        duration = (w.cell.robot.command_overhead_s + w.robot_model.arch_time(d, w.robot_speed_pct)
+                    + w.cell.robot.release_s)
         job = self._run("robot.place", duration, lambda t: w.release(pose, t))
         if isinstance(job, TimedJob):     # a place is never abandoned: the part is let go
             job.on_cancel = lambda: job.succeed(w.release(pose, w.now()))

@@ -1,0 +1,110 @@
+"""Where images come from: a camera or stream through OpenCV, or recorded images.
+
+A source only captures; pairing the image with the belt's position is the job of
+``LatchedCamera`` (the trigger is mirrored to the conveyor controller's latch input).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Protocol
+
+import cv2
+import numpy as np
+
+from ...errors import ConfigError, GrabFailed
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
+
+
+class FrameSource(Protocol):
+    def capture(self) -> np.ndarray:
+        """Trigger and return one grey uint8 image; raise ``GrabFailed`` when none comes."""
+
+    def close(self) -> None: ...
+
+
+def _grey(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    if img.dtype != np.uint8:
+        img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    return img
+
+
+class VideoCaptureSource:
+    """A device index ("0") or a stream URL, read through ``cv2.VideoCapture``."""
+
+    def __init__(self, spec: str | int) -> None:
+        self.spec = spec
+        target = int(spec) if isinstance(spec, str) and spec.isdigit() else spec
+        self.cap = cv2.VideoCapture(target)
+        if not self.cap.isOpened():
+            raise ConfigError(f"cannot open camera {spec!r} (no such device or stream)",
+                              key="camera.source")
+
+    def capture(self) -> np.ndarray:
+        ok, img = self.cap.read()
+        if not ok or img is None:
+            raise GrabFailed(f"camera {self.spec!r} returned no image")
+        return _grey(img)
+
+    def close(self) -> None:
+        self.cap.release()
+
+
+class ReplaySource:
+    """Recorded images, in name order, or the frames of a video file; loops at the end.
+
+    For tuning a recipe on a real cell's images without the cell."""
+
+    def __init__(self, path: str | Path, loop: bool = True) -> None:
+        self.path = Path(path)
+        self.loop = loop
+        self.index = 0
+        self.files: list[Path] = []
+        self.cap: cv2.VideoCapture | None = None
+        if self.path.is_dir():
+            self.files = sorted(p for p in self.path.iterdir()
+                                if p.suffix.lower() in IMAGE_SUFFIXES)
+            if not self.files:
+                raise ConfigError(f"{self.path}: no images ({', '.join(IMAGE_SUFFIXES)})",
+                                  key="camera.source")
+        elif self.path.is_file():
+            self.cap = cv2.VideoCapture(str(self.path))
+            if not self.cap.isOpened():
+                raise ConfigError(f"{self.path}: not a video file OpenCV can read",
+                                  key="camera.source")
+        else:
+            raise ConfigError(f"{self.path}: no such folder or video file", key="camera.source")
+
+    def capture(self) -> np.ndarray:
+        if self.cap is not None:
+            ok, img = self.cap.read()
+            if not ok and self.loop:
+                self.cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                ok, img = self.cap.read()
+            if not ok or img is None:
+                raise GrabFailed(f"{self.path}: no more frames")
+            return _grey(img)
+        if self.index >= len(self.files):
+            if not self.loop:
+                raise GrabFailed(f"{self.path}: no more images")
+            self.index = 0
+        f = self.files[self.index]
+        self.index += 1
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise GrabFailed(f"{f}: not an image OpenCV can read")
+        return img
+
+    def close(self) -> None:
+        if self.cap is not None:
+            self.cap.release()
+
+
+def open_source(spec: str) -> FrameSource:
+    """The cell description's ``camera.source``: a device index, a URL, a folder or a file."""
+    if spec.isdigit() or "://" in spec:
+        return VideoCaptureSource(spec)
+    return ReplaySource(spec)

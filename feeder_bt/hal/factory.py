@@ -1,0 +1,160 @@
+"""Which HAL a run uses: the simulated cell, the emulators, or a real cell.
+
+A scenario runs unchanged on all three; only the cell description (ports, addresses,
+calibration) and ``--hal`` differ. ``emulated`` starts the Galil and Adept emulators on
+loopback, backed by the simulated cell in real time, and talks to them through the same
+drivers a real cell uses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+from ..clock import Clock, RealClock, SimClock
+from ..errors import ConfigError, HalError
+from ..jobs import DoneJob, Job
+from ..scenario.model import CellSpec, Scenario
+from .interfaces import Hal, IoChange
+
+HAL_KINDS = ("sim", "emulated", "real")
+PROGRAMS_DIR = Path(__file__).resolve().parents[2] / "galil_programs"
+
+
+class CellIO:
+    """One numbering for all controllers: the cell description's signal names, each on a
+    controller's bit (thesis: the I/O server and the Galil's inputs behind one interface)."""
+
+    def __init__(self, cell: CellSpec, controllers: dict[str, object]) -> None:
+        self.signals = cell.io
+        self.controllers = controllers
+        self.by_bit = {(s.controller, s.bit): name for name, s in cell.io.items()}
+        for name, sig in cell.io.items():
+            if sig.controller not in controllers:
+                raise ConfigError(f"signal {name!r} is on controller {sig.controller!r}; "
+                                  f"one of: {', '.join(controllers)}", key=f"io.{name}")
+
+    def get(self, signal: str) -> bool:
+        sig = self.signals.get(signal)
+        if sig is None:
+            return False
+        return bool(self.controllers[sig.controller].get(sig.bit))
+
+    def set(self, signal: str, value: bool) -> Job:
+        sig = self.signals.get(signal)
+        if sig is None:
+            return DoneJob(f"io.set({signal})", error=HalError(f"unknown signal {signal!r}"))
+        if sig.dir != "out":
+            return DoneJob(f"io.set({signal})",
+                           error=HalError(f"signal {signal!r} is an input; it cannot be set"))
+        return self.controllers[sig.controller].set(sig.bit, value)
+
+    def changes(self) -> list[IoChange]:
+        out: list[IoChange] = []
+        for ctrl_name, ctrl in self.controllers.items():
+            for bit, value, t in ctrl.changes():
+                name = self.by_bit.get((ctrl_name, bit))
+                if name is not None:
+                    out.append(IoChange(name, bool(value), t))
+        return sorted(out, key=lambda c: c.t)
+
+
+class DriverHal(Hal):
+    """The cell behind the Galil and Adept drivers (a real cell or the emulators)."""
+
+    closers: list
+
+    def step(self, now: float) -> None:
+        pass
+
+    def changeover(self, scenario: Scenario) -> None:
+        plant = self.extras.get("plant")
+        if plant is not None:         # the emulated cell refills its hopper like the sim
+            plant.changeover(scenario)
+
+    def close(self) -> None:
+        for close in reversed(self.closers):
+            try:
+                close()
+            except Exception:          # noqa: BLE001 - closing must reach every device
+                pass
+
+
+def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
+    """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
+    from .adept.controller import AdeptController
+    from .camera import LatchedCamera, open_source
+    from .galil.driver import GalilController
+
+    closers: list = []
+    try:
+        galil = GalilController(cell.galil, clock, PROGRAMS_DIR, cell.encoder)
+        closers.append(galil.close)
+        adept = AdeptController(cell.adept, clock)
+        closers.append(adept.close)
+        conveyors = {name: galil.conveyor(name, cell.conveyors[name])
+                     for name in cell.galil.axes if name in cell.conveyors}
+        latch_name = next((n for n, a in cell.galil.axes.items()
+                           if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
+        camera = LatchedCamera(source if source is not None else open_source(cell.camera.source),
+                               clock, latch=conveyors[latch_name])
+        closers.append(camera.close)
+        io = CellIO(cell, {"galil": galil.io, "adept": adept.io})
+    except BaseException:
+        for close in reversed(closers):
+            close()
+        raise
+    hal = DriverHal(conveyors=conveyors, robot=adept.robot, robot_position=adept.position,
+                    camera=camera, io=io, kind=kind)
+    hal.closers = closers
+    return hal
+
+
+def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
+    """The HAL and the clock for a run."""
+    if kind == "sim":
+        from .sim.devices import make_sim_hal
+        clock = SimClock()
+        return make_sim_hal(scenario, cell, clock, seed), clock
+    if kind == "real":
+        if cell.hal != "real":
+            raise ConfigError(f"{cell.path}: describes a {cell.hal} cell (hal: {cell.hal}); "
+                              "--hal real needs a real cell's description with its ports and "
+                              "calibration files (start from cells/real_cell.yaml)", key="hal")
+        clock = RealClock()
+        return connect_drivers(cell, clock), clock
+    if kind == "emulated":
+        return start_emulated(scenario, cell, seed)
+    raise ConfigError(f"unknown HAL {kind!r}; one of: {', '.join(HAL_KINDS)}", key="hal")
+
+
+def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
+                   faults=None) -> tuple[Hal, Clock]:
+    """Emulators on loopback over the simulated cell in real time, and the real drivers."""
+    from ..emulators.adept import AdeptEmulator
+    from ..emulators.camera import PlantCameraSource
+    from ..emulators.galil import GalilEmulator
+    from ..emulators.plant import Plant
+
+    plant = Plant(scenario, cell, seed).start()
+    galil = GalilEmulator(plant, faults=faults).start()
+    adept = AdeptEmulator(plant, faults=faults).start()
+    ports = adept.ports
+    wired = dataclasses.replace(
+        cell,
+        galil=dataclasses.replace(cell.galil, url=f"socket://127.0.0.1:{galil.port}"),
+        adept=dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=ports["motion"],
+                                  position_port=ports["position"], io_port=ports["io"],
+                                  notify_port=ports["notify"]))
+    clock = RealClock()
+    try:
+        hal = connect_drivers(wired, clock, source=PlantCameraSource(plant), kind="emulated")
+    except BaseException:
+        galil.stop()
+        adept.stop()
+        plant.stop()
+        raise
+    hal.closers[:0] = [plant.stop, galil.stop, adept.stop]    # closed last, after drivers
+    hal.extras.update(plant=plant, galil_emulator=galil, adept_emulator=adept)
+    hal.world = plant.world        # for the report's accounting only; the trees never read it
+    return hal, clock
