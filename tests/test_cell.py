@@ -12,7 +12,7 @@ pytest.importorskip("feeder_bt.vision.locator",
 
 from feeder_bt.cell import Cell, CellCommandError, CellState  # noqa: E402
 from feeder_bt.clock import SimClock  # noqa: E402
-from feeder_bt.errors import ConveyorFault, ServoTimeout  # noqa: E402
+from feeder_bt.errors import ConveyorFault, HalError, ServoTimeout  # noqa: E402
 from feeder_bt.hal.mock.hal import MockHal  # noqa: E402
 
 SETUP_CALLS = ["robot.set_speed", "robot.move_safe", "horizontal.stop", "incline.stop",
@@ -207,10 +207,10 @@ def test_escalation_on_blackboard_drives_cell_to_fault(rig):
 def test_conveyor_that_cannot_stop_faults_the_cell(rig):
     rig.start()
     rig.tick()
-    fail(rig.hal, "horizontal", "set_speed", ConveyorFault("amplifier fault"))
+    fail(rig.hal, "horizontal", "set_speed", HalError("amplifier fault"))
     rig.tick()                                    # recovery: count, stop the conveyors
     assert rig.cell.state is CellState.RUNNING
-    assert rig.cell.stats.faults["conveyor"] == 1
+    assert rig.cell.stats.faults["hal"] == 1
     fail(rig.hal, "horizontal", "stop", ConveyorFault("no answer"))
     rig.tick()
     assert rig.cell.state is CellState.FAULTING

@@ -163,14 +163,35 @@ def test_terminate_while_waiting_for_travel_cancels_the_notification(tree):
     assert travel.cancelled
 
 
-def test_travel_notification_failure_escalates_without_crashing(tree):
+def test_lost_link_is_retried_with_back_off_and_recovery_counted(tree):
     ctx, root = tree
     tick(root, ctx)
     fail(ctx.hal, "horizontal", "travelled", CommsLost("galil gone"))
     assert tick(root, ctx) is Status.RUNNING
-    assert bb_get("/faults/escalate") == "camera or vision failed: galil gone"
+    assert bb_get("/faults/escalate") is None
     assert ctx.stats.faults["comms_lost"] == 1
-    assert tick(root, ctx, n=5) is Status.RUNNING
+    n_calls = len(ctx.hal.calls)
+    tick(root, ctx, n=20)                      # the first back-off is 0.5 s
+    assert ctx.hal.methods()[n_calls:] == []
+    tick(root, ctx, n=10)
+    assert ctx.hal.methods()[n_calls:] == ["horizontal.travelled"]
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    assert ctx.stats.recoveries["comms_lost"] == 1
+    assert ctx.hal.methods()[-1] == "camera.grab"
+
+
+def test_lost_link_escalates_after_the_last_attempt(tree):
+    ctx, root = tree
+    tick(root, ctx)
+    for _ in range(8):                         # back-offs 0.5, 1, 2, 4, 8, 8, 8, 8 s
+        fail(ctx.hal, "horizontal", "travelled", CommsLost("galil gone"))
+        tick(root, ctx, n=int(8.5 / 0.02))
+        assert bb_get("/faults/escalate") is None
+    fail(ctx.hal, "horizontal", "travelled", CommsLost("galil gone"))
+    tick(root, ctx, n=2)
+    assert bb_get("/faults/escalate") == "camera or vision failed: galil gone"
+    assert ctx.stats.recoveries["comms_lost"] == 0
 
 
 def test_travel_failure_after_a_grab_failure_is_not_taken_for_a_grab_failure(tree):
@@ -183,7 +204,9 @@ def test_travel_failure_after_a_grab_failure_is_not_taken_for_a_grab_failure(tre
     fail(ctx.hal, "horizontal", "travelled", CommsLost("galil gone"))
     tick(root, ctx)
     assert ctx.stats.faults["grab_failed"] == 1
-    assert bb_get("/faults/escalate") == "camera or vision failed: galil gone"
+    assert ctx.stats.faults["comms_lost"] == 1
+    assert ctx.stats.recoveries["grab_failed"] == 0   # no grab has worked since
+    assert bb_get("/faults/escalate") is None
 
 
 def test_recipe_failure_is_counted_like_a_camera_fault(tree):

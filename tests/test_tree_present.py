@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 from py_trees.common import Status
-from treeutil import bb_get, bb_set, fail, finish, make_ctx, pending, tick
+from treeutil import bb_get, bb_set, fail, finish, make_ctx, tick
 
-from feeder_bt.errors import ConveyorFault
+from feeder_bt.errors import ConveyorFault, HalError
 from feeder_bt.trees import present
 
 
@@ -59,42 +59,65 @@ def test_new_blackboard_speed_is_commanded_on_next_tick(continuous):
                                  ("incline", "set_speed", (100.0,))]
 
 
-def test_conveyor_fault_runs_recovery_then_conveyors_again(continuous):
+def test_jam_is_shaken_loose_then_conveyors_run_again(continuous):
     ctx, root = continuous
     tick(root, ctx)
-    fail(ctx.hal, "horizontal", "set_speed", ConveyorFault("amplifier fault"))
+    finish(ctx.hal, "horizontal", "set_speed")
+    finish(ctx.hal, "incline", "set_speed")
+    ctx.hal.conveyors["horizontal"].jam = ConveyorFault("horizontal conveyor stalled")
     ctx.hal.calls.clear()
 
     assert tick(root, ctx) is Status.RUNNING
     assert ctx.stats.faults["conveyor"] == 1
-    assert isinstance(bb_get("/present/error"), ConveyorFault)
-    assert ctx.hal.methods() == ["horizontal.stop", "incline.stop"]
+    assert ctx.hal.methods() == ["horizontal.shake"]
+    tick(root, ctx, n=5)                    # the shake takes its time
+    assert ctx.hal.methods() == ["horizontal.shake"]
+    finish(ctx.hal, "horizontal", "shake")
+    tick(root, ctx)
+    assert ctx.stats.recoveries["conveyor"] == 1
+    tick(root, ctx, n=30)                   # settle 0.5 s, then the speeds again
+    assert ctx.hal.methods() == ["horizontal.shake", "horizontal.set_speed",
+                                 "incline.set_speed"]
+    assert ctx.hal.calls[1][2] == (150.0,)
+    assert bb_get("/faults/escalate") is None
 
-    # the stop has not finished: still waiting on it, nothing else commanded
-    tick(root, ctx, n=5)
+
+def test_second_jam_within_a_minute_goes_to_the_operator(continuous):
+    ctx, root = continuous
+    tick(root, ctx)
+    ctx.hal.conveyors["horizontal"].jam = ConveyorFault("stalled")
+    tick(root, ctx)
+    finish(ctx.hal, "horizontal", "shake")
+    tick(root, ctx, n=40)
+    assert bb_get("/faults/escalate") is None
+    ctx.hal.conveyors["horizontal"].jam = ConveyorFault("stalled again")
+    tick(root, ctx, n=2)
+    assert "jammed again within a minute" in bb_get("/faults/escalate")
+    assert ctx.stats.faults["conveyor"] == 2
+    assert ctx.hal.methods().count("horizontal.shake") == 1
+
+
+def test_other_conveyor_error_stops_and_retries(continuous):
+    ctx, root = continuous
+    tick(root, ctx)
+    fail(ctx.hal, "horizontal", "set_speed", HalError("amplifier fault"))
+    ctx.hal.calls.clear()
+    assert tick(root, ctx) is Status.RUNNING
+    assert ctx.stats.faults["hal"] == 1
     assert ctx.hal.methods() == ["horizontal.stop", "incline.stop"]
     finish(ctx.hal, "horizontal", "stop")
     finish(ctx.hal, "incline", "stop")
-
-    # then it waits 1 s of clock time (the tick that sees the stop done starts the wait)
+    tick(root, ctx, n=60)                   # 1 s back-off, then the speeds again
+    assert ctx.hal.methods()[2:] == ["horizontal.set_speed", "incline.set_speed"]
+    finish(ctx.hal, "horizontal", "set_speed")
     tick(root, ctx)
-    t_wait = ctx.clock.now() - 0.02
-    while ctx.clock.now() < t_wait + 1.0 - 0.03:
-        assert tick(root, ctx) is Status.RUNNING
-        assert ctx.hal.methods() == ["horizontal.stop", "incline.stop"]
-    # the wait ends: the recovery succeeds, and the branch runs the conveyors again
-    tick(root, ctx, n=3)
-    assert ctx.hal.methods() == ["horizontal.stop", "incline.stop",
-                                 "horizontal.set_speed", "incline.set_speed"]
-    assert ctx.hal.calls[2][2] == (150.0,)
-    assert ctx.stats.faults["conveyor"] == 1
     assert bb_get("/faults/escalate") is None
 
 
 def test_recovery_stop_failure_escalates(continuous):
     ctx, root = continuous
     tick(root, ctx)
-    fail(ctx.hal, "incline", "set_speed", ConveyorFault("incline drive"))
+    fail(ctx.hal, "incline", "set_speed", HalError("incline drive"))
     tick(root, ctx)
     fail(ctx.hal, "horizontal", "stop", ConveyorFault("no answer"))
     assert tick(root, ctx) is Status.RUNNING
@@ -192,6 +215,11 @@ def test_incremental_move_fault_is_recovered(incremental):
     fail(ctx.hal, "horizontal", "move", ConveyorFault("following error"))
     tick(root, ctx)
     assert ctx.stats.faults["conveyor"] == 1
-    assert ctx.hal.methods()[-2:] == ["horizontal.stop", "incline.stop"]
+    assert ctx.hal.methods()[-1] == "horizontal.shake"     # a following error: a jam
     assert bb_get("/present/completed") == 0
-    pending(ctx.hal, "horizontal", "stop")
+    finish(ctx.hal, "horizontal", "shake")
+    tick(root, ctx, n=30)                   # settle, then the request is served again
+    assert ctx.hal.methods()[-1] == "horizontal.move"
+    finish(ctx.hal, "horizontal", "move")
+    tick(root, ctx)
+    assert bb_get("/present/completed") == 1

@@ -8,7 +8,7 @@ import pytest
 from py_trees.common import Status
 from treeutil import bb_get, bb_set, fail, finish, make_ctx, part, pending, scenario, tick
 
-from feeder_bt.errors import CommsLost, EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.errors import EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.parts import Part
 from feeder_bt.trees import retrieve
@@ -205,10 +205,10 @@ def test_failed_recovery_escalates_and_branch_stays_running(tree):
     tick(root, ctx)
     fail(ctx.hal, "robot", "pick", ServoTimeout("joint 2"))
     tick(root, ctx)
-    fail(ctx.hal, "robot", "recover", CommsLost("V+ not answering"))
+    fail(ctx.hal, "robot", "recover", ServoTimeout("REACTE: power cannot be enabled"))
     assert tick(root, ctx) is Status.RUNNING
     reason = bb_get("/faults/escalate")
-    assert reason == "robot could not recover: V+ not answering"
+    assert reason == "robot could not recover: REACTE: power cannot be enabled"
     assert ctx.stats.recoveries["servo_timeout"] == 0
     n = len(ctx.hal.calls)
     ctx.queue.put(part(320.0))

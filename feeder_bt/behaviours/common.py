@@ -44,6 +44,12 @@ class Stats:
         self.version = 0
         self.started_at: float | None = None
         self.last_retrieved: str | None = None
+        self.scenario: str | None = None
+        # faults a branch is retrying through, by blackboard key: the next success of a job
+        # reporting to that key is the recovery; ``attempts`` counts the retries meanwhile
+        self.pending: dict[str, str] = {}
+        self.counted: dict[str, object] = {}      # key -> the error CountFault last counted
+        self.attempts: Counter[str] = Counter()
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n
@@ -56,6 +62,23 @@ class Stats:
         self.version += 1
         for fn in self.listeners:
             fn(ev)
+
+    def retrying(self, key: str, kind: str) -> None:
+        """A branch will retry past a fault of ``kind``: its next success recovers it."""
+        self.pending[key] = kind
+        self.attempts[key] += 1
+
+    def succeeded(self, key: str, t: float, kinds: tuple[str, ...] | None = None) -> None:
+        """A job reporting to ``key`` succeeded: a fault of one of ``kinds`` (any, if None)
+        that the branch retried through is recovered."""
+        kind = self.pending.get(key)
+        if kind is not None and kinds is not None and kind not in kinds:
+            return
+        self.pending.pop(key, None)
+        if kind is not None:
+            self.recoveries[kind] += 1
+            self.emit(t, "recovered", kind=kind, attempts=self.attempts[key])
+        self.attempts[key] = 0
 
     @property
     def total_retrieved(self) -> int:
@@ -105,7 +128,7 @@ def init_blackboard(scenario: Scenario) -> None:
     for key in ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct",
                 "/present/request", "/present/completed", "/retrieve/part",
                 "/retrieve/error", "/faults/escalate", "/locate/frame", "/locate/result",
-                "/locate/found", "/locate/error", "/present/error"):
+                "/locate/found", "/locate/error", "/present/error", "/present/hold"):
         bb.register_key(key=key, access=Access.WRITE)
     bb.set("/speeds/horizontal_mm_s", scenario.present.horizontal_mm_s)
     bb.set("/speeds/incline_pct", scenario.present.incline_pct)
@@ -116,6 +139,7 @@ def init_blackboard(scenario: Scenario) -> None:
     bb.set("/retrieve/error", None)
     bb.set("/locate/error", None)      # read by the fallbacks even when no job ever failed
     bb.set("/present/error", None)
+    bb.set("/present/hold", False)     # locate's golden-image recovery holds the incline
     bb.set("/faults/escalate", None)
     bb.set("/locate/frame", None)
     bb.set("/locate/result", None)
@@ -136,6 +160,9 @@ class JobLeaf(Leaf):
     style keys through ``on_failure`` so that a fallback can choose the recovery."""
 
     fault_key: str | None = None        # blackboard key that receives the error kind
+    # fault kinds this leaf's success shows recovered (None: any): a belt notification
+    # arriving says nothing about a camera that failed
+    recovers: tuple[str, ...] | None = None
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
@@ -166,6 +193,8 @@ class JobLeaf(Leaf):
         if state is JobState.RUNNING:
             return Status.RUNNING
         if state is JobState.SUCCEEDED:
+            if self.fault_key:
+                self.ctx.stats.succeeded(self.fault_key, self.ctx.now(), self.recovers)
             return self.on_success(self.job.result)
         self.error = self.job.error or HalError(f"{self.job.name} {state.value}")
         return self.on_failure(self.error)
@@ -216,10 +245,55 @@ class CountFault(Leaf):
         err = self.bb.get(self.key)
         kind = err.kind if err is not None else "unknown"
         self.ctx.stats.faults[kind] += 1
+        self.ctx.stats.counted[self.key] = err
         if self.counter:
             self.ctx.stats.count(self.counter)
         self.ctx.stats.emit(self.ctx.now(), "fault", kind=kind, message=str(err))
         return Status.SUCCESS
+
+
+class Retry(Leaf):
+    """Fallback step for a fault that may pass (a dropped link, a failed grab): count it
+    as being retried and back off, longer each time; FAILURE after ``max_attempts`` in a
+    row without a success, so the next fallback (escalation) runs. The branch's next
+    successful job records the recovery (``Stats.succeeded``)."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str, first_s: float = 0.5,
+                 max_s: float = 8.0, max_attempts: int = 8) -> None:
+        super().__init__(name, ctx)
+        self.key, self.first_s, self.max_s, self.max_attempts = key, first_s, max_s, max_attempts
+        self.bb = client(self, read=(key,))
+        self.until = 0.0
+        self.give_up = False
+
+    def initialise(self) -> None:
+        err = self.bb.get(self.key)
+        stats = self.ctx.stats
+        self.give_up = stats.attempts[self.key] >= self.max_attempts
+        if self.give_up:
+            return
+        stats.retrying(self.key, getattr(err, "kind", "hal"))
+        wait = min(self.max_s, self.first_s * 2 ** (stats.attempts[self.key] - 1))
+        self.until = self.ctx.now() + wait
+        self.ctx.clock.wake_at(self.until)
+        self.feedback_message = f"attempt {stats.attempts[self.key]}: retry in {wait:g} s"
+
+    def update(self) -> Status:
+        if self.give_up:
+            self.feedback_message = f"gave up after {self.max_attempts} attempts"
+            return Status.FAILURE
+        return Status.SUCCESS if self.ctx.now() >= self.until - EPS else Status.RUNNING
+
+
+class AttemptsBelow(Leaf):
+    """Condition: fewer than ``n`` retries in a row on ``key`` (a recovery ladder's rung)."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str, n: int) -> None:
+        super().__init__(name, ctx)
+        self.key, self.n = key, n
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.ctx.stats.attempts[self.key] < self.n else Status.FAILURE
 
 
 class Escalate(Leaf):
@@ -235,6 +309,7 @@ class Escalate(Leaf):
         reason = f"{self.what}: {err}" if err is not None else self.what
         if self.bb.get("/faults/escalate") is None:
             self.bb.set("/faults/escalate", reason)
-            self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1
+            if err is None or self.ctx.stats.counted.get(self.key) is not err:
+                self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1
         self.feedback_message = reason
         return Status.RUNNING

@@ -18,6 +18,7 @@ class WaitTravel(JobLeaf):
     """Continuous mode: the conveyor's distance notification paces the frames."""
 
     fault_key = "/locate/error"     # so the fallbacks never act on a stale grab error
+    recovers = ("comms_lost",)
 
     def start(self) -> Job:
         return self.ctx.hal.conveyors["horizontal"].travelled(
@@ -196,8 +197,32 @@ class AdvanceIfNothing(Leaf):
         return Status.RUNNING
 
 
+class ClearForGolden(JobLeaf):
+    """Recovery: empty the belt under the camera before a new golden image. Continuous:
+    hold the incline (``/present/hold``) and let the horizontal belt carry off every part
+    on it; incremental: move the horizontal belt its length."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, write=("/present/hold",))
+
+    def start(self) -> Job:
+        conv = self.ctx.hal.conveyors["horizontal"]
+        length = self.ctx.cell.conveyors["horizontal"].length_mm
+        if self.ctx.scenario.present.mode == "continuous":
+            self.bb.set("/present/hold", True)
+            return conv.travelled(length)
+        return conv.move(length, self.ctx.cell.conveyors["horizontal"].max_mm_s)
+
+    def terminate(self, new_status: Status) -> None:
+        super().terminate(new_status)
+        self.bb.set("/present/hold", False)
+
+
 class GrabGolden(JobLeaf):
     """Set-up: grab the golden image (an empty, lit belt) for image subtraction."""
+
+    fault_key = "/locate/error"
 
     def start(self) -> Job:
         return self.ctx.hal.camera.grab()

@@ -15,7 +15,8 @@ class RunConveyors(Leaf):
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/incline_pct"),
+        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/incline_pct",
+                                     "/present/hold"),
                          write=("/present/error",))
         self.jobs: list[Job] = []
         self.commanded: tuple[float, float] | None = None
@@ -27,6 +28,8 @@ class RunConveyors(Leaf):
     def update(self) -> Status:
         h = float(self.bb.get("/speeds/horizontal_mm_s"))
         i = h * float(self.bb.get("/speeds/incline_pct")) / 100.0
+        if self.bb.get("/present/hold"):
+            i = 0.0
         if self.commanded != (h, i):
             conv = self.ctx.hal.conveyors
             self.jobs = [conv["horizontal"].set_speed(h), conv["incline"].set_speed(i)]
@@ -34,11 +37,19 @@ class RunConveyors(Leaf):
             self.ctx.stats.emit(self.ctx.now(), "speeds", horizontal_mm_s=h, incline_mm_s=i)
         for job in self.jobs:
             if job.done and not job.ok:
-                self.bb.set("/present/error", job.error)
-                self.feedback_message = str(job.error)
-                return Status.FAILURE
+                return self._failed(job.error)
+        for conv in self.ctx.hal.conveyors.values():
+            jam = conv.fault()
+            if jam is not None:
+                return self._failed(jam)
         self.feedback_message = f"horizontal {h:.0f} mm/s, incline {i:.0f} mm/s"
         return Status.RUNNING
+
+    def _failed(self, error) -> Status:
+        self.bb.set("/present/error", error)
+        self.feedback_message = str(error)
+        self.commanded = None               # after the recovery, command the speeds afresh
+        return Status.FAILURE
 
     def terminate(self, new_status: Status) -> None:
         # pre-empted while running: stop. After a FAILURE the recovery branch stops them.
@@ -88,6 +99,36 @@ class ServeAdvance(JobLeaf):
         self.bb.set("/present/request", None)
         self.bb.set("/present/completed", self.bb.get("/present/completed") + 1)
         return Status.SUCCESS
+
+
+class Shake(JobLeaf):
+    """Jam recovery: jog the horizontal belt back and forth to free the parts."""
+
+    fault_key = "/present/error"
+    AMPLITUDE_MM, CYCLES = 20.0, 3
+
+    def start(self) -> Job:
+        return self.ctx.hal.conveyors["horizontal"].shake(self.AMPLITUDE_MM, self.CYCLES)
+
+    def on_success(self, result: object) -> Status:
+        self.ctx.stats.recoveries["conveyor"] += 1
+        return Status.SUCCESS
+
+
+class FirstJamIn(Leaf):
+    """Condition: no other jam in the last ``window_s`` — a second one soon after a shake
+    means shaking does not help, and the operator must look."""
+
+    def __init__(self, name: str, ctx: Ctx, window_s: float = 60.0) -> None:
+        super().__init__(name, ctx)
+        self.window_s = window_s
+        self.last: float | None = None
+
+    def update(self) -> Status:
+        now = self.ctx.now()
+        first = self.last is None or now - self.last > self.window_s
+        self.last = now
+        return Status.SUCCESS if first else Status.FAILURE
 
 
 class StopConveyors(JobLeaf):

@@ -198,6 +198,13 @@ class Place(PartJob):
         return Status.SUCCESS
 
 
+class Holding(Leaf):
+    """Condition: the gripper holds a part (a place was cut short by a fault)."""
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.ctx.hal.robot.holding() else Status.FAILURE
+
+
 class Recover(JobLeaf):
     """Servo time-out: run the controller's recovery program and re-enable power."""
 

@@ -11,6 +11,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ..errors import HalError
 from ..jobs import Job
 
 
@@ -85,6 +86,10 @@ class Conveyor(Protocol):
 
     def travelled(self, distance_mm: float) -> Job:
         """A notification: ends when the belt has moved ``distance_mm`` from now."""
+
+    def fault(self) -> HalError | None:
+        """A fault the controller reported while the belt ran (a jam: the motor stalled,
+        a following error), or None. Cleared by the next motion command."""
 
 
 class Camera(Protocol):

@@ -1,13 +1,27 @@
-"""locate: latched grab every frame_spacing_mm of belt (or on request), recipe, enqueue."""
+"""locate: latched grab every frame_spacing_mm of belt (or on request), recipe, enqueue.
+
+Recovery: a dropped link is retried with back-off; a failed grab is retried once, then
+the golden image is taken again on a cleared belt, then the operator is called (FAULT)."""
 
 from __future__ import annotations
 
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Wait
-from ..behaviours.locate import AdvanceIfNothing, Enqueue, Grab, QueueEmpty, Recognise, WaitTravel
+from ..behaviours.common import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
+from ..behaviours.locate import (
+    AdvanceIfNothing,
+    ClearForGolden,
+    Enqueue,
+    Grab,
+    GrabGolden,
+    QueueEmpty,
+    Recognise,
+    WaitTravel,
+)
 from ..scenario.plugins import load_class
+
+KEY = "/locate/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -28,12 +42,24 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             Enqueue("enqueue", ctx),
             AdvanceIfNothing("advance if nothing", ctx),
         ])
+    link = Sequence("link lost", memory=True, children=[
+        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
+        CountFault("count link fault", ctx, KEY),
+        Retry("reconnect (back-off)", ctx, KEY),
+    ])
     grab_failed = Sequence("grab failed", memory=True, children=[
-        ErrorIs("camera fault?", ctx, "/locate/error", ("grab_failed", "hal")),
-        CountFault("count grab fault", ctx, "/locate/error"),
-        Wait("back off", ctx, 0.2),
+        ErrorIs("camera fault?", ctx, KEY, ("grab_failed", "hal")),
+        CountFault("count grab fault", ctx, KEY),
+        Retry("back off", ctx, KEY, first_s=0.2, max_attempts=2),
+        Selector("retry or new golden image", memory=True, children=[
+            AttemptsBelow("first failure?", ctx, KEY, 2),
+            Sequence("new golden image", memory=True, children=[
+                ClearForGolden("clear the belt", ctx),
+                GrabGolden("golden image", ctx),
+            ]),
+        ]),
     ])
     return Selector("locate", memory=True, children=[
-        frame, grab_failed,
-        Escalate("vision failed", ctx, "/locate/error", "camera or vision failed"),
+        frame, link, grab_failed,
+        Escalate("vision failed", ctx, KEY, "camera or vision failed"),
     ])

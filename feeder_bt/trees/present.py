@@ -1,12 +1,18 @@
-"""present: run the conveyors (continuous) or serve advance requests (incremental)."""
+"""present: run the conveyors (continuous) or serve advance requests (incremental).
+
+Recovery: a dropped link to the conveyor controller is retried with back-off; a jam is
+shaken loose once, and a second jam within a minute goes to the operator (FAULT)."""
 
 from __future__ import annotations
 
 import py_trees
 from py_trees.composites import Selector, Sequence
+from py_trees.decorators import Inverter
 
-from ..behaviours.common import CountFault, Ctx, Escalate, Wait
-from ..behaviours.present import RunConveyors, ServeAdvance, StopConveyors
+from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
+from ..behaviours.present import FirstJamIn, RunConveyors, ServeAdvance, Shake, StopConveyors
+
+KEY = "/present/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -14,12 +20,31 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         work = RunConveyors("run conveyors", ctx)
     else:
         work = ServeAdvance("advance on request", ctx)
-    recover = Sequence("conveyor recovery", memory=True, children=[
-        CountFault("count conveyor fault", ctx, "/present/error"),
+    link = Sequence("link lost", memory=True, children=[
+        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
+        CountFault("count link fault", ctx, KEY),
+        Retry("reconnect (back-off)", ctx, KEY),
+    ])
+    jam = Sequence("jam", memory=True, children=[
+        ErrorIs("jammed?", ctx, KEY, ("conveyor",)),
+        CountFault("count jam", ctx, KEY),
+        Selector("shake once", memory=True, children=[
+            Sequence("shake it loose", memory=True, children=[
+                FirstJamIn("first jam in a minute?", ctx),
+                Shake("shake", ctx),
+                Wait("let it settle", ctx, 0.5),
+            ]),
+            Escalate("jammed again", ctx, KEY,
+                     "conveyor jammed again within a minute of a shake"),
+        ]),
+    ])
+    other = Sequence("conveyor recovery", memory=True, children=[
+        Inverter("not handled above", ErrorIs("jam or link?", ctx, KEY, ("conveyor", "comms_lost"))),
+        CountFault("count conveyor fault", ctx, KEY),
         StopConveyors("stop conveyors", ctx),
-        Wait("let it settle", ctx, 1.0),
+        Retry("settle and retry", ctx, KEY, first_s=1.0, max_attempts=3),
     ])
     return Selector("present", memory=True, children=[
-        work, recover,
-        Escalate("conveyors failed", ctx, "/present/error", "conveyors do not respond"),
+        work, link, jam, other,
+        Escalate("conveyors failed", ctx, KEY, "conveyors do not respond"),
     ])

@@ -1,15 +1,35 @@
-"""retrieve: next part by policy, too-far check, pick (tracking), place, with recovery."""
+"""retrieve: next part by policy, too-far check, pick (tracking), place, with recovery.
+
+Recovery (thesis 8.2.1.1, hierarchical error handling): a missed grab or an unreachable
+part is counted and skipped; a servo time-out runs the controller's recovery program,
+re-enables power, moves clear and finishes the part once (a part still held is placed,
+else the pick is retried); a dropped link is retried with back-off and a held part placed;
+what cannot be recovered goes to the operator (FAULT)."""
 
 from __future__ import annotations
 
 import py_trees
+from py_trees.behaviours import Success
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
-from ..behaviours.retrieve import FollowRobotSpeed, MoveSafe, NextPart, Pick, Place, Recover
+from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from ..behaviours.retrieve import (
+    FollowRobotSpeed,
+    Holding,
+    MoveSafe,
+    NextPart,
+    Pick,
+    Place,
+    Recover,
+)
 from ..scenario.plugins import load_class
 
 KEY = "/retrieve/error"
+
+
+def _place_held(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    return Sequence("place the held part", memory=True, children=[
+        Holding("holding a part?", ctx), Place("place", ctx)])
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -34,10 +54,20 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         CountFault("count servo fault", ctx, KEY),
         Recover("run recovery program", ctx),
         MoveSafe("move to safe", ctx),
-        pick("retry pick", ctx),
-        Place("place", ctx),
+        Selector("finish the part once", memory=True, children=[
+            _place_held(ctx),
+            Sequence("retry", memory=True, children=[
+                pick("retry pick", ctx), Place("place", ctx)]),
+        ]),
+    ])
+    link = Sequence("link lost", memory=True, children=[
+        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
+        CountFault("count link fault", ctx, KEY),
+        Retry("reconnect (back-off)", ctx, KEY),
+        Selector("then", memory=True, children=[
+            _place_held(ctx), Success("nothing held")]),
     ])
     return Selector("retrieve", memory=True, children=[
-        pick_and_place, missed, unreachable, servo,
+        pick_and_place, missed, unreachable, servo, link,
         Escalate("robot failed", ctx, KEY, "robot could not recover"),
     ])

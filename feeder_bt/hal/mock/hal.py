@@ -37,19 +37,22 @@ class MockConveyor(_Device):
         self.name = name
         self.count = 0
         self.commanded = 0.0
+        self.jam = None
 
     def set_speed(self, mm_s: float) -> Job:
-        self.commanded = mm_s
+        self.commanded, self.jam = mm_s, None
         return self._job("set_speed", mm_s)
 
     def move(self, distance_mm: float, mm_s: float) -> Job:
+        self.jam = None
         return self._job("move", distance_mm, mm_s)
 
     def stop(self) -> Job:
-        self.commanded = 0.0
+        self.commanded, self.jam = 0.0, None
         return self._job("stop")
 
     def shake(self, amplitude_mm: float, cycles: int) -> Job:
+        self.jam = None
         return self._job("shake", amplitude_mm, cycles)
 
     def speed(self) -> float:
@@ -60,6 +63,10 @@ class MockConveyor(_Device):
 
     def travelled(self, distance_mm: float) -> Job:
         return self._job("travelled", distance_mm)
+
+    def fault(self):
+        """The test sets ``jam`` to a ``ConveyorFault``; a motion command clears it."""
+        return self.jam
 
 
 class MockCamera(_Device):

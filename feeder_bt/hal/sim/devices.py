@@ -76,6 +76,9 @@ class SimConveyor:
     def position(self) -> int:
         return self.world.galil_count()
 
+    def fault(self) -> HalError | None:
+        return None
+
     def travelled(self, distance_mm: float) -> Job:
         job = Job(f"{self.name}.travelled({distance_mm:g})")
         self.world.notify_travel(self.axis, distance_mm, job)

@@ -1,0 +1,154 @@
+"""Each recovery path of issue 4, ticked through the fault and the recovery over the mock
+HAL, asserting the order of the HAL calls."""
+
+from __future__ import annotations
+
+import pytest
+from test_cell import Rig
+from treeutil import bb_get, fail, finish, frame, make_ctx, part, pending, tick
+
+from feeder_bt.cell import CellCommandError, CellState
+from feeder_bt.errors import CommsLost, GrabFailed, ServoTimeout
+from feeder_bt.trees import locate, retrieve
+
+MOTION = ("robot.pick", "robot.place", "robot.move_safe", "robot.recover")
+
+
+def robot_calls(ctx) -> list[str]:
+    return [m for m in ctx.hal.methods() if m in MOTION]
+
+
+def test_servo_timeout_during_place_recovers_and_places_the_held_part():
+    ctx = make_ctx()
+    root = retrieve.build(ctx)
+    ctx.queue.put(part(400.0))
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "pick")
+    ctx.hal.robot.held = True
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "place", ServoTimeout("joint 1 following error"))
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "recover")
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "move_safe")
+    tick(root, ctx)
+    # the part is still in the gripper: place it, do not pick again
+    assert robot_calls(ctx) == ["robot.pick", "robot.place", "robot.recover",
+                                "robot.move_safe", "robot.place"]
+    finish(ctx.hal, "robot", "place")
+    ctx.hal.robot.held = False
+    tick(root, ctx)
+    assert ctx.stats.retrieved["lens"] == 1
+    assert ctx.stats.faults["servo_timeout"] == 1
+    assert ctx.stats.recoveries["servo_timeout"] == 1
+    assert bb_get("/faults/escalate") is None
+
+
+def test_lost_robot_link_backs_off_then_places_the_held_part_and_goes_on():
+    ctx = make_ctx()
+    root = retrieve.build(ctx)
+    ctx.queue.put(part(400.0))
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "pick")
+    ctx.hal.robot.held = True
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "place", CommsLost("motion server: connection reset"))
+    tick(root, ctx)
+    assert ctx.stats.faults["comms_lost"] == 1
+    tick(root, ctx, n=20)                       # back-off 0.5 s: no robot call meanwhile
+    assert robot_calls(ctx) == ["robot.pick", "robot.place"]
+    tick(root, ctx, n=10)
+    assert robot_calls(ctx) == ["robot.pick", "robot.place", "robot.place"]
+    finish(ctx.hal, "robot", "place")
+    ctx.hal.robot.held = False
+    tick(root, ctx)
+    assert ctx.stats.recoveries["comms_lost"] == 1
+    assert ctx.stats.retrieved["lens"] == 1
+    ctx.queue.put(part(420.0))
+    tick(root, ctx, n=2)
+    assert robot_calls(ctx)[-1] == "robot.pick"          # feeding again
+    assert bb_get("/faults/escalate") is None
+
+
+def _to_grab(ctx, root):
+    tick(root, ctx)
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    return pending(ctx.hal, "camera", "grab")
+
+
+def test_grab_failure_ladder_retry_then_new_golden_image_then_fault():
+    ctx = make_ctx()
+    root = locate.build(ctx)
+    _to_grab(ctx, root)
+    fail(ctx.hal, "camera", "grab", GrabFailed("no frame"))
+    tick(root, ctx, n=15)                       # rung 1: back off, then try again
+    assert bb_get("/faults/escalate") is None
+    _to_grab(ctx, root)
+    fail(ctx.hal, "camera", "grab", GrabFailed("no frame"))
+    tick(root, ctx, n=25)                       # rung 2: clear the belt, new golden image
+    travel = pending(ctx.hal, "horizontal", "travelled")
+    assert travel.args == (ctx.cell.conveyors["horizontal"].length_mm,)
+    assert bb_get("/present/hold") is True      # the incline waits while the belt empties
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    assert bb_get("/present/hold") is False
+    assert ctx.hal.methods()[-2:] == ["horizontal.travelled", "camera.grab"]
+    fail(ctx.hal, "camera", "grab", GrabFailed("camera gone"))    # rung 3: the operator
+    tick(root, ctx, n=2)
+    assert bb_get("/faults/escalate") == "camera or vision failed: camera gone"
+    assert ctx.stats.faults["grab_failed"] == 3
+    assert ctx.stats.recoveries["grab_failed"] == 0
+
+
+def test_new_golden_image_counts_as_the_recovery():
+    ctx = make_ctx()
+    root = locate.build(ctx)
+    for _ in range(2):
+        _to_grab(ctx, root)
+        fail(ctx.hal, "camera", "grab", GrabFailed("no frame"))
+        tick(root, ctx, n=25)
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    finish(ctx.hal, "camera", "grab", frame(0))
+    tick(root, ctx)
+    assert ctx.vision.golden is not None
+    assert ctx.stats.recoveries["grab_failed"] == 1
+    assert ctx.stats.attempts["/locate/error"] == 0
+
+
+def test_estop_stops_every_motion_at_once_and_needs_an_operator_reset():
+    rig = Rig()
+    rig.start()
+    rig.tick(3)
+    rig.hal.conveyors["horizontal"].count = 100
+    rig.hal.io.values["estop"] = True
+    n = len(rig.hal.calls)
+    running = [j for j in rig.hal.jobs if not j.done]
+    rig.tick()
+    assert rig.cell.state is CellState.FAULT          # at once: no clean-up motion
+    assert rig.cell.fault_reason == "e-stop pressed"
+    stops = rig.hal.methods()[n:]
+    assert set(stops) == {"horizontal.stop", "incline.stop"}      # and nothing else
+    assert all(j.cancelled for j in running)
+    assert rig.cell.stats.faults["estop"] == 1
+    rig.tick(50)
+    assert rig.hal.methods()[n:] == stops
+    with pytest.raises(CellCommandError, match="release it first"):
+        rig.cell.reset()
+    rig.hal.io.values["estop"] = False
+    assert rig.cell.state is CellState.FAULT          # releasing is not a reset
+    rig.cell.reset()
+    assert rig.cell.state is CellState.STOPPED
+    assert rig.cell.stats.recoveries["estop"] == 1
+    rig.start()
+    assert rig.cell.stats.faults["estop"] == 1        # the counts survive the restart
+
+
+def test_estop_while_stopped_blocks_start():
+    rig = Rig()
+    rig.hal.io.values["estop"] = True
+    with pytest.raises(CellCommandError, match="e-stop"):
+        rig.cell.start()
+    assert rig.cell.state is CellState.STOPPED
+    assert rig.hal.calls == []
