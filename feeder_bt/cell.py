@@ -18,7 +18,7 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
-from .adjusters import make_adjuster
+from .adjusters import AdjustInputs, Speeds, make_adjuster
 from .behaviours.common import Ctx, Stats, init_blackboard
 from .clock import Clock
 from .encoder import EncoderSync
@@ -31,6 +31,8 @@ from .trees import build_cleanup, build_feeding, build_setup
 from .vision.calibration import Calibration
 from .vision.locator import Locator
 from .vision.worker import VisionWorker
+
+ESTOP = "estop"         # the cell description's e-stop input, if it has one
 
 
 class CellState(enum.Enum):
@@ -61,6 +63,7 @@ class Cell:
         self.listeners: list[Callable[[CellState, CellState], None]] = []
         self.ticks = 0
         self.version = 0
+        self.auto_adjust = True     # the operator may hold the adjuster; kept across starts
 
     # ------------------------------------------------------------------ commands
     def load(self, scenario: Scenario) -> None:
@@ -76,8 +79,11 @@ class Cell:
             raise CellCommandError(f"cannot start while {self.state.value}")
         if self.scenario is None:
             raise CellCommandError("no scenario loaded")
+        if self.estop_pressed():
+            raise CellCommandError("the e-stop is pressed: release it first")
         self.ctx = self._make_ctx(self.scenario)
-        self.stats.started_at = self.clock.now()
+        if self.stats.started_at is None:
+            self.stats.started_at = self.clock.now()
         self.feeding = build_feeding(self.ctx)
         self._switch(CellState.STARTING, build_setup(self.ctx))
 
@@ -109,10 +115,32 @@ class Cell:
         self._halt_feeding()
         self._switch(CellState.FAULTING, build_cleanup(self.ctx))
 
+    def estop_pressed(self) -> bool:
+        return ESTOP in self.cell.io and bool(self.hal.io.get(ESTOP))
+
+    def estop(self) -> None:
+        """The e-stop input: every motion stops at once and the cell goes straight to
+        FAULT — no clean-up tree, since nothing may move until an operator resets."""
+        if self.state in (CellState.STOPPED, CellState.FAULT):
+            return
+        self.fault_reason = "e-stop pressed"
+        self.stats.faults["estop"] += 1
+        self.stats.emit(self.clock.now(), "fault", kind="estop", message=self.fault_reason)
+        if self.root is not None and self.root.status is Status.RUNNING:
+            self.root.stop(Status.INVALID)         # every running job cancelled
+        for conv in self.hal.conveyors.values():
+            conv.stop()
+        self._drop_scenario_objects()
+        self._switch(CellState.FAULT, None)
+
     def reset(self) -> None:
         """Operator acknowledges a FAULT."""
         if self.state is not CellState.FAULT:
             raise CellCommandError(f"nothing to reset while {self.state.value}")
+        if self.estop_pressed():
+            raise CellCommandError("the e-stop is still pressed: release it first")
+        if self.fault_reason == "e-stop pressed":
+            self.stats.recoveries["estop"] += 1
         self.fault_reason = None
         self._switch(CellState.STOPPED, None)
 
@@ -125,10 +153,18 @@ class Cell:
             bb.set(f"/speeds/{key}", float(value))
         self.version += 1
 
+    def set_auto_adjust(self, engaged: bool) -> None:
+        """Engage or hold the auto-adjuster: held, it leaves the speeds where the operator
+        put them (thesis Figure 4-4's switch); the adjust tree still samples."""
+        self.auto_adjust = bool(engaged)
+        self.version += 1
+
     # ------------------------------------------------------------------ ticking
     def tick(self) -> None:
         """One tick of whichever tree the state calls for."""
         self.ticks += 1
+        if self.state not in (CellState.STOPPED, CellState.FAULT) and self.estop_pressed():
+            self.estop()
         root = self.root
         if root is None:
             return
@@ -161,7 +197,11 @@ class Cell:
     # ------------------------------------------------------------------ internals
     def _make_ctx(self, scenario: Scenario) -> Ctx:
         init_blackboard(scenario)
-        self.stats = Stats()
+        if self.stats.scenario != scenario.name:   # a restart of the same job keeps counting
+            self.stats = Stats()
+            self.stats.scenario = scenario.name
+        self.stats.pending.clear()
+        self.stats.attempts.clear()
         queue = PartsQueue(list(scenario.parts))
         locator_cls = load_class(scenario.vision.leaf) if scenario.vision.leaf else Locator
         locator = locator_cls(scenario.vision, scenario.parts,
@@ -172,7 +212,7 @@ class Cell:
         return Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
                    queue=queue, encoder=self.encoder, stats=self.stats,
                    vision=VisionWorker(locator, self.clock, self.cell.camera.vision_latency_s),
-                   adjuster=adjuster)
+                   adjuster=_Holdable(adjuster, self))
 
     def _halt_feeding(self) -> None:
         if self.root is not None and self.root.status is Status.RUNNING:
@@ -198,6 +238,23 @@ class Cell:
         s = self.stats
         return {"state": self.state.value, "scenario": self.scenario.name if self.scenario else None,
                 "retrieved": dict(s.retrieved), "queue": len(self.ctx.queue) if self.ctx else 0}
+
+
+class _Holdable:
+    """The scenario's adjuster, passed through unless the operator holds it."""
+
+    def __init__(self, inner: Any, cell: Cell) -> None:
+        self.inner, self.cell = inner, cell
+
+    def update(self, inp: AdjustInputs) -> Speeds:
+        if self.cell.auto_adjust:
+            return self.inner.update(inp)
+        return Speeds(inp.horizontal_mm_s, inp.incline_pct, inp.robot_speed_pct)
+
+    def __getattr__(self, name: str) -> Any:      # params, NAME, ...: the adjuster's own
+        if name in ("inner", "cell"):
+            raise AttributeError(name)
+        return getattr(self.inner, name)
 
 
 def _failed_leaf(root: py_trees.behaviour.Behaviour) -> py_trees.behaviour.Behaviour:

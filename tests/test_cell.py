@@ -257,8 +257,10 @@ def test_setup_failure_faults_the_cell(rig):
 def test_cleanup_failure_ends_in_fault(rig):
     rig.start()
     rig.cell.stop()
-    rig.tick()
-    fail(rig.hal, "horizontal", "stop", ConveyorFault("no answer"))
-    rig.tick()
+    for _ in range(4):               # the first try and three more after 1, 2 and 4 s
+        rig.tick()
+        fail(rig.hal, "horizontal", "stop", ConveyorFault("no answer"))
+        assert rig.cell.state is CellState.STOPPING
+        rig.tick(int(4.2 / DT))
     assert rig.cell.state is CellState.FAULT
     assert rig.cell.fault_reason.startswith("clean-up failed")

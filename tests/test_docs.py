@@ -32,13 +32,17 @@ def shortened(argv: list[str]) -> list[str]:
     if argv[0] != "run":
         return argv
     argv = list(argv)
+    emulated = "--hal" in argv and argv[argv.index("--hal") + 1] == "emulated"
+    cap = 10.0 if emulated else 60.0        # the emulators run in real time
     if "--duration" in argv:
         i = argv.index("--duration")
-        argv[i + 1] = str(min(float(argv[i + 1]), 60.0))
+        argv[i + 1] = str(min(float(argv[i + 1]), cap))
     else:
-        argv += ["--duration", "60"]
-    if "--fast" not in argv:
+        argv += ["--duration", str(cap)]
+    if "--fast" not in argv and not emulated:
         argv.append("--fast")
+    if "--db" not in argv:
+        argv.append("--no-db")
     return argv
 
 
@@ -66,7 +70,8 @@ def _run(doc, line, tmp_path, monkeypatch):
         if flag in argv:
             i = argv.index(flag)
             argv[i + 1] = str(tmp_path / Path(argv[i + 1]).name)
-    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/")) else a
+    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/", "faults/"))
+            else a
             for a in argv]
     if argv[0] == "check":                    # expand globs the shell would expand
         argv = [argv[0]] + [str(p) for a in argv[1:] for p in sorted(Path.cwd().glob(

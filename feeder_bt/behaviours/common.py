@@ -296,16 +296,36 @@ class AttemptsBelow(Leaf):
         return Status.SUCCESS if self.ctx.stats.attempts[self.key] < self.n else Status.FAILURE
 
 
-class Escalate(Leaf):
-    """Last resort of a branch: ask the cell to go to FAULT, with the reason."""
+#: Faults that pass by themselves (a link comes back): when one strikes a recovery step,
+#: the branch starts over instead of escalating, and its own fallback handles it.
+TRANSIENT = ("comms_lost",)
 
-    def __init__(self, name: str, ctx: Ctx, key: str | None, what: str) -> None:
+
+class Escalate(Leaf):
+    """Last resort of a branch: ask the cell to go to FAULT, with the reason.
+
+    A transient fault that struck a recovery step itself (a link dropping during a shake)
+    is counted and the branch starts over, up to ``Retry``'s limit of attempts in a row."""
+
+    def __init__(self, name: str, ctx: Ctx, key: str | None, what: str,
+                 max_attempts: int = 8) -> None:
         super().__init__(name, ctx)
-        self.key, self.what = key, what
+        self.key, self.what, self.max_attempts = key, what, max_attempts
         self.bb = client(self, read=(key,) if key else (), write=("/faults/escalate",))
 
     def update(self) -> Status:
         err = self.bb.get(self.key) if self.key else None
+        stats = self.ctx.stats
+        if (self.key and err is not None and err.kind in TRANSIENT
+                and stats.attempts[self.key] < self.max_attempts
+                and self.bb.get("/faults/escalate") is None):
+            if stats.counted.get(self.key) is not err:
+                stats.faults[err.kind] += 1
+                stats.counted[self.key] = err
+                stats.emit(self.ctx.now(), "fault", kind=err.kind, message=str(err))
+            stats.retrying(self.key, err.kind)
+            self.feedback_message = f"{err}: starting over"
+            return Status.SUCCESS
         reason = f"{self.what}: {err}" if err is not None else self.what
         if self.bb.get("/faults/escalate") is None:
             self.bb.set("/faults/escalate", reason)

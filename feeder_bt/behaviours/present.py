@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from ..jobs import Job
+from ..jobs import Job, JobState
 from .common import Ctx, JobLeaf, Leaf, client
 
 
@@ -137,9 +137,23 @@ class StopConveyors(JobLeaf):
         return jobs[0] if len(jobs) == 1 else _all(jobs)
 
 
+class _AllJob(Job):
+    """Polling it polls its parts: a worker's job (``FutureJob``) ends only when polled."""
+
+    def __init__(self, name: str, parts: list[Job]) -> None:
+        super().__init__(name)
+        self.parts = parts
+
+    def poll(self):
+        if self.state is JobState.RUNNING:
+            for j in self.parts:
+                j.poll()
+        return self.state
+
+
 def _all(jobs: list[Job]) -> Job:
     """One job that ends when every job has ended (first failure wins)."""
-    combined = Job("+".join(j.name for j in jobs))
+    combined = _AllJob("+".join(j.name for j in jobs), jobs)
     remaining = set(range(len(jobs)))
     cancelling: list[bool] = []
 

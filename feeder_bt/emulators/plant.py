@@ -112,13 +112,14 @@ class Plant:
         """The conveyor driven by Galil axis ``letter`` (None: nothing connected)."""
         return self._axes.get(letter.upper())
 
-    def position_counts(self, letter: str) -> int:
-        """Encoder count of an axis (32-bit signed, as the Galil keeps it)."""
+    def position_counts(self, letter: str, t: float | None = None) -> int:
+        """Encoder count of an axis (32-bit signed, as the Galil keeps it), now or at clock
+        time ``t`` (a latch captures the count at the trigger's instant)."""
         axis = self.axis(letter)
         if axis is None:
             return 0
         with self.lock:
-            t = self.world.now()
+            t = self.world.now() if t is None else t
             return wrap(round(axis.pos(t) * self.cpm), self.cell.encoder.conveyor_bits)
 
     def velocity_counts(self, letter: str) -> float:

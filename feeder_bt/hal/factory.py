@@ -34,11 +34,17 @@ class CellIO:
                 raise ConfigError(f"signal {name!r} is on controller {sig.controller!r}; "
                                   f"one of: {', '.join(controllers)}", key=f"io.{name}")
 
+    def _addr(self, signal: str):
+        """How a controller's I/O object names a signal: the Galil's by name, the V+
+        servers' by bit number."""
+        sig = self.signals[signal]
+        return sig.bit if sig.controller == "adept" else signal
+
     def get(self, signal: str) -> bool:
         sig = self.signals.get(signal)
         if sig is None:
             return False
-        return bool(self.controllers[sig.controller].get(sig.bit))
+        return bool(self.controllers[sig.controller].get(self._addr(signal)))
 
     def set(self, signal: str, value: bool) -> Job:
         sig = self.signals.get(signal)
@@ -47,15 +53,19 @@ class CellIO:
         if sig.dir != "out":
             return DoneJob(f"io.set({signal})",
                            error=HalError(f"signal {signal!r} is an input; it cannot be set"))
-        return self.controllers[sig.controller].set(sig.bit, value)
+        return self.controllers[sig.controller].set(self._addr(signal), value)
 
     def changes(self) -> list[IoChange]:
         out: list[IoChange] = []
         for ctrl_name, ctrl in self.controllers.items():
-            for bit, value, t in ctrl.changes():
-                name = self.by_bit.get((ctrl_name, bit))
-                if name is not None:
-                    out.append(IoChange(name, bool(value), t))
+            for c in ctrl.changes():
+                if isinstance(c, IoChange):
+                    out.append(c)
+                else:                       # (bit, value, t) from the V+ notify server
+                    bit, value, t = c
+                    name = self.by_bit.get((ctrl_name, bit))
+                    if name is not None:
+                        out.append(IoChange(name, bool(value), t))
         return sorted(out, key=lambda c: c.t)
 
 
@@ -82,24 +92,23 @@ class DriverHal(Hal):
 
 def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
-    from .adept.controller import AdeptController
+    from .adept import AdeptController
     from .camera import LatchedCamera, open_source
-    from .galil.driver import GalilController
+    from .galil import make_galil
 
     closers: list = []
     try:
-        galil = GalilController(cell.galil, clock, PROGRAMS_DIR, cell.encoder)
+        galil, conveyors, galil_io = make_galil(cell, clock, PROGRAMS_DIR)
         closers.append(galil.close)
-        adept = AdeptController(cell.adept, clock)
+        adept = AdeptController(cell.adept, clock, inputs=[
+            s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"])
         closers.append(adept.close)
-        conveyors = {name: galil.conveyor(name, cell.conveyors[name])
-                     for name in cell.galil.axes if name in cell.conveyors}
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
         camera = LatchedCamera(source if source is not None else open_source(cell.camera.source),
                                clock, latch=conveyors[latch_name])
         closers.append(camera.close)
-        io = CellIO(cell, {"galil": galil.io, "adept": adept.io})
+        io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
     except BaseException:
         for close in reversed(closers):
             close()

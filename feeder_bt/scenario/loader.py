@@ -33,6 +33,15 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
 from feeder_bt.errors import ConfigError
+from feeder_bt.scenario.faults import (
+    COMMS_DEVICES,
+    FAULT_KINDS,
+    FaultPlanSpec,
+    FaultRate,
+    ScriptedFault,
+    build_rates,
+    check_fault_plan,
+)
 from feeder_bt.scenario.model import (
     AdeptSpec,
     AdjustParams,
@@ -65,7 +74,7 @@ __all__ = [
     "ADJUST_ALGORITHMS", "ADJUST_ORDER", "ADJUST_PARAMS", "CELL_HALS", "CONVEYOR_NAMES",
     "ENUMS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
     "PROBABILITY_TOLERANCE", "RANGES", "RETRIEVE_POLICIES", "SHAPE_KINDS", "THRESHOLD_METHODS",
-    "Range", "check_files", "load_cell", "load_scenario", "part_size_mm",
+    "Range", "check_files", "load_cell", "load_fault_plan", "load_scenario", "part_size_mm",
 ]
 
 # ============================================================================ allowed values
@@ -196,7 +205,18 @@ RANGES: dict[tuple[type, str], Range] = {
     (AdeptSpec, "notify_port"): Range(1, 65535),
     (AdeptSpec, "timeout_s"): POSITIVE,
     (AdeptSpec, "motion_timeout_s"): POSITIVE,
+    # fault plans (feeder_bt.scenario.faults)
+    (FaultRate, "per_pick"): Range(0, 1),
+    (FaultRate, "per_frame"): Range(0, 1),
+    (FaultRate, "per_hour"): NON_NEGATIVE,
+    (FaultRate, "outage_s"): POSITIVE,
+    (ScriptedFault, "at_s"): NON_NEGATIVE,
+    (ScriptedFault, "release_after_s"): POSITIVE,
+    (ScriptedFault, "outage_s"): POSITIVE,
 }
+ENUMS[(FaultRate, "device")] = COMMS_DEVICES
+ENUMS[(ScriptedFault, "device")] = COMMS_DEVICES
+ENUMS[(ScriptedFault, "kind")] = FAULT_KINDS
 
 #: Adjuster algorithms and the ``adjust.params`` keys each accepts (all optional; an
 #: adjuster supplies its own defaults). Keys ending in ``_mm_s`` are horizontal belt speeds
@@ -735,6 +755,7 @@ _SPECIAL_TYPES: dict[type, Callable[[_Ctx, Node, str], Any]] = {
 _FIELD_BUILDERS: dict[tuple[type, str], Callable[[_Ctx, Node, str], dict[str, Any]]] = {
     (Scenario, "hopper"): _build_hopper,
     (CellSpec, "conveyors"): _build_conveyors,
+    (FaultPlanSpec, "rates"): build_rates,
 }
 
 # ============================================================================ files
@@ -830,6 +851,16 @@ def load_scenario(path: str | Path, cell: str | Path | None = None
     cell_spec, _ = _load_cell(cell_path)
     _check_against_cell(scenario, ctx, cell_spec)
     return scenario, cell_spec
+
+
+def load_fault_plan(path: str | Path) -> FaultPlanSpec:
+    """Load and validate a fault plan for the simulated cell (``docs/faults.md``)."""
+    path = Path(path)
+    ctx = _Ctx(str(path))
+    root = _compose(path, ctx)
+    plan = ctx.dataclass(FaultPlanSpec, root, "", fill={"path": path})
+    check_fault_plan(plan, ctx)
+    return plan
 
 
 def check_files(paths: list[str]) -> list[str]:

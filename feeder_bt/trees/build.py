@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import py_trees
 from py_trees.common import ParallelPolicy
-from py_trees.composites import Parallel, Sequence
+from py_trees.composites import Parallel, Selector, Sequence
 from py_trees.decorators import SuccessIsRunning
 
 from ..behaviours.common import Ctx, Wait
@@ -42,9 +42,23 @@ def build_setup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     return Sequence("set-up", memory=True, children=steps)
 
 
+def _patiently(make, ctx: Ctx, waits: tuple[float, ...] = (1.0, 2.0, 4.0)
+               ) -> py_trees.behaviour.Behaviour:
+    """A clean-up step tried again after growing waits: a link that drops while the cell
+    stops (it comes back within seconds) must not leave the conveyors running."""
+    first = make()
+    tries: list[py_trees.behaviour.Behaviour] = [first]
+    for i, w in enumerate(waits, 1):
+        tries.append(Sequence(f"{first.name}: try {i + 1}", memory=True, children=[
+            Wait(f"wait {w:g} s", ctx, w), make()]))
+    return Selector(first.name, memory=True, children=tries)
+
+
 def build_cleanup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
-    steps: list[py_trees.behaviour.Behaviour] = [StopConveyors("stop conveyors", ctx)]
+    steps: list[py_trees.behaviour.Behaviour] = [
+        _patiently(lambda: StopConveyors("stop conveyors", ctx), ctx)]
     if ctx.scenario.vision.backlight:
-        steps.append(SetSignal("backlight off", ctx, "backlight", False))
-    steps.append(MoveSafe("robot to safe", ctx))
+        steps.append(_patiently(lambda: SetSignal("backlight off", ctx, "backlight", False),
+                                ctx))
+    steps.append(_patiently(lambda: MoveSafe("robot to safe", ctx), ctx))
     return Sequence("clean-up", memory=True, children=steps)

@@ -58,6 +58,13 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             _place_held(ctx),
             Sequence("retry", memory=True, children=[
                 pick("retry pick", ctx), Place("place", ctx)]),
+            # the part moved on during the recovery: a miss, not a robot failure
+            Sequence("missed on retry", memory=True, children=[
+                ErrorIs("missed?", ctx, KEY, ("missed_grab",)),
+                CountFault("count miss", ctx, KEY, counter="missed")]),
+            Sequence("gone on retry", memory=True, children=[
+                ErrorIs("envelope?", ctx, KEY, ("envelope",)),
+                CountFault("count unreachable", ctx, KEY, counter="unreachable")]),
         ]),
     ])
     link = Sequence("link lost", memory=True, children=[

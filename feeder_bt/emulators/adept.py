@@ -1,0 +1,387 @@
+"""An emulator of the Adept controller's V+ servers (``vplus/``), backed by the plant.
+
+Four real TCP servers on loopback, one per V+ server program — motion, position, I/O and
+I/O notify — speaking the protocol of ``vplus/PROTOCOL.md``. Like the V+ programs, each
+serves one client at a time and, when the client goes away (READ status 101) or the link
+breaks, resets its socket and waits for the next (thesis Figure 7-1). Commands act on the
+plant's simulated robot; a motion holds its connection until the simulated motion ends,
+so a pick takes its real time, while the position socket answers mid-motion.
+
+Fault plan (controller ``adept``): ``reject`` answers ``ERR -9005``; ``drop`` closes the
+connection without a reply; ``stall`` holds the reply back ``stall_s``; ``servo_timeout``
+fails the motion with ``-1007 *Motor stalled*`` and leaves power off: every motion then
+fails with ``-604 *Robot power off*`` until ``RECOVER`` (the V+ REACTE recovery) runs.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+from collections import Counter, deque
+from collections.abc import Callable
+
+from ..errors import EnvelopeError, HalError, MissedGrab
+from ..hal.adept import protocol as P
+from ..hal.interfaces import PickTarget, Pose
+from ..jobs import Job
+from .faults import FaultPlan
+from .plant import Plant
+
+SERVERS = ("motion", "position", "io", "notify")
+SERVO_FAULT_S = 0.25         # the arm runs into something this long after the command
+MOTION_LIMIT_S = 60.0        # a simulated motion that has not ended by then: plant stopped
+NOTIFY_PERIOD_S = 0.01       # io_notify polls the inputs every major cycle (16 ms on V+)
+POLL_S = 0.1                 # how often blocked server threads look at the stop flag
+
+MOTIONS = ("PICK", "PLACE", "MOVE", "SAFE")
+
+
+class BadArgument(Exception):
+    """A request argument the V+ program would refuse (reply ERR -9002)."""
+
+
+def _err(code: int) -> str:
+    return f"ERR {code} {P.error_text(code)}"
+
+
+def _num(v: float) -> str:
+    return f"{v:.3f}"
+
+
+def _as_int(v: float) -> int:
+    if v != int(v):
+        raise BadArgument(f"{v} is not an integer")
+    return int(v)
+
+
+def _as_flag(v: float) -> bool:
+    if v not in (0.0, 1.0):
+        raise BadArgument(f"{v} is not 0 or 1")
+    return v == 1.0
+
+
+class AdeptEmulator:
+    """The V+ servers over ``plant``. ``start()`` returns self; ``.ports`` maps each server
+    (motion, position, io, notify) to its port; ``stop()`` closes everything."""
+
+    def __init__(self, plant: Plant, host: str = "127.0.0.1",
+                 ports: dict[str, int] | None = None, faults: FaultPlan | None = None) -> None:
+        self.plant, self.host, self.faults = plant, host, faults
+        self.ports: dict[str, int] = {name: int((ports or {}).get(name) or 0) for name in SERVERS}
+        self.power = True                        # arm power; off after a servo fault
+        self.soft: dict[int, bool] = {}          # V+ soft signals 2001-2999
+        self.connections: Counter[str] = Counter()
+        self.requests: deque[tuple[str, str]] = deque(maxlen=1000)   # (server, line), latest
+        self._stop = threading.Event()
+        self._listeners: dict[str, socket.socket] = {}
+        self._threads: list[threading.Thread] = []
+        self._conns: set[socket.socket] = set()
+        self._lock = threading.Lock()
+        self._handlers: dict[str, dict[str, Callable[..., str]]] = {
+            "motion": {"HELLO": lambda: self._hello("motion"), "PICK": self._pick,
+                       "PLACE": self._place, "MOVE": self._move, "SAFE": self._safe,
+                       "SPEED": self._speed, "RECOVER": self._recover,
+                       "HOLDING": self._holding},
+            "position": {"HELLO": lambda: self._hello("position"), "WHERE": self._where,
+                         "BELT": self._belt},
+            "io": {"HELLO": lambda: self._hello("io"), "SIG": self._sig, "SET": self._set},
+        }
+
+    def handled(self) -> dict[str, set[str]]:
+        """The verbs each request server answers (checked against the protocol table)."""
+        return {name: set(table) for name, table in self._handlers.items()}
+
+    # ------------------------------------------------------------------ life
+    def start(self) -> AdeptEmulator:
+        for name in SERVERS:
+            lsock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                lsock.bind((self.host, self.ports[name]))
+            except OSError:
+                lsock.close()
+                self.stop()
+                raise
+            lsock.listen(1)
+            lsock.settimeout(POLL_S)
+            self.ports[name] = lsock.getsockname()[1]
+            self._listeners[name] = lsock
+        for name, lsock in self._listeners.items():
+            t = threading.Thread(target=self._serve, args=(name, lsock),
+                                 name=f"adept-emu-{name}", daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        for lsock in self._listeners.values():
+            lsock.close()
+        with self._lock:
+            conns = list(self._conns)
+        for conn in conns:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        for t in self._threads:
+            t.join(timeout=3.0)
+        self._threads.clear()
+        self._listeners.clear()
+
+    def __enter__(self) -> AdeptEmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def drop_clients(self) -> None:
+        """Break every client connection (a network fault; the servers wait for new ones)."""
+        with self._lock:
+            conns = list(self._conns)
+        for conn in conns:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    # ------------------------------------------------------------------ servers
+    def _serve(self, name: str, lsock: socket.socket) -> None:
+        """Figure 7-1: wait for a connection (READ 100), serve it until the client closes
+        (101) or the link breaks, reset the socket, wait again."""
+        while not self._stop.is_set():
+            try:
+                conn, _ = lsock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return                          # listener closed: stopping
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with self._lock:
+                self._conns.add(conn)
+            self.connections[name] += 1
+            try:
+                if name == "notify":
+                    self._notify_session(conn)
+                else:
+                    self._request_session(name, conn)
+            except OSError:
+                pass                            # "socket crash": close and listen again
+            finally:
+                with self._lock:
+                    self._conns.discard(conn)
+                conn.close()
+
+    def _request_session(self, name: str, conn: socket.socket) -> None:
+        conn.settimeout(POLL_S)
+        buf = b""
+        while not self._stop.is_set():
+            if b"\n" not in buf:
+                if len(buf) > P.MAX_LINE:       # READ buffer overflow: refuse and resync
+                    buf = b""
+                    conn.sendall((_err(P.CODE_BAD_ARGUMENT) + "\r\n").encode())
+                try:
+                    chunk = conn.recv(4096)
+                except TimeoutError:
+                    continue
+                if not chunk:
+                    return                      # client closed (READ 101): reset
+                buf += chunk
+                continue
+            raw, _, buf = buf.partition(b"\n")
+            line = raw.decode("ascii", "replace").strip()
+            if not line:
+                continue
+            self.requests.append((name, line))
+            rule = self.faults.check("adept", line) if self.faults is not None else None
+            kind = rule.kind if rule is not None else None
+            if kind == "drop":
+                return                          # the connection dies without a reply
+            if kind == "reject":
+                reply = _err(P.CODE_REJECTED)
+            else:
+                reply = self._dispatch(name, line, servo_fault=kind == "servo_timeout")
+            if kind == "stall":
+                self._stop.wait(rule.stall_s)   # type: ignore[union-attr]
+            conn.sendall((reply + "\r\n").encode("ascii"))   # V+ WRITE ends lines CR LF
+
+    def _dispatch(self, name: str, line: str, servo_fault: bool = False) -> str:
+        """decode_and_do (thesis Figure 7-2): decode the verb, check the arguments, do it."""
+        verb, *words = line.split()
+        handler = self._handlers[name].get(verb)
+        if handler is None:
+            return _err(P.CODE_UNKNOWN_REQUEST)
+        cmd = P.command(name, verb)
+        if len(words) != len(cmd.args):
+            return _err(P.CODE_BAD_ARGUMENT)
+        try:
+            args = [float(w) for w in words]
+            if not all(math.isfinite(a) for a in args):
+                raise BadArgument("not finite")
+            if servo_fault and verb in MOTIONS:
+                return self._servo_fault()
+            return handler(*args)
+        except (ValueError, BadArgument):
+            return _err(P.CODE_BAD_ARGUMENT)
+
+    # ------------------------------------------------------------------ motion server
+    def _hello(self, server: str) -> str:
+        return f"OK {P.PROTOCOL_VERSION} {server}"
+
+    def _servo_fault(self) -> str:
+        """The arm runs into something: the amplifiers time out, REACTE turns power off."""
+        self._stop.wait(SERVO_FAULT_S)
+        self.power = False
+        return _err(P.CODE_MOTOR_STALLED)
+
+    def _run(self, start: Callable[[], Job]) -> Job | str:
+        """Start a simulated robot job and block this connection until it ends."""
+        if not self.power:
+            return _err(P.CODE_POWER_OFF)
+        with self.plant.lock:
+            job = start()
+        if not self.plant.wait(job, timeout=MOTION_LIMIT_S):
+            return _err(P.CODE_REJECTED)
+        return job
+
+    def _pick(self, pid: float, x: float, y: float, angle: float, latch: float,
+              tracking: float, ox: float, oy: float, oz: float) -> str:
+        target = PickTarget(part_id=_as_int(pid), x_mm=x, y_mm=y, angle_deg=angle,
+                            latch=_as_int(latch), tracking=_as_flag(tracking),
+                            tool_offset=(ox, oy, oz))
+        job = self._run(lambda: self.plant.hal.robot.pick(target))
+        if isinstance(job, str):
+            return job
+        if job.ok:
+            return f"OK {target.part_id} {_num(job.result.belt_x_mm)}"
+        return self._failed(job.error, target.tracking)
+
+    def _failed(self, error: HalError | None, tracking: bool = False) -> str:
+        if isinstance(error, EnvelopeError):    # V+: WINDOW() check, or out of reach
+            return _err(P.CODE_OUTSIDE_WINDOW if tracking else P.CODE_OUT_OF_RANGE)
+        if isinstance(error, MissedGrab):
+            return _err(P.CODE_NOTHING_GRIPPED)
+        return _err(P.CODE_REJECTED)
+
+    def _motion_reply(self, job: Job | str) -> str:
+        if isinstance(job, str):
+            return job
+        return "OK" if job.ok else self._failed(job.error)
+
+    def _place(self, x: float, y: float, z: float, rz: float) -> str:
+        return self._motion_reply(self._run(lambda: self.plant.hal.robot.place(Pose(x, y, z, rz))))
+
+    def _move(self, x: float, y: float, z: float, rz: float) -> str:
+        return self._motion_reply(self._run(lambda: self.plant.hal.robot.move_to(Pose(x, y, z, rz))))
+
+    def _safe(self) -> str:
+        return self._motion_reply(self._run(lambda: self.plant.hal.robot.move_safe()))
+
+    def _speed(self, pct: float) -> str:
+        if not 0.0 < pct <= 200.0:
+            raise BadArgument(f"speed {pct} %")
+        with self.plant.lock:
+            self.plant.hal.robot.set_speed(pct)
+        return "OK"
+
+    def _recover(self) -> str:
+        """reacte.v2 recover(): disable, clear, re-enable power, report."""
+        with self.plant.lock:
+            job = self.plant.hal.robot.recover()
+        self.plant.wait(job, timeout=MOTION_LIMIT_S)
+        if not job.ok:
+            return self._failed(job.error)
+        self.power = True
+        return "OK"
+
+    def _holding(self) -> str:
+        with self.plant.lock:
+            held = self.plant.hal.robot.holding()
+        return f"OK {int(held)}"
+
+    # ------------------------------------------------------------------ position server
+    def _where(self) -> str:
+        with self.plant.lock:
+            p = self.plant.hal.robot_position.pose()
+        return f"OK {_num(p.x)} {_num(p.y)} {_num(p.z)} {_num(p.rz)}"
+
+    def _belt(self) -> str:
+        with self.plant.lock:
+            count = self.plant.hal.robot_position.belt_encoder()
+        return f"OK {count}"
+
+    # ------------------------------------------------------------------ I/O server
+    def _signal_name(self, signal: int) -> str | None:
+        """The cell's name of a V+ signal on this controller (None: nothing wired)."""
+        bit, is_input = P.bit_of(signal)
+        for name, sig in self.plant.cell.io.items():
+            if sig.controller != "adept" or (sig.dir == "in") != is_input:
+                continue
+            if sig.bit in (bit, signal):
+                return name
+        return None
+
+    @staticmethod
+    def _check_signal(signal: int) -> None:
+        if not (1 <= signal < P.INPUT_BASE or P.INPUT_BASE < signal < P.SOFT_BASE
+                or P.SOFT_BASE < signal < P.SOFT_BASE + 1000):
+            raise BadArgument(f"no V+ signal {signal}")
+
+    def _read_signal(self, signal: int) -> bool:
+        if signal > P.SOFT_BASE:
+            return self.soft.get(signal, False)
+        name = self._signal_name(signal)
+        return self.plant.signal(name) if name is not None else False
+
+    def _sig(self, s: float) -> str:
+        signal = _as_int(s)
+        self._check_signal(signal)
+        return f"OK {int(self._read_signal(signal))}"
+
+    def _set(self, s: float, v: float) -> str:
+        signal, value = _as_int(s), _as_flag(v)
+        self._check_signal(signal)
+        if P.INPUT_BASE < signal < P.SOFT_BASE:
+            raise BadArgument("an input cannot be set")
+        if signal > P.SOFT_BASE:
+            self.soft[signal] = value
+        else:
+            name = self._signal_name(signal)
+            if name is not None:
+                self.plant.set_signal(name, value)
+        return "OK"
+
+    # ------------------------------------------------------------------ io_notify
+    def _inputs(self) -> list[tuple[int, str]]:
+        return [(P.signal_of(sig.bit, True), name) for name, sig in self.plant.cell.io.items()
+                if sig.controller == "adept" and sig.dir == "in"]
+
+    def _notify_session(self, conn: socket.socket) -> None:
+        """io_notify: on connection send every input's state, then a line per change."""
+        inputs = self._inputs()
+        last: dict[int, bool] = {}
+        for signal, name in inputs:
+            last[signal] = self.plant.signal(name)
+            conn.sendall(f"IN {signal} {int(last[signal])}\r\n".encode("ascii"))
+        conn.settimeout(NOTIFY_PERIOD_S)
+        while not self._stop.is_set():
+            try:
+                if not conn.recv(4096):
+                    return                      # the PC closed the socket: reset
+            except TimeoutError:
+                pass                            # nothing from the PC: the usual case
+            for signal, name in inputs:
+                value = self.plant.signal(name)
+                if value != last[signal]:
+                    last[signal] = value
+                    conn.sendall(f"IN {signal} {int(value)}\r\n".encode("ascii"))
+
+
+def serve(plant: Plant, host: str = "127.0.0.1", ports: dict[str, int] | int | None = None,
+          faults: FaultPlan | None = None) -> AdeptEmulator:
+    """Start the V+ emulator: ``ports`` a dict per server, or N for ports N..N+3 (motion,
+    position, io, notify), or None for free ports. ``feeder emulate adept --port N``."""
+    if isinstance(ports, int):
+        ports = {name: ports + i for i, name in enumerate(SERVERS)}
+    return AdeptEmulator(plant, host=host, ports=ports, faults=faults).start()

@@ -1,0 +1,667 @@
+"""An interpreter for the subset of Galil's DMC language that ``galil_programs/`` uses.
+
+The Galil emulator runs the programs the driver downloads with this interpreter, so the
+programs shipped in ``galil_programs/`` are tested by running them, not by a stand-in.
+
+Subset: labels (``#NAME``), ``JP``/``JS`` with optional conditions, ``EN`` (end a thread or
+return from ``JS``), ``IF``/``ELSE``/``ENDIF`` (nestable), variables and assignments,
+``~a``-``~h`` variable axis designators, arithmetic and comparison expressions, operands
+(``_TPB``, ``_BGB``, ``_TI0``, ``_ALB``, ``_RLB``, ``_TP~a`` ... answered by the host),
+functions (``@IN[n]``, ``@OUT[n]`` from the host; ``@ABS``, ``@INT``, ``@FRAC``, ``@RND``,
+``@COM``, ``@SQR`` here), ``MG`` with strings, expressions and ``{Fm.n}``/``{Zm.n}``/
+``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), ``NO`` and
+``'`` comments. Anything else in a program is handed to the host as a command (``SB 1``,
+``JG ,100``, ``BGB``...).
+
+Galil evaluates arithmetic strictly left to right, with no operator precedence:
+``1+2*3`` is 9. Parentheses group; a comparison splits a condition into two such
+expressions (``A+1>B*2`` is ``(A+1)>(B*2)``), and conditions combine with ``&``/``|``
+only in parentheses: ``(A>1)&(B<2)``.
+
+Each program thread (``XQ #LABEL,n``) runs on its own Python thread. An error stops that
+thread and is reported to the host with a Galil error code, as ``TC1`` would give it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ..hal.galil.protocol import (
+    ERROR_TEXT,
+    MAX_LINE_CHARS,
+    MAX_PROGRAM_LINES,
+    MAX_VARIABLE_CHARS,
+    THREADS,
+    label_problem,
+)
+
+AXES = "ABCDEFGH"
+MAX_STACK = 16
+SLICE = 200            # statements a thread runs before yielding for a moment
+
+# Two-letter commands the interpreter hands to the host rather than reading ``XYB=...`` as
+# an assignment to a variable ``XYB``.
+HOST_COMMANDS = frozenset(
+    "AB AC AL BG CB CN CW DC DL EO HX JG MO OB PR RL SB SH SP ST TC TI TP TV XQ".split())
+
+
+class DmcError(Exception):
+    """A Galil error: ``code`` and ``text`` as ``TC1`` reports them."""
+
+    def __init__(self, code: int, detail: str | None = None) -> None:
+        self.code = code
+        self.text = ERROR_TEXT.get(code, "Unrecognized command")
+        self.detail = detail
+        super().__init__(f"{code} {self.text}" + (f" ({detail})" if detail else ""))
+
+
+class DmcHost(Protocol):
+    """What the interpreter needs from the controller around it."""
+
+    def operand(self, name: str, suffix: str) -> float:
+        """``_TPB`` -> ``operand('TP', 'B')``; ``_TI0`` -> ``operand('TI', '0')``."""
+
+    def function(self, name: str, arg: float) -> float:
+        """``@IN[3]`` -> ``function('IN', 3)`` (I/O functions only)."""
+
+    def command(self, text: str, thread: int) -> None:
+        """Carry out a non-flow command from a program (``SB 1``, ``BGB``)."""
+
+    def output(self, text: str) -> None:
+        """Program output (``MG``), with its CR/LF, for the unsolicited channel."""
+
+    def thread_error(self, thread: int, error: DmcError, line: int, text: str) -> None:
+        """A thread stopped on an error at program line ``line``."""
+
+
+# ---------------------------------------------------------------------------- lexer
+
+_TOKEN_RE = re.compile(r"""
+    (?P<ws>\s+)
+  | (?P<str>"[^"]*")
+  | (?P<hex>\$[0-9A-Fa-f]+)
+  | (?P<num>\d+\.?\d*|\.\d+)
+  | (?P<opnd>_[A-Z]{2}(?:~[a-h]|[A-H0-9]*))
+  | (?P<func>@[A-Z]{2,4})
+  | (?P<axv>~[a-h])
+  | (?P<name>[A-Za-z][A-Za-z0-9]*)
+  | (?P<cmp><>|<=|>=|=|<|>)
+  | (?P<op>[-+*/&|])
+  | (?P<punct>[()\[\],])
+""", re.X)
+
+
+@dataclass(frozen=True)
+class Tok:
+    kind: str
+    text: str
+    value: float = 0.0
+
+
+def tokenize(text: str) -> list[Tok]:
+    """Tokens of an expression; raises ``DmcError`` on a character it cannot read."""
+    out: list[Tok] = []
+    pos = 0
+    while pos < len(text):
+        m = _TOKEN_RE.match(text, pos)
+        if not m:
+            raise DmcError(1, f"cannot read {text[pos:]!r}")
+        kind = m.lastgroup or ""
+        s = m.group()
+        pos = m.end()
+        if kind == "ws":
+            continue
+        if kind == "num":
+            out.append(Tok("num", s, float(s)))
+        elif kind == "hex":
+            out.append(Tok("num", s, float(int(s[1:], 16))))
+        else:
+            out.append(Tok(kind, s))
+    return out
+
+
+# ---------------------------------------------------------------------------- expressions
+
+
+class _Parser:
+    """Recursive descent over tokens, evaluating as it goes (Galil's left-to-right rules)."""
+
+    def __init__(self, toks: list[Tok], env: _Env) -> None:
+        self.toks, self.i, self.env = toks, 0, env
+
+    def peek(self) -> Tok | None:
+        return self.toks[self.i] if self.i < len(self.toks) else None
+
+    def take(self) -> Tok:
+        tok = self.peek()
+        if tok is None:
+            raise DmcError(1, "expression ends too early")
+        self.i += 1
+        return tok
+
+    def expect(self, text: str, code: int) -> None:
+        tok = self.peek()
+        if tok is None or tok.text != text:
+            raise DmcError(code, f"expected {text!r}")
+        self.i += 1
+
+    def condition(self) -> float:
+        left = self.arith()
+        tok = self.peek()
+        if tok is not None and tok.kind == "cmp":
+            self.i += 1
+            right = self.arith()
+            return 1.0 if _compare(tok.text, left, right) else 0.0
+        return left
+
+    def arith(self) -> float:
+        value = self.unary()
+        while (tok := self.peek()) is not None and tok.kind == "op":
+            self.i += 1
+            value = _apply(tok.text, value, self.unary())
+        return value
+
+    def unary(self) -> float:
+        tok = self.peek()
+        if tok is not None and tok.kind == "op" and tok.text in "+-":
+            self.i += 1
+            v = self.unary()
+            return -v if tok.text == "-" else v
+        return self.primary()
+
+    def primary(self) -> float:
+        tok = self.take()
+        if tok.kind == "num":
+            return tok.value
+        if tok.text == "(":
+            v = self.condition()
+            self.expect(")", 59)
+            return v
+        if tok.kind == "name":
+            return self.env.variable(tok.text)
+        if tok.kind == "opnd":
+            return self.env.operand(tok.text)
+        if tok.kind == "axv":
+            return float(self.env.axis_var(tok.text[1]))
+        if tok.kind == "func":
+            self.expect("[", 55)
+            arg = self.condition()
+            self.expect("]", 55)
+            return self.env.function(tok.text[1:], arg)
+        if tok.kind == "str":
+            return _string_value(tok.text[1:-1])
+        raise DmcError(1, f"unexpected {tok.text!r}")
+
+
+def _string_value(s: str) -> float:
+    """Galil packs up to 6 characters of a string into one number (first char highest)."""
+    if len(s) > 6:
+        raise DmcError(52, "string longer than 6 characters")
+    v = 0
+    for ch in s:
+        v = (v << 8) | (ord(ch) & 0xFF)
+    return float(v)
+
+
+def _compare(op: str, a: float, b: float) -> bool:
+    if op == "=":
+        return abs(a - b) < 1e-9
+    if op == "<>":
+        return abs(a - b) >= 1e-9
+    return {"<": a < b, ">": a > b, "<=": a <= b + 1e-9, ">=": a >= b - 1e-9}[op]
+
+
+def _apply(op: str, a: float, b: float) -> float:
+    if op == "+":
+        return a + b
+    if op == "-":
+        return a - b
+    if op == "*":
+        return a * b
+    if op == "/":
+        if b == 0:
+            raise DmcError(6, "division by zero")
+        return a / b
+    if op == "&":
+        return float(int(a) & int(b))
+    return float(int(a) | int(b))      # '|'
+
+
+_MATH: dict[str, Callable[[float], float]] = {
+    "ABS": abs,
+    "INT": lambda x: float(math.trunc(x)),
+    "FRAC": lambda x: x - math.trunc(x),
+    "RND": lambda x: float(math.floor(x + 0.5)),
+    "COM": lambda x: float(~int(x) & 0xFFFFFFFF),
+    "SQR": lambda x: math.sqrt(x) if x >= 0 else _raise(DmcError(6, "square root of < 0")),
+}
+
+
+def _raise(e: Exception) -> float:
+    raise e
+
+
+# ---------------------------------------------------------------------------- MG formatting
+
+
+def format_number(value: float, kind: str = "", m: int = 10, n: int = 4) -> str:
+    """A number as ``MG`` prints it: a sign column (space or ``-``), digits, decimals.
+
+    ``kind`` '' is the default variable format (10.4, leading zeros suppressed); ``F`` pads
+    the integer part with zeros to ``m`` digits, ``Z`` does not, ``$`` prints hex. A value
+    too large for ``m`` digits prints as all nines, as the controller does.
+    """
+    sign = "-" if value < 0 else " "
+    a = abs(value)
+    if kind == "$":
+        digits = f"{int(a):X}"
+        return f"{sign}${digits.rjust(m, '0')[-m:] if m else digits}"
+    scale = 10 ** n
+    units = math.floor(a * scale + 0.5)
+    whole, frac = divmod(units, scale)
+    if kind in ("F", "Z") and len(str(whole)) > m:
+        whole, frac = 10 ** m - 1, scale - 1
+    whole_s = str(whole).rjust(m, "0") if kind == "F" else str(whole)
+    if n > 0:
+        return f"{sign}{whole_s}.{str(frac).rjust(n, '0')}"
+    return f"{sign}{whole_s}"
+
+
+_FMT_RE = re.compile(r"\{([^}]*)\}")
+
+
+def split_args(text: str) -> list[str]:
+    """Split on commas outside quotes, brackets, braces and parentheses."""
+    out, depth, quoted, cur = [], 0, False, []
+    for ch in text:
+        if ch == '"':
+            quoted = not quoted
+        elif not quoted and ch in "([{":
+            depth += 1
+        elif not quoted and ch in ")]}":
+            depth -= 1
+        if ch == "," and not quoted and depth == 0:
+            out.append("".join(cur))
+            cur = []
+        else:
+            cur.append(ch)
+    if quoted:
+        raise DmcError(52, "missing quote")
+    out.append("".join(cur))
+    return out
+
+
+# ---------------------------------------------------------------------------- program
+
+
+@dataclass
+class Stmt:
+    kind: str               # label if else endif jp js en wt mg assign axis nop cmd
+    text: str
+    line: int               # 1-based program line
+    target: str = ""        # label of jp/js; variable of assign; axis var letter
+    expr: str = ""          # condition / wait / value / MG arguments
+    toks: list[Tok] | None = None
+    jump: int = -1          # if: index of else+1 or endif+1; else: endif+1
+
+
+def split_statements(line: str) -> list[str]:
+    """A program line's statements (``;``-separated, outside quotes)."""
+    out, cur, quoted = [], [], False
+    for ch in line:
+        if ch == '"':
+            quoted = not quoted
+        if ch == ";" and not quoted:
+            out.append("".join(cur).strip())
+            cur = []
+        else:
+            cur.append(ch)
+    out.append("".join(cur).strip())
+    return [s for s in out if s]
+
+
+def is_axis_command(word: str) -> bool:
+    """``SPB``, ``ACAB``, ``JG``: a host command in explicit-axis form, not a variable."""
+    return word[:2] in HOST_COMMANDS and all(c in AXES for c in word[2:])
+
+
+_ASSIGN_RE = re.compile(r"^([A-Za-z][A-Za-z0-9]*)\s*=\s*(.*)$")
+_AXVAR_RE = re.compile(r"^~([a-h])\s*=\s*(.*)$")
+_JUMP_RE = re.compile(r"^(JP|JS)\s*(#[A-Za-z0-9]+)\s*(?:,(.*))?$")
+
+
+def compile_statement(text: str, line: int) -> Stmt:
+    """One statement -> ``Stmt`` (expressions tokenised now, evaluated when run)."""
+    s = text.strip()
+    head = s[:2]
+    if s.startswith("'") or (head == "NO" and (len(s) == 2 or not s[2].isalnum())):
+        return Stmt("nop", s, line)
+    if s == "ELSE":
+        return Stmt("else", s, line)
+    if s == "ENDIF":
+        return Stmt("endif", s, line)
+    if head == "IF" and len(s) > 2 and (s[2] in " (" or not s[2].isalnum()):
+        return Stmt("if", s, line, expr=s[2:].strip(), toks=tokenize(s[2:]))
+    if head in ("JP", "JS"):
+        m = _JUMP_RE.match(s)
+        if not m:
+            raise DmcError(11, f"bad jump {s!r}")
+        cond = (m.group(3) or "").strip()
+        return Stmt(head.lower(), s, line, target=m.group(2).upper(), expr=cond,
+                    toks=tokenize(cond) if cond else None)
+    if s == "EN" or (head == "EN" and s[2:3] in (" ", ",")):
+        return Stmt("en", s, line)
+    if head == "WT" and not s[2:3].isalpha():
+        return Stmt("wt", s, line, expr=s[2:].strip(), toks=tokenize(s[2:]))
+    if head == "MG" and not s[2:3].isalnum():
+        return Stmt("mg", s, line, expr=s[2:].strip())
+    m = _AXVAR_RE.match(s)
+    if m:
+        return Stmt("axis", s, line, target=m.group(1), expr=m.group(2).strip(),
+                    toks=tokenize(m.group(2)))
+    m = _ASSIGN_RE.match(s)
+    if m and not is_axis_command(m.group(1)):
+        name = m.group(1)
+        if len(name) > MAX_VARIABLE_CHARS:
+            raise DmcError(9, f"variable name {name!r} is longer than {MAX_VARIABLE_CHARS}")
+        return Stmt("assign", s, line, target=name, expr=m.group(2).strip(),
+                    toks=tokenize(m.group(2)))
+    return Stmt("cmd", s, line)
+
+
+@dataclass
+class Program:
+    """A downloaded program: its lines, compiled statements and labels."""
+
+    lines: list[str]
+    stmts: list[Stmt] = field(default_factory=list)
+    labels: dict[str, int] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, text: str | list[str]) -> Program:
+        """Compile program text; raises ``DmcError`` (60 too long, 61 bad label, 63 IF
+        without ENDIF, ...) with the program line in ``detail``."""
+        lines = text.splitlines() if isinstance(text, str) else list(text)
+        if len(lines) > MAX_PROGRAM_LINES:
+            raise DmcError(60, f"{len(lines)} lines; at most {MAX_PROGRAM_LINES}")
+        prog = cls(lines)
+        open_ifs: list[int] = []
+        for n, raw in enumerate(lines, start=1):
+            if len(raw) > MAX_LINE_CHARS:
+                raise DmcError(60, f"line {n} is {len(raw)} characters; at most {MAX_LINE_CHARS}")
+            parts = split_statements(raw)
+            for k, part in enumerate(parts):
+                if part.startswith("#"):
+                    if k:
+                        raise DmcError(61, f"line {n}: a label must start its line")
+                    problem = label_problem(part)
+                    if problem:
+                        raise DmcError(61, f"line {n}: {problem}")
+                    name = part.upper()
+                    if name in prog.labels:
+                        raise DmcError(61, f"line {n}: duplicate label {name}")
+                    prog.labels[name] = len(prog.stmts)
+                    prog.stmts.append(Stmt("label", part, n))
+                    continue
+                try:
+                    st = compile_statement(part, n)
+                except DmcError as e:
+                    raise DmcError(e.code, f"line {n}: {e.detail or e.text}") from None
+                idx = len(prog.stmts)
+                prog.stmts.append(st)
+                if st.kind == "if":
+                    open_ifs.append(idx)
+                elif st.kind == "else":
+                    if not open_ifs or prog.stmts[open_ifs[-1]].jump != -1:
+                        raise DmcError(63, f"line {n}: ELSE without IF")
+                    prog.stmts[open_ifs[-1]].jump = idx + 1
+                    open_ifs.append(idx)            # the ELSE waits for its ENDIF too
+                elif st.kind == "endif":
+                    if not open_ifs:
+                        raise DmcError(63, f"line {n}: ENDIF without IF")
+                    top = open_ifs.pop()
+                    if prog.stmts[top].kind == "else":
+                        prog.stmts[top].jump = idx + 1
+                        top = open_ifs.pop()
+                    if prog.stmts[top].jump == -1:
+                        prog.stmts[top].jump = idx + 1
+        if open_ifs:
+            raise DmcError(63, f"line {prog.stmts[open_ifs[-1]].line}: IF without ENDIF")
+        for st in prog.stmts:
+            if st.kind in ("jp", "js") and st.target not in prog.labels:
+                raise DmcError(10, f"line {st.line}: undefined label {st.target}")
+        return prog
+
+
+# ---------------------------------------------------------------------------- interpreter
+
+
+class _Env:
+    """What an expression can read: variables, operands, functions."""
+
+    def __init__(self, interp: DmcInterpreter) -> None:
+        self.interp = interp
+
+    def variable(self, name: str) -> float:
+        with self.interp.lock:
+            if name not in self.interp.variables:
+                raise DmcError(1, f"undefined variable {name}")
+            return self.interp.variables[name]
+
+    def axis_var(self, letter: str) -> int:
+        with self.interp.lock:
+            return self.interp.axis_vars.get(letter, 0)
+
+    def operand(self, text: str) -> float:
+        name, suffix = text[1:3], text[3:]
+        if suffix.startswith("~"):
+            suffix = AXES[self.axis_var(suffix[1])]
+        return float(self.interp.host.operand(name, suffix))
+
+    def function(self, name: str, arg: float) -> float:
+        fn = _MATH.get(name)
+        if fn is not None:
+            return float(fn(arg))
+        return float(self.interp.host.function(name, arg))
+
+
+@dataclass
+class _Thread:
+    number: int
+    stop: threading.Event
+    thread: threading.Thread | None = None
+    line: int = 0
+
+
+class DmcInterpreter:
+    """Program memory, variables and up to ``THREADS`` running program threads."""
+
+    def __init__(self, host: DmcHost, threads: int = THREADS) -> None:
+        self.host = host
+        self.max_threads = threads
+        self.program: Program | None = None
+        self.variables: dict[str, float] = {}
+        self.axis_vars: dict[str, int] = {}
+        self.lock = threading.RLock()
+        self._threads: dict[int, _Thread] = {}
+        self._env = _Env(self)
+
+    # ------------------------------------------------------------------ program memory
+    def load(self, program: Program) -> None:
+        """``DL``: replace program memory (refused while a thread runs, as the card does)."""
+        if self.running():
+            raise DmcError(17, "DL while a program runs")
+        self.program = program
+
+    # ------------------------------------------------------------------ expressions
+    def evaluate(self, expr: str | list[Tok]) -> float:
+        """Value of an expression or condition (left to right, no precedence)."""
+        toks = tokenize(expr) if isinstance(expr, str) else expr
+        if not toks:
+            raise DmcError(1, "empty expression")
+        p = _Parser(toks, self._env)
+        value = p.condition()
+        if p.peek() is not None:
+            raise DmcError(1, f"unexpected {p.peek().text!r}")   # type: ignore[union-attr]
+        return value
+
+    def assign(self, name: str, expr: str | list[Tok]) -> None:
+        if len(name) > MAX_VARIABLE_CHARS or not name[:1].isalpha() or not name.isalnum():
+            raise DmcError(9, f"bad variable name {name!r}")
+        value = self.evaluate(expr)
+        with self.lock:
+            self.variables[name] = value
+
+    def set_axis_var(self, letter: str, expr: str | list[Tok]) -> None:
+        """``~a=1`` (axis B) or ``~a="B"``."""
+        if isinstance(expr, str):
+            s = expr.strip()
+            if len(s) == 3 and s[0] == s[2] == '"' and s[1].upper() in AXES:
+                value = AXES.index(s[1].upper())
+            else:
+                value = int(self.evaluate(s))
+        else:
+            toks = expr
+            if len(toks) == 1 and toks[0].kind == "str" and toks[0].text[1:-1].upper() in AXES \
+                    and len(toks[0].text) == 3:
+                value = AXES.index(toks[0].text[1].upper())
+            else:
+                value = int(self.evaluate(toks))
+        if not 0 <= value < len(AXES):
+            raise DmcError(6, f"~{letter}={value}: no such axis")
+        with self.lock:
+            self.axis_vars[letter] = value
+
+    def message(self, args: str) -> str:
+        """The text ``MG args`` prints, with CR/LF unless ``{N}``."""
+        out: list[str] = []
+        newline = True
+        if not args.strip():
+            return "\r\n"
+        for arg in split_args(args):
+            kind, m, n = "", 10, 4
+            for spec in _FMT_RE.findall(arg):
+                spec = spec.strip()
+                if spec.upper() == "N":
+                    newline = False
+                elif spec.startswith("^"):
+                    try:
+                        out.append(chr(int(spec[1:]) & 0xFF))
+                    except ValueError:
+                        raise DmcError(1, f"bad {{{spec}}}") from None
+                elif spec[:1].upper() in ("F", "Z", "$"):
+                    fm = re.match(r"^([FZ$])(\d+)(?:\.(\d+))?$", spec, re.I)
+                    if not fm:
+                        raise DmcError(1, f"bad format {{{spec}}}")
+                    kind, m, n = fm.group(1).upper(), int(fm.group(2)), int(fm.group(3) or 0)
+                else:
+                    raise DmcError(1, f"bad format {{{spec}}}")
+            body = _FMT_RE.sub("", arg).strip()
+            if not body:
+                continue
+            if body.startswith('"'):
+                if len(body) < 2 or not body.endswith('"') or body.count('"') != 2:
+                    raise DmcError(52, "missing quote")
+                out.append(body[1:-1])
+            else:
+                out.append(format_number(self.evaluate(body), kind, m, n))
+        return "".join(out) + ("\r\n" if newline else "")
+
+    # ------------------------------------------------------------------ threads
+    def running(self) -> list[int]:
+        with self.lock:
+            return sorted(n for n, t in self._threads.items()
+                          if t.thread is not None and t.thread.is_alive())
+
+    def execute(self, label: str, thread: int = 0) -> None:
+        """``XQ #LABEL,n``: start program thread ``n`` at ``label``."""
+        if not 0 <= thread < self.max_threads:
+            raise DmcError(6, f"thread {thread}")
+        prog = self.program
+        if prog is None:
+            raise DmcError(10, "no program downloaded")
+        start = prog.labels.get(label.upper())
+        if start is None:
+            raise DmcError(10, f"undefined label {label}")
+        with self.lock:
+            if thread in self.running():
+                raise DmcError(19, f"thread {thread} is running")
+            t = _Thread(thread, threading.Event())
+            t.thread = threading.Thread(target=self._run, args=(prog, start, t),
+                                        name=f"dmc-thread-{thread}", daemon=True)
+            self._threads[thread] = t
+            t.thread.start()
+
+    def halt(self, thread: int | None = None, wait: float = 2.0) -> None:
+        """``HX`` (all threads) or ``HXn``; waits for them to stop."""
+        with self.lock:
+            targets = [t for n, t in self._threads.items() if thread is None or n == thread]
+        for t in targets:
+            t.stop.set()
+        for t in targets:
+            if t.thread is not None and t.thread is not threading.current_thread():
+                t.thread.join(wait)
+
+    def _run(self, prog: Program, pc: int, t: _Thread) -> None:
+        stack: list[int] = []
+        stmts = prog.stmts
+        count = 0
+        try:
+            while not t.stop.is_set():
+                if pc >= len(stmts):
+                    return                           # ran off the end: the thread ends
+                st = stmts[pc]
+                t.line = st.line
+                pc += 1
+                kind = st.kind
+                if kind in ("label", "nop", "endif"):
+                    pass
+                elif kind == "if":
+                    if not self.evaluate(st.toks or []):
+                        pc = st.jump
+                elif kind == "else":
+                    pc = st.jump
+                elif kind in ("jp", "js"):
+                    if st.toks is None or self.evaluate(st.toks):
+                        if kind == "js":
+                            if len(stack) >= MAX_STACK:
+                                raise DmcError(12)
+                            stack.append(pc)
+                        pc = prog.labels[st.target]
+                elif kind == "en":
+                    if not stack:
+                        return
+                    pc = stack.pop()
+                elif kind == "wt":
+                    ms = self.evaluate(st.toks or [])
+                    if ms < 0:
+                        raise DmcError(6, "WT < 0")
+                    t.stop.wait(ms / 1000.0)
+                    count = 0
+                    continue
+                elif kind == "mg":
+                    self.host.output(self.message(st.expr))
+                elif kind == "assign":
+                    self.assign(st.target, st.toks or [])
+                elif kind == "axis":
+                    self.set_axis_var(st.target, st.toks or [])
+                else:
+                    self.host.command(st.text, t.number)
+                count += 1
+                if count >= SLICE:              # a loop without WT must not hog the CPU
+                    count = 0
+                    t.stop.wait(0.0005)
+        except DmcError as e:
+            self.host.thread_error(t.number, e, t.line, prog.lines[t.line - 1]
+                                   if 0 < t.line <= len(prog.lines) else "")
+        except Exception as e:                 # noqa: BLE001 - a host fault stops the thread
+            self.host.thread_error(t.number, DmcError(1, f"{type(e).__name__}: {e}"), t.line,
+                                   prog.lines[t.line - 1] if 0 < t.line <= len(prog.lines) else "")
+
+
+__all__ = ["DmcError", "DmcHost", "DmcInterpreter", "Program", "format_number", "tokenize"]

@@ -1,0 +1,273 @@
+"""The robot, its position and its I/O behind the HAL interfaces, over the V+ servers.
+
+Every call returns at once: motions and settings are requests queued on the socket's
+worker and returned as ``FutureJob``s; reads (``holding``, ``pose``, ``belt_encoder``,
+``get``) come from caches that the replies, a position poller and the notify listener
+keep up to date (thesis chapter 6: position server, I/O server with ``adept_io_notify``).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterable
+
+from ...clock import Clock
+from ...errors import CommsLost, HalError, MissedGrab
+from ...jobs import DoneJob, FutureJob, Job
+from ..interfaces import PickResult, PickTarget, Pose
+from . import protocol
+from .client import LineSocket, ServerClient
+
+POLL_S = 0.01                # position poller period: ~100 Hz
+
+
+class PlaceJob(FutureJob):
+    """A place is never abandoned (interface contract): cancelling it lets the controller
+    finish the place, and the job ends SUCCEEDED when the reply comes."""
+
+    def cancel(self) -> None:
+        pass
+
+
+class AdeptRobot:
+    """``Robot`` over the motion server. ``holding()`` is local state set by the replies."""
+
+    def __init__(self, motion: ServerClient, clock: Clock, motion_timeout_s: float,
+                 timeout_s: float) -> None:
+        self.motion, self.clock = motion, clock
+        self.motion_timeout_s, self.timeout_s = motion_timeout_s, timeout_s
+        self._holding = False
+
+    def refresh_holding(self) -> bool:
+        """Ask the controller whether the gripper holds a part (blocking: start-up only)."""
+        values = self.motion.call("HOLDING", timeout=self.timeout_s)
+        self._holding = protocol.decode_flag(values, "HOLDING")
+        return self._holding
+
+    def _submit(self, name: str, run, cls: type[FutureJob] = FutureJob) -> Job:
+        try:
+            future = self.motion.worker.submit(run)
+        except RuntimeError as e:                   # the controller was closed
+            return DoneJob(name, error=CommsLost(f"{name}: {e}"))
+        return cls(name, future, self.clock)
+
+    def _call(self, verb: str, *args: object, motion: bool = True) -> list[str]:
+        timeout = self.motion_timeout_s if motion else self.timeout_s
+        return self.motion.call(verb, *args, timeout=timeout)
+
+    def pick(self, target: PickTarget) -> Job:
+        ox, oy, oz = target.tool_offset
+
+        def run() -> PickResult:
+            try:
+                values = self._call("PICK", int(target.part_id), float(target.x_mm),
+                                    float(target.y_mm), float(target.angle_deg),
+                                    int(target.latch), bool(target.tracking),
+                                    float(ox), float(oy), float(oz))
+            except MissedGrab:
+                self._holding = False
+                raise
+            part_id, x_mm = protocol.decode_pick(values)
+            self._holding = True
+            return PickResult(part_id=part_id, t=self.clock.now(), belt_x_mm=x_mm)
+
+        return self._submit("robot.pick", run)
+
+    def place(self, pose: Pose) -> Job:
+        def run() -> None:
+            self._call("PLACE", *_pose_args(pose))
+            self._holding = False
+
+        return self._submit("robot.place", run, cls=PlaceJob)
+
+    def move_to(self, pose: Pose) -> Job:
+        def run() -> Pose:
+            self._call("MOVE", *_pose_args(pose))
+            return pose
+
+        return self._submit("robot.move", run)
+
+    def move_safe(self) -> Job:
+        def run() -> None:
+            self._call("SAFE")
+
+        return self._submit("robot.move_safe", run)
+
+    def set_speed(self, pct: float) -> Job:
+        def run() -> None:
+            self._call("SPEED", float(pct), motion=False)
+
+        return self._submit("robot.set_speed", run)
+
+    def recover(self) -> Job:
+        """RECOVER runs the V+ recovery (reacte.v2); then re-read what the gripper holds."""
+        def run() -> None:
+            self._call("RECOVER")
+            self.refresh_holding()
+
+        return self._submit("robot.recover", run)
+
+    def holding(self) -> bool:
+        return self._holding
+
+
+def _pose_args(pose: Pose) -> tuple[float, float, float, float]:
+    return float(pose.x), float(pose.y), float(pose.z), float(pose.rz)
+
+
+class AdeptRobotPosition:
+    """``RobotPosition`` over the position server: a poller refreshes a cache at ~100 Hz
+    (its own socket, so it reads on while the robot moves); reads return the cache."""
+
+    def __init__(self, position: ServerClient, period_s: float = POLL_S) -> None:
+        self.position = position
+        self.period_s = period_s
+        self._pose = Pose(0.0, 0.0)
+        self._count = 0
+        self.updated_at: float | None = None      # monotonic time of the last good read
+        self.error: HalError | None = None        # the last failure, None once reading again
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def read_once(self) -> None:
+        """One WHERE and one BELT (blocking; the poller thread, or start-up)."""
+        pose = protocol.decode_where(self.position.call("WHERE"))
+        count = protocol.decode_belt(self.position.call("BELT"))
+        self._pose, self._count = pose, count
+        self.updated_at = time.monotonic()
+        self.error = None
+
+    def start(self) -> AdeptRobotPosition:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="vplus-position-poll",
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.read_once()
+            except HalError as e:
+                self.error = e                  # keep the last good values; retry
+            self._stop.wait(self.period_s)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def belt_encoder(self) -> int:
+        return self._count
+
+    def pose(self) -> Pose:
+        return self._pose
+
+    def age(self) -> float | None:
+        """Seconds since the cache was last refreshed (None: never)."""
+        return None if self.updated_at is None else time.monotonic() - self.updated_at
+
+
+class AdeptIO:
+    """The Adept controller's digital I/O by the cell description's bit numbers.
+
+    Inputs: a cache filled by an initial read and kept by the notify socket (``IN`` lines);
+    ``changes()`` drains ``(bit, value, t)`` tuples. Outputs: ``SET`` on the I/O socket,
+    remembered locally (the thesis's output map).
+    """
+
+    def __init__(self, io: ServerClient, notify: LineSocket, clock: Clock,
+                 inputs: Iterable[int] = ()) -> None:
+        self.io, self.notify, self.clock = io, notify, clock
+        self.inputs = set(inputs)
+        self._in: dict[int, bool] = {}
+        self._out: dict[int, bool] = {}
+        self._changes: list[tuple[int, bool, float]] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: HalError | None = None
+        self.connected = threading.Event()       # the notify socket has sent its states
+
+    # ------------------------------------------------------------------ reads
+    def read_inputs(self) -> None:
+        """Read every known input once (blocking; start-up)."""
+        for bit in sorted(self.inputs):
+            values = self.io.call("SIG", protocol.signal_of(bit, True))
+            self._note(bit, protocol.decode_flag(values, "SIG"), initial=True)
+
+    def _note(self, bit: int, value: bool, initial: bool = False) -> None:
+        with self._lock:
+            old = self._in.get(bit)
+            self._in[bit] = value
+            if old is not None and old != value and not initial:
+                self._changes.append((bit, value, self.clock.now()))
+
+    def get(self, bit: int) -> bool:
+        with self._lock:
+            if bit in self._in:
+                return self._in[bit]
+            return self._out.get(bit, False)
+
+    def set(self, bit: int, value: bool) -> Job:
+        name = f"io.set({bit})"
+        signal = protocol.signal_of(bit, False)
+
+        def done(values: list[str]) -> None:
+            with self._lock:
+                self._out[bit] = bool(value)
+
+        try:
+            future = self.io.submit("SET", signal, bool(value), then=done)
+        except RuntimeError as e:                   # the controller was closed
+            return DoneJob(name, error=CommsLost(f"{name}: {e}"))
+        return FutureJob(name, future, self.clock)
+
+    def changes(self) -> list[tuple[int, bool, float]]:
+        with self._lock:
+            out, self._changes = self._changes, []
+        return out
+
+    # ------------------------------------------------------------------ notify listener
+    def start(self) -> AdeptIO:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._listen, name="vplus-io-notify",
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def _listen(self) -> None:
+        """Read ``IN`` lines; on a drop, re-connect with back-off (the server sends every
+        input's state again on connection, so the cache catches up)."""
+        link = self.notify
+        while not self._stop.is_set():
+            try:
+                link.ensure(time.monotonic() + 0.5, idle_check=False)
+                line = link.read_line(time.monotonic() + 0.5, "notification", idle_ok=True)
+                if line is None:
+                    continue
+                signal, value = protocol.parse_notify(line)
+            except CommsLost as e:              # wait out the link's back-off, re-connect
+                self.error = e
+                self.connected.clear()
+                self._stop.wait(max(0.02, link.backoff.next_try - time.monotonic()))
+                continue
+            except HalError as e:               # a garbled line: start the link afresh
+                self.error = e
+                link.drop()
+                continue
+            bit, is_input = protocol.bit_of(signal)
+            if is_input:
+                self.inputs.add(bit)
+                self._note(bit, value)
+                self.connected.set()
+            self.error = None
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.notify.close()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None

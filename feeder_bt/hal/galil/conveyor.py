@@ -1,0 +1,339 @@
+"""HAL devices on a Galil controller: a conveyor axis (``Conveyor``) and digital I/O.
+
+Millimetres and mm/s at the HAL, encoder counts on the wire (``counts_per_mm`` of the
+cell's ``encoder``). Every method returns at once: a command becomes a ``FutureJob`` on
+the controller's device worker; an operation of several commands (stop, then wait for
+``_BGB`` to read 0, then read the position) is a step sequence the worker runs a command
+at a time; a belt-distance notification is a ``Job`` whose ``poll()`` compares counts.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+from ...clock import Clock
+from ...encoder import diff
+from ...errors import ConveyorFault, HalError
+from ...jobs import DoneJob, FutureJob, Job, JobState
+from ...scenario.model import IoSignal
+from ..interfaces import IoChange
+from .driver import RETRY, Delay, GalilController
+from .protocol import DistanceEvent, Event, InputsEvent, explicit, parse_int, positional
+
+COUNTER_BITS = 32
+STALL_S = 2.0                # jogging with no encoder motion this long: a stall
+SETTLE_MARGIN_S = 3.0        # slack on top of a motion's planned time before it is a fault
+
+
+class GalilConveyor:
+    """One conveyor on one Galil axis, implementing ``hal.interfaces.Conveyor``."""
+
+    def __init__(self, controller: GalilController, name: str, axis: str,
+                 counts_per_mm: float | None = None, max_mm_s: float = 400.0,
+                 accel_mm_s2: float = 1500.0, clock: Clock | None = None) -> None:
+        self.ctl = controller
+        self.name = name
+        self.axis = axis.upper()
+        self.cpm = float(counts_per_mm if counts_per_mm is not None else controller.cpm)
+        self.max_mm_s = float(max_mm_s)
+        self.accel = float(accel_mm_s2)
+        self.clock = clock or controller.clock
+        self._commanded = 0.0          # mm/s, what we last asked for (speed())
+        self._mode = "idle"            # idle | jog | move: what the axis is doing for us
+        self._stall_ref: tuple[float, int] | None = None   # (since, count) for fault()
+        controller.on_connect(self._configure)
+
+    # ---------------------------------------------------------------- helpers
+    def _counts(self, mm: float) -> int:
+        return int(round(mm * self.cpm))
+
+    def _configure(self) -> None:
+        """Acceleration and deceleration of the axis (re-sent after every connect)."""
+        a = self._counts(self.accel)
+        self.ctl.ask(positional("AC", {self.axis: a}))
+        self.ctl.ask(positional("DC", {self.axis: a}))
+
+    def _running(self) -> bool:
+        """``_BGx``: 1 while the axis's profiler runs (device worker only)."""
+        return parse_int(self.ctl.ask(f"MG _BG{self.axis}")) != 0
+
+    def _job(self, name: str, future) -> Job:
+        return FutureJob(f"{self.name}.{name}", future, self.clock)
+
+    def _ensure_idle(self, state: dict[str, Any]):
+        """Step: stop the axis if it moves and wait until it has stopped."""
+        def step():
+            if not self._running():
+                return None
+            if not state.get("stop_sent"):
+                self.ctl.ask(f"ST{self.axis}")
+                state["stop_sent"] = True
+            return RETRY
+        return step
+
+    def _wait_idle(self):
+        return lambda: RETRY if self._running() else None
+
+    def _read_position(self):
+        def step():
+            self.ctl.read_position(self.axis)
+            return self.clock.now()
+        return step
+
+    def _start_move(self, counts: int, speed_counts: int):
+        def step():
+            self.ctl.ask(explicit("SP", self.axis, speed_counts))
+            self.ctl.ask(positional("PR", {self.axis: counts}))
+            self.ctl.ask(f"BG{self.axis}")
+            self._mode = "move"
+        return step
+
+    def _start_jog(self, mm_s: float, state: dict[str, Any]):
+        """Step: jog at ``mm_s``; a new JG while jogging just changes speed."""
+        def step():
+            running = self._running()
+            if running and self._mode != "jog":
+                if not state.get("stop_sent"):
+                    self.ctl.ask(f"ST{self.axis}")
+                    state["stop_sent"] = True
+                return RETRY                      # a position move must end before JG
+            before = state.get("from_mm_s", 0.0) if running else 0.0
+            self.ctl.ask(positional("JG", {self.axis: self._counts(mm_s)}))
+            if not running:
+                self.ctl.ask(f"BG{self.axis}")
+            self._mode = "jog"
+            return Delay(abs(mm_s - before) / self.accel)   # until the speed is reached
+        return step
+
+    def _move_time(self, distance_mm: float, mm_s: float) -> float:
+        v = max(1e-6, min(abs(mm_s), self.max_mm_s))
+        return abs(distance_mm) / v + 2 * v / self.accel + SETTLE_MARGIN_S
+
+    # ---------------------------------------------------------------- Conveyor
+    def set_speed(self, mm_s: float) -> Job:
+        """Jog at ``mm_s`` (``JG`` + ``BG``; 0 stops); ends when the speed is reached."""
+        mm_s = max(-self.max_mm_s, min(self.max_mm_s, float(mm_s)))
+        if self._counts(mm_s) == 0:
+            return self._stop("set_speed")
+        state: dict[str, Any] = {"from_mm_s": self._commanded}
+        self._commanded = mm_s
+        fut = self.ctl.run_steps(f"{self.name}.set_speed", [self._start_jog(mm_s, state)],
+                                 timeout_s=self._move_time(0, self.max_mm_s))
+        return self._job("set_speed", fut)
+
+    def move(self, distance_mm: float, mm_s: float) -> Job:
+        """Relative move (``SP``, ``PR``, ``BG``); ends when ``_BGx`` reads 0."""
+        counts = self._counts(distance_mm)
+        speed = self._counts(min(abs(mm_s), self.max_mm_s))
+        if speed <= 0:
+            return DoneJob(f"{self.name}.move", error=HalError(f"{self.name}: move at "
+                                                              f"{mm_s} mm/s"))
+        self._commanded = 0.0
+        state: dict[str, Any] = {}
+        steps = [self._ensure_idle(state), self._start_move(counts, speed), self._wait_idle(),
+                 self._read_position()]
+        fut = self.ctl.run_steps(f"{self.name}.move", steps,
+                                 timeout_s=self._move_time(distance_mm, mm_s)
+                                 + self._move_time(0, self.max_mm_s))
+        return self._job("move", fut)
+
+    def stop(self) -> Job:
+        """``ST``; ends when the axis has stopped (``_BGx`` reads 0)."""
+        return self._stop("stop")
+
+    def _stop(self, name: str) -> Job:
+        self._commanded = 0.0
+
+        def send():
+            self.ctl.ask(f"ST{self.axis}")
+            self._mode = "idle"
+        steps = [send, self._wait_idle(), self._read_position()]
+        fut = self.ctl.run_steps(f"{self.name}.{name}", steps,
+                                 timeout_s=self._move_time(0, self.max_mm_s))
+        return self._job(name, fut)
+
+    def shake(self, amplitude_mm: float, cycles: int) -> Job:
+        """Back-and-forth moves at full speed, then back to the speed it had."""
+        before = self._commanded
+        a = self._counts(amplitude_mm)
+        v = self._counts(self.max_mm_s)
+        state: dict[str, Any] = {}
+        steps = [self._ensure_idle(state)]
+        for _ in range(max(1, int(cycles))):
+            steps += [self._start_move(a, v), self._wait_idle(),
+                      self._start_move(-a, v), self._wait_idle()]
+        if self._counts(before):
+            steps.append(self._start_jog(before, {"from_mm_s": 0.0}))
+        steps.append(self._read_position())
+        total = max(1, int(cycles)) * 2 * self._move_time(amplitude_mm, self.max_mm_s)
+        fut = self.ctl.run_steps(f"{self.name}.shake", steps, timeout_s=total + 5.0)
+        return self._job("shake", fut)
+
+    def speed(self) -> float:
+        """Commanded speed (mm/s), as last asked for."""
+        return self._commanded
+
+    def position(self) -> int:
+        """Latest count (distance events, and a TP read at most every 0.1 s)."""
+        self.ctl.refresh_position(self.axis)
+        pos = self.ctl.position(self.axis)
+        return 0 if pos is None else pos
+
+    def fault(self) -> HalError | None:
+        """A stall: jogging, yet the encoder has not moved for ``STALL_S`` (a jam, or the
+        amplifier shut the motor off on a following error). Cleared by the next command."""
+        if self._mode != "jog" or abs(self._commanded) < 1.0:
+            self._stall_ref = None
+            return None
+        now, pos = self.clock.now(), self.position()
+        ref = self._stall_ref
+        if ref is None or ref[1] != pos:
+            self._stall_ref = (now, pos)
+            return None
+        if now - ref[0] < STALL_S:
+            return None
+        return ConveyorFault(f"{self.name} conveyor stalled: the encoder has not moved for "
+                             f"{now - ref[0]:.1f} s at {self._commanded:g} mm/s")
+
+    def travelled(self, distance_mm: float) -> Job:
+        """Ends when the count has moved ``distance_mm`` on from the latest count now."""
+        return _TravelJob(self, distance_mm)
+
+    # ---------------------------------------------------------------- latch, servo
+    def arm_latch(self) -> Job:
+        """``AL``: arm the position latch (the camera trigger is wired to its input)."""
+        return self._job("arm_latch", self.ctl.command(f"AL{self.axis}"))
+
+    def read_latch(self, timeout_s: float = 1.0) -> Job:
+        """Result: the count latched at the trigger. Polls ``_ALx`` (1 while armed) until
+        it reads 0, then ``_RLx``; fails after ``timeout_s`` if the latch never trips."""
+        axis = self.axis
+
+        def tripped():
+            return RETRY if parse_int(self.ctl.ask(f"MG _AL{axis}")) else None
+
+        def latched():
+            return parse_int(self.ctl.ask(f"MG _RL{axis}"))
+
+        fut = self.ctl.run_steps(
+            f"{self.name}.read_latch", [tripped, latched], timeout_s=timeout_s,
+            on_timeout=lambda: HalError(f"{self.name}: latch on Galil axis {axis} not tripped "
+                                        f"within {timeout_s:g} s (no camera trigger seen on "
+                                        f"the latch input?)"))
+        return self._job("read_latch", fut)
+
+    def abort(self) -> Job:
+        """``AB 1``: stop every axis at once, leaving the card's programs running."""
+        self._commanded = 0.0
+        self._mode = "idle"
+        return self._job("abort", self.ctl.command("AB 1"))
+
+    def servo(self, on: bool) -> Job:
+        """``SH`` (servo here: motor on) or ``MO`` (motor off)."""
+        return self._job("servo", self.ctl.command(f"{'SH' if on else 'MO'}{self.axis}"))
+
+
+class _TravelJob(Job):
+    """Belt-distance notification: succeeds once the count is ``distance`` on from the start.
+
+    No thread per job: ``poll()`` compares the controller's latest count (kept fresh by the
+    notifier's ``D`` messages and rate-limited ``TP`` reads) with the target.
+    """
+
+    def __init__(self, conveyor: GalilConveyor, distance_mm: float) -> None:
+        super().__init__(f"{conveyor.name}.travelled({distance_mm:g})")
+        self.conveyor = conveyor
+        self.target = conveyor._counts(distance_mm)
+        conveyor.ctl.refresh_position(conveyor.axis)
+        self.base = conveyor.ctl.position(conveyor.axis)     # None until first known
+
+    def poll(self) -> JobState:
+        if self.state is JobState.RUNNING:
+            self.conveyor.ctl.refresh_position(self.conveyor.axis)
+            now = self.conveyor.ctl.position(self.conveyor.axis)
+            if now is None:
+                return self.state
+            if self.base is None:
+                self.base = now
+            moved = diff(now, self.base, COUNTER_BITS)
+            if (moved >= self.target if self.target >= 0 else moved <= self.target):
+                self.succeed(self.conveyor.clock.now())
+        return self.state
+
+
+class GalilIO:
+    """The digital I/O of a Galil controller under the cell's signal names.
+
+    Outputs are set with ``SB``/``CB``; inputs come from the input monitor's ``I`` messages
+    (and the read at connect), so ``get`` never waits on the link.
+    """
+
+    def __init__(self, controller: GalilController, signals: dict[str, IoSignal],
+                 clock: Clock | None = None) -> None:
+        self.ctl = controller
+        self.clock = clock or controller.clock
+        self.inputs = {n: s.bit for n, s in signals.items()
+                       if s.controller == "galil" and s.dir == "in"}
+        self.outputs = {n: s.bit for n, s in signals.items()
+                        if s.controller == "galil" and s.dir != "in"}
+        self._lock = threading.Lock()
+        self._changes: list[IoChange] = []
+        self._last: int | None = None
+        self._out: dict[str, bool] = {}
+        controller.subscribe(self._on_event)
+
+    def _on_event(self, ev: Event, t: float) -> None:
+        if not isinstance(ev, InputsEvent):
+            return
+        with self._lock:
+            last, self._last = self._last, ev.mask
+            if last is None:
+                return
+            for name, bit in self.inputs.items():
+                was, now = bool(last >> (bit - 1) & 1), bool(ev.mask >> (bit - 1) & 1)
+                if was != now:
+                    self._changes.append(IoChange(name, now, t))
+
+    def get(self, signal: str | int) -> bool:
+        """A signal by the cell's name, or an input by its Galil bit number (cached)."""
+        if isinstance(signal, int):
+            mask = self.ctl.inputs_mask
+            return bool(mask is not None and mask >> (signal - 1) & 1)
+        if signal in self.inputs:
+            mask = self.ctl.inputs_mask
+            return bool(mask is not None and mask >> (self.inputs[signal] - 1) & 1)
+        if signal in self.outputs:
+            with self._lock:
+                if signal in self._out:
+                    return self._out[signal]
+            mask = self.ctl.outputs_mask
+            return bool(mask is not None and mask >> (self.outputs[signal] - 1) & 1)
+        return False
+
+    def set(self, signal: str | int, value: bool) -> Job:
+        """An output by the cell's name or by its Galil bit number: ``SB n``/``CB n``."""
+        if isinstance(signal, int) and 1 <= signal <= 16:
+            bit = signal
+            signal = next((n for n, b in self.outputs.items() if b == bit), f"galil.out{bit}")
+        elif signal in self.outputs:
+            bit = self.outputs[signal]
+        else:
+            return DoneJob(f"io.set({signal})",
+                           error=HalError(f"{signal!r} is not a Galil output"))
+        fut = self.ctl.command(f"{'SB' if value else 'CB'} {bit}")
+
+        def done(f) -> None:
+            if not f.cancelled() and f.exception() is None:
+                with self._lock:
+                    self._out[signal] = bool(value)
+        fut.add_done_callback(done)
+        return FutureJob(f"io.set({signal})", fut, self.clock)
+
+    def changes(self) -> list[IoChange]:
+        with self._lock:
+            out, self._changes = self._changes, []
+        return out
+
+
+__all__ = ["GalilConveyor", "GalilIO", "DistanceEvent"]

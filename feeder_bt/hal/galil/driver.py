@@ -1,0 +1,563 @@
+"""The Galil controller over pyserial: one link, one reader, one device worker.
+
+``serial_for_url`` opens either a serial port (``/dev/ttyS0``, a pty) or a TCP connection
+(``socket://host:23``) with the same code. Threads, and why:
+
+- the *reader* does blocking ``read(1)`` with a short timeout and feeds a
+  ``ReplySplitter`` (``in_waiting`` is wrong for ``socket://``, so it is never used):
+  replies go to a queue for the worker, unsolicited lines become events at once;
+- the *device worker* (one thread, the thesis's monitor) sends one command at a time and
+  waits for its reply, so commands are never interleaved. ``command()`` queues a command
+  and returns a ``Future``; ``ask()`` is the same, synchronously, for code already on the
+  worker;
+- a *scheduler* re-queues multi-step operations (wait for ``_BGB`` to read 0, then read
+  the position) so that the worker never blocks for longer than one command.
+
+A rejected command (``?``) is followed by ``TC1`` and raises ``GalilError(code, text)``.
+A dropped link, or no reply within ``spec.timeout_s``, raises ``CommsLost`` for the
+command in flight and closes the link; the next command reconnects, after a back-off
+(0.1 s doubling to 2 s) once an attempt has failed. Every connect re-runs the start-up
+sequence: ``CW 1``, ``EO 0``, ``HX``, ``DL`` of ``spec.programs``, program variables,
+``XQ`` of the input monitor and the distance notifier, servo on, initial reads.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import serial
+
+from ...clock import Clock
+from ...encoder import wrap
+from ...errors import CommsLost, ConfigError, ConveyorFault, HalError
+from ...scenario.model import GalilSpec
+from .protocol import (
+    AXES,
+    DistanceEvent,
+    Event,
+    GalilError,
+    InputsEvent,
+    ProgramError,
+    ProgramLine,
+    ProtocolError,
+    Reply,
+    ReplySplitter,
+    download_payload,
+    parse_int,
+    parse_tell_code,
+    parse_unsolicited,
+    read_programs,
+)
+
+log = logging.getLogger(__name__)
+
+PROGRAMS_DIR = Path(__file__).resolve().parents[3] / "galil_programs"
+INPUT_MONITOR = "#INMON"        # galil_programs/monitor.dmc, thread 0
+DIST_NOTIFIER = "#DIST"         # galil_programs/monitor.dmc, thread 1
+READ_TIMEOUT_S = 0.05           # reader's read(1) timeout: how fast it notices a close
+BACKOFF_FIRST_S = 0.1
+BACKOFF_MAX_S = 2.0
+POLL_S = 0.05                   # status polls of multi-step operations: 20 Hz
+POSITION_POLL_S = 0.1           # TP refreshes: at most 10 Hz per axis
+COUNTER_BITS = 32
+
+EventCallback = Callable[[Event, float], None]
+
+
+class Retry:
+    """Returned by a step: run me again after ``POLL_S``."""
+
+
+RETRY = Retry()
+
+
+@dataclass(frozen=True)
+class Delay:
+    """Returned by a step: go on to the next step after ``seconds``."""
+
+    seconds: float
+
+
+_DEAD = object()            # put in the reply queue when the link dies
+
+
+class _Connection:
+    """One open link: the serial object, its reader thread and its reply queue."""
+
+    def __init__(self, ser: serial.SerialBase, on_line: Callable[[str], None], name: str) -> None:
+        self.ser = ser
+        self.on_line = on_line
+        self.splitter = ReplySplitter()
+        self.replies: queue.Queue = queue.Queue()
+        self.alive = True
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._read_loop, name=f"galil-reader-{name}",
+                                       daemon=True)
+        self.thread.start()
+
+    def _read_loop(self) -> None:
+        while self.alive:
+            try:
+                data = self.ser.read(1)
+            except Exception as e:               # noqa: BLE001 - any failure: the link is gone
+                self._die(e)
+                return
+            if not data:
+                continue
+            try:
+                items = self.splitter.feed(data)
+            except ProtocolError as e:
+                self._die(e)
+                return
+            for item in items:
+                if isinstance(item, Reply):
+                    self.replies.put(item)
+                else:
+                    try:
+                        self.on_line(item.text)
+                    except Exception:            # noqa: BLE001 - a subscriber must not kill us
+                        log.exception("Galil event handler failed on %r", item.text)
+
+    def _die(self, e: BaseException) -> None:
+        if self.alive:
+            self.error = e
+        self.alive = False
+        self.replies.put(_DEAD)
+
+    def close(self) -> None:
+        self.alive = False
+        self.replies.put(_DEAD)
+        try:
+            self.ser.close()
+        except Exception:                        # noqa: BLE001 - closing a broken link
+            pass
+        if self.thread is not threading.current_thread():
+            self.thread.join(1.0)
+
+
+class _Scheduler:
+    """Calls functions after a delay on one timer thread (continuations of operations)."""
+
+    def __init__(self) -> None:
+        self._heap: list[tuple[float, int, Callable[[], None]]] = []
+        self._seq = itertools.count()
+        self._cv = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="galil-scheduler", daemon=True)
+        self._thread.start()
+
+    def call_later(self, delay: float, fn: Callable[[], None]) -> None:
+        with self._cv:
+            heapq.heappush(self._heap, (time.monotonic() + max(0.0, delay), next(self._seq), fn))
+            self._cv.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                while not self._closed and (not self._heap
+                                            or self._heap[0][0] > time.monotonic()):
+                    timeout = self._heap[0][0] - time.monotonic() if self._heap else None
+                    self._cv.wait(timeout)
+                if self._closed:
+                    return
+                _, _, fn = heapq.heappop(self._heap)
+            try:
+                fn()
+            except Exception:                    # noqa: BLE001
+                log.exception("Galil scheduled call failed")
+
+    def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self._cv.notify()
+        self._thread.join(1.0)
+
+
+class GalilController:
+    """A Galil DMC on ``spec.url``: commands, events, positions and inputs.
+
+    ``counts_per_mm`` (the cell's ``encoder``) turns ``spec.notify_mm`` into the
+    notifier's step in counts. ``servo_axes`` are switched on (``SH``) at every connect;
+    by default the axes of ``spec.axes``. Construction prepares the programs (so a bad
+    program fails at once, naming ``file:line``, before anything is sent) and starts
+    connecting in the background; ``ready`` is that first connect's ``Future``.
+    """
+
+    def __init__(self, spec: GalilSpec, clock: Clock, programs_dir: Path | str = PROGRAMS_DIR,
+                 counts_per_mm: float = 20.0, servo_axes: str | None = None,
+                 connect: bool = True) -> None:
+        self.spec, self.clock = spec, clock
+        self.cpm = float(counts_per_mm)
+        self.programs_dir = Path(programs_dir)
+        self.notify_axis = spec.latch_axis.upper()
+        bad = [a for a in (self.notify_axis, *spec.axes.values()) if a.upper() not in AXES]
+        if bad or len(self.notify_axis) != 1:
+            raise ConfigError(f"Galil axes must be one letter of {AXES}, "
+                              f"got {bad or [self.notify_axis]}", key="galil")
+        self.servo_axes = servo_axes if servo_axes is not None else "".join(
+            sorted({a.upper() for a in spec.axes.values()}))
+        self.program: list[ProgramLine] = read_programs(self.programs_dir, spec.programs)
+        labels = {pl.text.split(";", 1)[0].strip().upper()
+                  for pl in self.program if pl.text.startswith("#")}
+        self._has_monitor = INPUT_MONITOR in labels
+        self._has_notifier = DIST_NOTIFIER in labels and spec.notify_mm > 0
+        self._worker_name = f"galil-worker-{id(self):x}"
+        self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=self._worker_name)
+        self._sched = _Scheduler()
+        self._conn: _Connection | None = None
+        self._backoff = BACKOFF_FIRST_S
+        self._next_attempt = 0.0
+        self._last_error: BaseException | None = None
+        self._lock = threading.Lock()
+        self._positions: dict[str, tuple[int, float]] = {}       # axis -> (count, clock t)
+        self._polled: dict[str, float] = {}                      # axis -> monotonic of last TP
+        self._polling: set[str] = set()
+        self._subscribers: list[EventCallback] = []
+        self._connect_hooks: list[Callable[[], None]] = []
+        self.inputs_mask: int | None = None
+        self.outputs_mask: int | None = None
+        self.connects = 0                   # successful connects (reconnects = connects - 1)
+        self.program_errors: list[str] = []
+        self._closed = False
+        self.ready: Future = self.submit(self._first_connect) if connect else _done(False)
+        self.ready.add_done_callback(_retrieve)
+
+    # ================================================================ public API
+    def command(self, text: str) -> Future:
+        """Queue one command for the worker; the future's result is the reply data."""
+        return self.submit(self.ask, text)
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
+        """Run ``fn`` on the device worker (where it may call ``ask``)."""
+        if self._closed:
+            return _failed(CommsLost("Galil controller closed"))
+        try:
+            return self._worker.submit(fn, *args)
+        except RuntimeError:
+            return _failed(CommsLost("Galil controller closed"))
+
+    def ask(self, text: str) -> str:
+        """Send one command and wait for its reply (device worker only).
+
+        Raises ``GalilError`` (with ``TC1``'s code and text) when rejected, ``CommsLost``
+        when the link drops or the reply does not come within ``spec.timeout_s``.
+        """
+        if not threading.current_thread().name.startswith(self._worker_name):
+            raise HalError("GalilController.ask() runs on the device worker only; "
+                           "use command() or submit()")
+        conn = self._ensure_connected()
+        return self._ask_on(conn, text)
+
+    def ask_number(self, text: str) -> int:
+        return parse_int(self.ask(text))
+
+    def subscribe(self, fn: EventCallback) -> Callable[[], None]:
+        """Call ``fn(event, t)`` for every unsolicited event (on the reader thread)."""
+        with self._lock:
+            self._subscribers.append(fn)
+
+        def unsubscribe() -> None:
+            with self._lock:
+                if fn in self._subscribers:
+                    self._subscribers.remove(fn)
+        return unsubscribe
+
+    def events(self) -> queue.Queue:
+        """A queue receiving ``(event, t)`` for every unsolicited event from now on."""
+        q: queue.Queue = queue.Queue()
+        self.subscribe(lambda ev, t: q.put((ev, t)))
+        return q
+
+    def on_connect(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` on the worker after every connect (settings the card must be told)."""
+        self._connect_hooks.append(fn)
+        if self._conn is not None and self._conn.alive:
+            self.submit(fn).add_done_callback(_retrieve)
+
+    @property
+    def connected(self) -> bool:
+        return self._conn is not None and self._conn.alive
+
+    def position(self, axis: str) -> int | None:
+        """Latest known count of ``axis`` (distance events and TP reads), or None."""
+        with self._lock:
+            got = self._positions.get(axis.upper())
+        return None if got is None else got[0]
+
+    def position_age(self, axis: str) -> float | None:
+        """Clock seconds since the latest count of ``axis`` was read."""
+        with self._lock:
+            got = self._positions.get(axis.upper())
+        return None if got is None else self.clock.now() - got[1]
+
+    def refresh_position(self, axis: str, max_age: float = POSITION_POLL_S) -> None:
+        """Queue a ``TP`` read of ``axis`` unless one ran in the last ``max_age`` s."""
+        axis = axis.upper()
+        now = time.monotonic()
+        with self._lock:
+            if axis in self._polling or now - self._polled.get(axis, -1e9) < max_age:
+                return
+            self._polling.add(axis)
+            self._polled[axis] = now
+
+        def done(f: Future) -> None:
+            with self._lock:
+                self._polling.discard(axis)
+            _retrieve(f)
+        self.submit(self.read_position, axis).add_done_callback(done)
+
+    def read_position(self, axis: str) -> int:
+        """``TP`` now (device worker only); updates the latest count."""
+        count = parse_int(self.ask(f"TP{axis.upper()}"))
+        self._set_position(axis.upper(), count)
+        return count
+
+    def run_steps(self, name: str, steps: list[Callable[[], Any]],
+                  timeout_s: float | None = None,
+                  on_timeout: Callable[[], HalError] | None = None) -> Future:
+        """Run ``steps`` in order on the worker without ever blocking it.
+
+        A step returns ``RETRY`` (run it again after ``POLL_S``), ``Delay(s)`` (go on after
+        ``s``), None or a value (go on at once; the last value is the result). Past
+        ``timeout_s`` a retrying step fails with ``on_timeout()`` (default ``ConveyorFault``).
+        Cancelling the future stops the sequence at the next step.
+        """
+        fut: Future = Future()
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        state: dict[str, Any] = {"i": 0, "result": None}
+
+        def resume() -> None:
+            if fut.done():
+                return
+            if self._closed:
+                _set_exception(fut, CommsLost("Galil controller closed"))
+                return
+            self.submit(run).add_done_callback(_retrieve)
+
+        def run() -> None:
+            if fut.done():
+                return
+            try:
+                while state["i"] < len(steps):
+                    r = steps[state["i"]]()
+                    if isinstance(r, Retry):
+                        if deadline is not None and time.monotonic() > deadline:
+                            raise (on_timeout() if on_timeout else
+                                   ConveyorFault(f"{name}: not done within {timeout_s:.1f} s"))
+                        self._sched.call_later(POLL_S, resume)
+                        return
+                    state["i"] += 1
+                    if isinstance(r, Delay):
+                        self._sched.call_later(r.seconds, resume)
+                        return
+                    if r is not None:
+                        state["result"] = r
+                _set_result(fut, state["result"])
+            except BaseException as e:            # noqa: BLE001 - delivered through the future
+                _set_exception(fut, e)
+
+        if self._closed:
+            _set_exception(fut, CommsLost("Galil controller closed"))
+        else:
+            self.submit(run).add_done_callback(_retrieve)
+        return fut
+
+    def close(self) -> None:
+        """Stop the worker, the scheduler and the reader; close the link."""
+        if self._closed:
+            return
+        self._closed = True
+        self._sched.close()
+        conn = self._conn
+        if conn is not None:
+            conn.close()                     # a command waiting for a reply ends now
+        self._worker.shutdown(wait=True, cancel_futures=True)
+        conn, self._conn = self._conn, None
+        if conn is not None:
+            conn.close()
+
+    # ================================================================ connection
+    def _first_connect(self) -> bool:
+        self._ensure_connected()
+        return True
+
+    def _ensure_connected(self) -> _Connection:
+        conn = self._conn
+        if conn is not None and conn.alive:
+            return conn
+        if conn is not None:
+            self._last_error = conn.error or self._last_error
+            conn.close()
+            self._conn = None
+        if self._closed:
+            raise CommsLost("Galil controller closed")
+        now = time.monotonic()
+        if now < self._next_attempt:
+            raise CommsLost(f"Galil at {self.spec.url} not connected (next attempt in "
+                            f"{self._next_attempt - now:.2f} s; last error: {self._last_error})")
+        try:
+            conn = self._connect()
+        except HalError as e:
+            self._last_error = e
+            self._next_attempt = time.monotonic() + self._backoff
+            self._backoff = min(BACKOFF_MAX_S, self._backoff * 2)
+            if isinstance(e, CommsLost):
+                raise
+            raise CommsLost(f"Galil at {self.spec.url}: connect failed: {e}") from e
+        self._backoff = BACKOFF_FIRST_S
+        self._next_attempt = 0.0
+        return conn
+
+    def _connect(self) -> _Connection:
+        try:
+            ser = serial.serial_for_url(self.spec.url, baudrate=self.spec.baud,
+                                        timeout=READ_TIMEOUT_S,
+                                        write_timeout=self.spec.timeout_s)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise CommsLost(f"Galil at {self.spec.url}: cannot open: {e}") from None
+        conn = _Connection(ser, self._on_line, self.spec.url)
+        self._conn = conn
+        try:
+            self._ask_on(conn, "CW 1")            # unsolicited bytes with the top bit set
+            self._ask_on(conn, "EO 0")            # no echo (serial ports echo by default)
+            self._ask_on(conn, "HX")              # DL is refused while a program runs
+            self._ask_on(conn, "DL", payload=download_payload(self.program))
+            if self._has_notifier:
+                step = max(1, round(self.spec.notify_mm * self.cpm))
+                self._ask_on(conn, f"DSTEP={step}")
+                self._ask_on(conn, f"~a={AXES.index(self.notify_axis)}")
+            if self._has_monitor:
+                self._ask_on(conn, f"XQ {INPUT_MONITOR},0")
+            if self._has_notifier:
+                self._ask_on(conn, f"XQ {DIST_NOTIFIER},1")
+            if self.servo_axes:
+                self._ask_on(conn, f"SH{self.servo_axes}")
+            self.inputs_mask = parse_int(self._ask_on(conn, "MG _TI0"))
+            self.outputs_mask = parse_int(self._ask_on(conn, "MG _OP0"))
+            for axis in self.servo_axes:
+                self._set_position(axis, parse_int(self._ask_on(conn, f"TP{axis}")))
+            for hook in list(self._connect_hooks):
+                hook()
+        except BaseException:
+            if self._conn is conn:
+                self._conn = None
+            conn.close()
+            raise
+        self.connects += 1
+        log.info("Galil at %s connected (%d)", self.spec.url, self.connects)
+        return conn
+
+    def _drop(self, conn: _Connection, why: str) -> CommsLost:
+        if self._conn is conn:
+            self._conn = None
+        conn.close()
+        self._last_error = CommsLost(why)
+        return CommsLost(why)
+
+    def _ask_on(self, conn: _Connection, text: str, payload: bytes | None = None) -> str:
+        try:
+            data = text.encode("ascii") + b"\r" + (payload or b"")
+        except UnicodeEncodeError:
+            raise GalilError(1, "not ASCII", command=text) from None
+        while True:                                  # a stale reply must not answer us
+            try:
+                stale = conn.replies.get_nowait()
+            except queue.Empty:
+                break
+            if stale is _DEAD:
+                raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
+        if not conn.alive:
+            raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
+        try:
+            conn.ser.write(data)
+        except Exception as e:                       # noqa: BLE001 - any write failure
+            raise self._drop(conn, f"Galil link lost sending {text!r}: {e}") from None
+        reply = self._wait_reply(conn, text)
+        if reply.ok:
+            return reply.data
+        try:
+            conn.ser.write(b"TC1\r")
+        except Exception as e:                       # noqa: BLE001
+            raise self._drop(conn, f"Galil link lost sending TC1: {e}") from None
+        tc = self._wait_reply(conn, "TC1")
+        code, why = parse_tell_code(tc.data) if tc.ok else (-1, "unknown (TC1 rejected)")
+        raise GalilError(code, why, command=text)
+
+    def _wait_reply(self, conn: _Connection, text: str) -> Reply:
+        try:
+            item = conn.replies.get(timeout=self.spec.timeout_s)
+        except queue.Empty:
+            raise self._drop(conn, f"Galil: no reply to {text!r} within "
+                                   f"{self.spec.timeout_s:g} s") from None
+        if item is _DEAD:
+            raise self._drop(conn, f"Galil link lost waiting for {text!r}: {conn.error}")
+        return item
+
+    # ================================================================ events
+    def _on_line(self, line: str) -> None:
+        ev = parse_unsolicited(line)
+        t = self.clock.now()
+        if isinstance(ev, InputsEvent):
+            self.inputs_mask = ev.mask
+        elif isinstance(ev, DistanceEvent):
+            self._set_position(self.notify_axis, ev.count, t)
+        elif isinstance(ev, ProgramError):
+            self.program_errors.append(ev.text)
+            log.warning("Galil program error: %s", ev.text)
+        with self._lock:
+            subscribers = list(self._subscribers)
+        for fn in subscribers:
+            try:
+                fn(ev, t)
+            except Exception:                        # noqa: BLE001
+                log.exception("Galil event subscriber failed")
+
+    def _set_position(self, axis: str, count: int, t: float | None = None) -> None:
+        with self._lock:
+            self._positions[axis] = (wrap(int(count), COUNTER_BITS),
+                                     self.clock.now() if t is None else t)
+
+
+# ------------------------------------------------------------------------ futures
+
+
+def _retrieve(f: Future) -> None:
+    """Mark a fire-and-forget future's exception as seen."""
+    if not f.cancelled():
+        f.exception()
+
+
+def _done(value: Any) -> Future:
+    f: Future = Future()
+    f.set_result(value)
+    return f
+
+
+def _failed(e: BaseException) -> Future:
+    f: Future = Future()
+    f.set_exception(e)
+    return f
+
+
+def _set_result(f: Future, value: Any) -> None:
+    try:
+        f.set_result(value)
+    except InvalidStateError:
+        pass
+
+
+def _set_exception(f: Future, e: BaseException) -> None:
+    try:
+        f.set_exception(e)
+    except InvalidStateError:
+        pass

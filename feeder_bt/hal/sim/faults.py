@@ -1,0 +1,562 @@
+"""Fault injection into the simulated cell, from a fault plan (``docs/faults.md``).
+
+``inject_faults`` wraps the devices of a ``SimHal`` in place with ones that keep the same
+interfaces but fail the way real hardware does: a servo time-out part-way through a pick
+that leaves the arm without power, a controller link that drops for a few seconds, a grab
+with no image, a belt that stalls, a grip that misses, an e-stop pressed and released.
+The trees cannot tell an injected fault from a real one; the injector counts and logs
+each one so a run's report can match every injected fault against the trees' recoveries.
+
+Timed faults are events on the world's own queue (``World.schedule``), so they happen at
+exact virtual times however the world is stepped, and the fast ticker wakes for them. The
+draws come from the injector's own generators (one per kind), seeded from the plan's
+seed and the run's, so a run is repeatable and the world's random stream is untouched.
+No part is ever moved by a fault: a failed pick leaves its part on the belt, a failed
+place leaves it in the gripper, and the world's accounting check runs on every step.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ...errors import (
+    CommsLost,
+    ConfigError,
+    ConveyorFault,
+    FeederError,
+    GrabFailed,
+    HalError,
+    MissedGrab,
+    ServoTimeout,
+)
+from ...jobs import DoneJob, Job
+from ...scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
+from ..interfaces import IoChange, PickTarget, Pose
+from .devices import SimHal, TimedJob
+from .world import World
+
+POWER_OFF = "robot power is off: run the recovery program"
+SERVO_FRACTION = 0.5            # a servo time-out stops the pick this far into its duration
+_MASK64 = (1 << 64) - 1
+_LINKS = ("galil", "adept", "camera")
+_LINK_NAMES = {"galil": "conveyor controller (Galil)", "adept": "robot controller (Adept)",
+               "camera": "camera"}
+
+
+def _event_time(world: World, seq: int | None) -> float | None:
+    """When the world's scheduled event ``seq`` is due (None if it is not scheduled)."""
+    return next((t for t, s, _ in world._timed if s == seq), None)
+
+
+def _fail_timed(world: World, job: Job, error: HalError) -> None:
+    """End a running job with ``error`` now: its completion is unscheduled (so a pick's
+    grip or a place's release never happens) and the robot is no longer busy with it."""
+    if job.done:
+        return
+    if isinstance(job, TimedJob) and job.seq is not None:
+        world.unschedule(job.seq)
+        job.seq = None
+    if world.robot_busy is job:
+        world.robot_busy = None
+    job.fail(error)
+
+
+class FaultInjector:
+    """Carries out a fault plan on one simulated cell; ``injected`` and ``log`` say what it
+    did. Create it with ``inject_faults``."""
+
+    def __init__(self, hal: SimHal, plan: FaultPlanSpec, seed: int) -> None:
+        self.plan = plan
+        self.seed = seed
+        #: every fault actually injected, by plan kind (``FAULT_KINDS``)
+        self.injected: Counter[str] = Counter()
+        #: one entry per injected fault: ``t``, ``kind``, ``device``, ``detail`` and ``seen``
+        #: (whether any caller met it: a refused call, a failed job, a read of ``fault()``)
+        self.log: list[dict[str, Any]] = []
+        self.power_on = True
+        self.down: dict[str, bool] = dict.fromkeys(_LINKS, False)
+        self.estop_presses = 0
+        self._rngs = {kind: np.random.default_rng([plan.seed & _MASK64, seed & _MASK64, i])
+                      for i, kind in enumerate(FAULT_KINDS)}
+        self._armed: Counter[str] = Counter()     # scripted per-pick/per-frame faults waiting
+        self._alternate = itertools.cycle(("galil", "adept"))
+        self._outage_entry: dict[str, dict[str, Any]] = {}
+        self._jam_entry: dict[str, Any] | None = None
+        self._pending: dict[int, tuple[float, Callable[[float], None], int]] = {}
+        self._keys = itertools.count()
+        self._check_cell(hal.world)             # before anything is wrapped
+        self._attach(hal)
+        self.t0 = self.world.now()
+        self._schedule_plan()
+
+    # ------------------------------------------------------------------ wiring
+    def _attach(self, hal: SimHal) -> None:
+        """Wrap the HAL's devices in place (again after a changeover's fresh devices)."""
+        self.hal = hal
+        self.world: World = hal.world
+        self.robot = FaultyRobot(hal.robot, self)
+        self.position = FaultyRobotPosition(hal.robot_position, self)
+        self.camera = FaultyCamera(hal.camera, self)
+        self.conveyors = {name: FaultyConveyor(c, self) for name, c in hal.conveyors.items()}
+        self.io = FaultyIO(hal.io, self)
+        hal.robot, hal.robot_position, hal.camera = self.robot, self.position, self.camera
+        hal.conveyors, hal.io = dict(self.conveyors), self.io
+        hal.extras["fault_injector"] = self
+        hal.changeover = self._changeover       # type: ignore[method-assign]
+
+    def _changeover(self, scenario: Any) -> None:
+        """A changeover builds a fresh world and devices: wrap those and move the plan's
+        pending events onto the new world (the clock, and so the plan's times, go on)."""
+        SimHal.changeover(self.hal, scenario)
+        pending, self._pending = self._pending, {}
+        self._attach(self.hal)
+        if self.estop_presses:                  # still pressed: the fresh world's input too
+            self.world.io["estop"] = True
+        for t, fn, _ in sorted(pending.values(), key=lambda e: e[0]):
+            self._at(t, fn)
+
+    def _check_cell(self, world: World) -> None:
+        for i, sf in enumerate(self.plan.scripted):
+            if sf.kind == "estop" and "estop" not in world.io:
+                raise ConfigError(f"the plan presses an e-stop but cell {world.cell.name!r} "
+                                  "has no 'estop' input (add one under io:)",
+                                  file=str(self.plan.path), key=f"scripted[{i}].kind")
+
+    def _at(self, t: float, fn: Callable[[float], None]) -> None:
+        """Schedule a plan event on the world, remembered until it runs (for changeovers)."""
+        key = next(self._keys)
+
+        def run(now: float) -> None:
+            self._pending.pop(key, None)
+            fn(now)
+
+        self._pending[key] = (t, fn, self.world.schedule(t, run))
+
+    # ------------------------------------------------------------------ the plan
+    def _schedule_plan(self) -> None:
+        for kind, rate in self.plan.rates.items():
+            unit, value = rate.rate()
+            if unit == "per_hour" and value > 0:
+                self._next_arrival(kind, rate, self.t0)
+        for sf in self.plan.scripted:
+            self._at(self.t0 + sf.at_s, lambda t, sf=sf: self._scripted(sf, t))
+
+    def _next_arrival(self, kind: str, rate: FaultRate, after: float) -> None:
+        """Poisson arrivals: exponential gaps of mean 3600 / per_hour seconds."""
+        gap = float(self._rngs[kind].exponential(3600.0 / rate.per_hour))
+
+        def arrive(t: float) -> None:
+            self._fire(kind, t, rate.device, rate.outage_s)
+            self._next_arrival(kind, rate, t)
+
+        self._at(after + gap, arrive)
+
+    def _scripted(self, sf: ScriptedFault, t: float) -> None:
+        if sf.kind in ("servo_timeout", "missed_grab", "grab_failed"):
+            self._armed[sf.kind] += 1          # the next pick (or grab) gets it
+        elif sf.kind == "estop":
+            self._estop(t, sf.release_after_s)
+        else:
+            self._fire(sf.kind, t, sf.device, sf.outage_s)
+
+    def _fire(self, kind: str, t: float, device: str, outage_s: float) -> None:
+        if kind == "comms_lost":
+            self._drop(device if device != "alternate" else next(self._alternate), t, outage_s)
+        elif kind == "conveyor_jam":
+            self._jam(t)
+
+    def _draw(self, kind: str) -> bool:
+        """Whether this pick or frame gets a fault of ``kind`` (a scripted one first)."""
+        rate = self.plan.rates.get(kind)
+        hit = rate is not None and bool(self._rngs[kind].random() < rate.rate()[1])
+        if self._armed[kind] > 0:
+            self._armed[kind] -= 1
+            return True
+        return hit
+
+    def _record(self, t: float, kind: str, device: str, detail: str,
+                seen: bool = True) -> dict[str, Any]:
+        entry = {"t": round(t, 6), "kind": kind, "device": device, "detail": detail,
+                 "seen": seen}
+        self.injected[kind] += 1
+        self.log.append(entry)
+        return entry
+
+    @property
+    def unseen(self) -> Counter[str]:
+        """Injected faults nobody met (a link that came back before anything used it, a jam
+        cleared by a command before ``fault()`` was read): the trees cannot count those."""
+        return Counter(e["kind"] for e in self.log if not e["seen"])
+
+    # ------------------------------------------------------------------ robot faults
+    def on_pick(self, job: TimedJob, target: PickTarget) -> None:
+        """A pick the robot accepted: maybe a servo time-out part-way, or a missed grab."""
+        w = self.world
+        servo = self._draw("servo_timeout")
+        missed = self._draw("missed_grab")
+        if not (servo or missed):
+            return
+        t0 = w.now()
+        t_grip = _event_time(w, job.seq)
+        if t_grip is None:
+            return
+        w.unschedule(job.seq)
+        if servo:
+            t_fail = t0 + SERVO_FRACTION * (t_grip - t0)
+            job.seq = w.schedule(t_fail, lambda t: self._servo_fail(job, target, t))
+        else:
+            job.seq = w.schedule(t_grip, lambda t: self._missed(job, target, t))
+
+    def _servo_fail(self, job: TimedJob, target: PickTarget, t: float) -> None:
+        job.seq = None
+        self.power_on = False
+        self._record(t, "servo_timeout", "adept",
+                     f"pick of part {target.part_id} stopped part-way; arm power off")
+        _fail_timed(self.world, job, ServoTimeout(
+            "servo time-out during the pick (motor stalled): arm power is off"))
+
+    def _missed(self, job: TimedJob, target: PickTarget, t: float) -> None:
+        job.seq = None
+        cx, cy = self.world.commanded_xy(target, t)
+        self.world.robot_pose = Pose(cx, cy, 0.0, target.angle_deg)   # it got there
+        self._record(t, "missed_grab", "adept", f"no vacuum on part {target.part_id}")
+        _fail_timed(self.world, job, MissedGrab(
+            f"vacuum not made on part {target.part_id}: nothing held after the grip"))
+
+    def on_recovered(self, job: Job) -> None:
+        if job.ok:
+            self.power_on = True
+
+    # ------------------------------------------------------------------ links
+    def _drop(self, link: str, t: float, outage_s: float) -> None:
+        """The link goes down for ``outage_s``: calls fail at once, jobs in flight fail now."""
+        if self.down[link]:
+            return                              # already down: not a second fault
+        self.down[link] = True
+        entry = self._record(t, "comms_lost", link,
+                             f"{_LINK_NAMES[link]} connection lost for {outage_s:g} s",
+                             seen=False)
+        self._outage_entry[link] = entry
+        err = CommsLost(f"{_LINK_NAMES[link]}: connection lost")
+        if link == "adept":
+            self.position.freeze(t)
+            busy = self.world.robot_busy
+            if busy is not None and not busy.done:
+                _fail_timed(self.world, busy, err)
+                entry["seen"] = True
+        elif link == "galil":
+            for conv in self.conveyors.values():
+                if conv.freeze(t, err):
+                    entry["seen"] = True
+        else:
+            if self.camera.fail_in_flight(err):
+                entry["seen"] = True
+        self._at(t + outage_s, lambda now: self._restore(link))
+
+    def _restore(self, link: str) -> None:
+        self.down[link] = False
+        self._outage_entry.pop(link, None)
+
+    def is_down(self, link: str) -> bool:
+        self.world.now()                        # events due by now (a restore) happen first
+        return self.down[link]
+
+    def refused(self, link: str, name: str) -> Job | None:
+        """A call on a link that is down fails at once (and the outage was met)."""
+        if not self.is_down(link):
+            return None
+        entry = self._outage_entry.get(link)
+        if entry is not None:
+            entry["seen"] = True
+        return DoneJob(name, error=CommsLost(f"{_LINK_NAMES[link]}: connection lost; "
+                                             f"{name} not sent"))
+
+    # ------------------------------------------------------------------ conveyor, e-stop
+    def _jam(self, t: float) -> None:
+        """The horizontal belt stalls: it stops, and ``fault()`` says so until the next
+        motion command. A belt that is not moving cannot stall: nothing is injected."""
+        conv = self.conveyors.get("horizontal")
+        axis = self.world.horizontal
+        if conv is None or (abs(axis.vel(t)) < 1e-6 and axis.commanded == 0.0):
+            return
+        axis.jog(t, 0.0)
+        err = ConveyorFault("horizontal conveyor stalled")
+        self._jam_entry = self._record(t, "conveyor_jam", "galil",
+                                       "horizontal belt stalled and stopped", seen=False)
+        if conv.jammed(err):
+            self._jam_entry["seen"] = True
+
+    def jam_read(self) -> None:
+        if self._jam_entry is not None:
+            self._jam_entry["seen"] = True
+
+    def jam_cleared(self) -> None:
+        self._jam_entry = None
+
+    def _estop(self, t: float, release_after_s: float) -> None:
+        self.estop_presses += 1
+        self._record(t, "estop", "io", f"e-stop pressed for {release_after_s:g} s")
+        self._set_estop(t, True)
+        self._at(t + release_after_s, self._release_estop)
+
+    def _release_estop(self, t: float) -> None:
+        self.estop_presses = max(0, self.estop_presses - 1)
+        if self.estop_presses == 0:
+            self._set_estop(t, False)
+
+    def _set_estop(self, t: float, value: bool) -> None:
+        if self.world.io.get("estop") != value:
+            self.world.io["estop"] = value
+            self.io.input_changed("estop", value, t)
+
+
+# ============================================================================ devices
+
+
+class _Wrapper:
+    """Anything a wrapper does not override goes to the wrapped device."""
+
+    def __init__(self, inner: Any, inj: FaultInjector) -> None:
+        self._inner = inner
+        self._inj = inj
+
+    def __getattr__(self, name: str) -> Any:
+        if name in ("_inner", "_inj"):         # not set yet (a copy being made)
+            raise AttributeError(name)
+        return getattr(self._inner, name)
+
+
+class FaultyRobot(_Wrapper):
+    """The robot with arm power and the Adept link: motions fail at once while either is
+    off; ``recover()`` turns the power back on."""
+
+    def _refuse(self, name: str, motion: bool = True) -> Job | None:
+        refused = self._inj.refused("adept", name)
+        if refused is None and motion and not self._inj.power_on:
+            refused = DoneJob(name, error=ServoTimeout(POWER_OFF))
+        return refused
+
+    def pick(self, target: PickTarget) -> Job:
+        refused = self._refuse("robot.pick")
+        if refused is not None:
+            return refused
+        job = self._inner.pick(target)
+        if isinstance(job, TimedJob) and not job.done:
+            self._inj.on_pick(job, target)
+        return job
+
+    def place(self, pose: Pose) -> Job:
+        return self._refuse("robot.place") or self._inner.place(pose)
+
+    def move_to(self, pose: Pose) -> Job:
+        return self._refuse("robot.move") or self._inner.move_to(pose)
+
+    def move_safe(self) -> Job:
+        return self._refuse("robot.move") or self._inner.move_safe()
+
+    def set_speed(self, pct: float) -> Job:
+        return self._refuse("robot.set_speed", motion=False) or self._inner.set_speed(pct)
+
+    def recover(self) -> Job:
+        refused = self._refuse("robot.recover", motion=False)
+        if refused is not None:
+            return refused
+        job = self._inner.recover()
+        job.add_done_callback(self._inj.on_recovered)
+        return job
+
+    def holding(self) -> bool:
+        return self._inner.holding()
+
+
+class FaultyRobotPosition(_Wrapper):
+    """While the Adept link is down, reads return what the controller last sent."""
+
+    _frozen: tuple[int, Pose] | None = None
+
+    def freeze(self, t: float) -> None:
+        self._frozen = (self._inj.world.robot_count(t), self._inj.world.robot_pose)
+
+    def _live(self) -> bool:
+        return not self._inj.is_down("adept")
+
+    def belt_encoder(self) -> int:
+        if self._live() or self._frozen is None:
+            return self._inner.belt_encoder()
+        return self._frozen[0]
+
+    def pose(self) -> Pose:
+        if self._live() or self._frozen is None:
+            return self._inner.pose()
+        return self._frozen[1]
+
+
+class FaultyConveyor(_Wrapper):
+    """A conveyor on the Galil link, which may stall (``fault()``) until the next motion
+    command. While the link is down, commands fail at once and reads return the last
+    values; the belt itself goes on as it was commanded."""
+
+    def __init__(self, inner: Any, inj: FaultInjector) -> None:
+        super().__init__(inner, inj)
+        self.name: str = inner.name
+        self.jam: HalError | None = None
+        self._jobs: list[Job] = []
+        self._frozen: tuple[float, int] | None = None
+
+    def _track(self, job: Job) -> Job:
+        if not job.done:
+            self._jobs.append(job)
+            job.add_done_callback(self._untrack)
+        return job
+
+    def _untrack(self, job: Job) -> None:
+        if job in self._jobs:
+            self._jobs.remove(job)
+
+    def _motion(self, method: str, *args: Any) -> Job:
+        refused = self._inj.refused("galil", f"{self.name}.{method}")
+        if refused is not None:
+            return refused
+        if self.jam is not None:
+            self.jam = None
+            self._inj.jam_cleared()
+        return self._track(getattr(self._inner, method)(*args))
+
+    def set_speed(self, mm_s: float) -> Job:
+        return self._motion("set_speed", mm_s)
+
+    def move(self, distance_mm: float, mm_s: float) -> Job:
+        return self._motion("move", distance_mm, mm_s)
+
+    def stop(self) -> Job:
+        return self._motion("stop")
+
+    def shake(self, amplitude_mm: float, cycles: int) -> Job:
+        return self._motion("shake", amplitude_mm, cycles)
+
+    def travelled(self, distance_mm: float) -> Job:
+        refused = self._inj.refused("galil", f"{self.name}.travelled")
+        if refused is not None:
+            return refused
+        return self._track(self._inner.travelled(distance_mm))
+
+    def speed(self) -> float:
+        if not self._inj.is_down("galil") or self._frozen is None:
+            return self._inner.speed()
+        return self._frozen[0]
+
+    def position(self) -> int:
+        if not self._inj.is_down("galil") or self._frozen is None:
+            return self._inner.position()
+        return self._frozen[1]
+
+    def fault(self) -> HalError | None:
+        self._inj.world.now()
+        if self.jam is not None:
+            self._inj.jam_read()
+        return self.jam
+
+    # -- for the injector --------------------------------------------------------------
+    def freeze(self, t: float, err: HalError) -> bool:
+        """The link dropped at ``t``: remember the reads, fail the jobs in flight (the
+        belt's motion itself is not touched). True if any job failed."""
+        self._frozen = (self._inner.speed(), self._inj.world.galil_count(t))
+        return self._fail_jobs(err, lambda job: True)
+
+    def jammed(self, err: HalError) -> bool:
+        """The belt stalled: ``fault()`` reports it, motions in flight end with it (their
+        planned profile is gone); distance notifications wait for the belt to move."""
+        self.jam = err
+        return self._fail_jobs(err, lambda job: isinstance(job, TimedJob))
+
+    def _fail_jobs(self, err: HalError, which: Callable[[Job], bool]) -> bool:
+        jobs = [j for j in self._jobs if which(j) and not j.done]
+        for job in jobs:
+            _fail_timed(self._inj.world, job, err)
+        return bool(jobs)
+
+
+class FaultyCamera(_Wrapper):
+    """The camera on its own link; a grab may come back with no image (``GrabFailed``)."""
+
+    def __init__(self, inner: Any, inj: FaultInjector) -> None:
+        super().__init__(inner, inj)
+        self._jobs: list[Job] = []
+
+    def grab(self) -> Job:
+        inj = self._inj
+        refused = inj.refused("camera", "camera.grab")
+        if refused is not None:
+            return refused
+        if inj._draw("grab_failed"):
+            if hasattr(self._inner, "frames"):
+                self._inner.frames += 1       # the frame index is used: later noise unchanged
+            w = inj.world
+            job = TimedJob("camera.grab", w)
+
+            def fail(t: float) -> None:
+                job.seq = None
+                inj._record(t, "grab_failed", "camera", "grab returned no image")
+                job.fail(GrabFailed("camera: no image (grab failed)"))
+
+            return job.at(w.now() + w.cell.camera.grab_s, fail)
+        job = self._inner.grab()
+        if not job.done:
+            self._jobs.append(job)
+            job.add_done_callback(self._untrack)
+        return job
+
+    def _untrack(self, job: Job) -> None:
+        if job in self._jobs:
+            self._jobs.remove(job)
+
+    def set_exposure(self, ms: float) -> Job:
+        return self._inj.refused("camera", "camera.set_exposure") or self._inner.set_exposure(ms)
+
+    def fail_in_flight(self, err: HalError) -> bool:
+        jobs = [j for j in self._jobs if not j.done]
+        for job in jobs:
+            job.fail(err)
+        return bool(jobs)
+
+
+class FaultyIO(_Wrapper):
+    """Digital I/O that also reports the input changes the injector makes (the e-stop)."""
+
+    def __init__(self, inner: Any, inj: FaultInjector) -> None:
+        super().__init__(inner, inj)
+        self._changes: list[IoChange] = []
+
+    def get(self, signal: str) -> bool:
+        self._inj.world.now()
+        return self._inner.get(signal)
+
+    def set(self, signal: str, value: bool) -> Job:
+        return self._inner.set(signal, value)
+
+    def changes(self) -> list[IoChange]:
+        self._inj.world.now()
+        out, self._changes = self._inner.changes() + self._changes, []
+        return sorted(out, key=lambda c: c.t)
+
+    def input_changed(self, signal: str, value: bool, t: float) -> None:
+        self._changes.append(IoChange(signal, value, t))
+
+
+def inject_faults(hal: SimHal, plan: FaultPlanSpec, seed: int | None = None) -> FaultInjector:
+    """Wrap the simulated cell's devices so they fail as ``plan`` says; ``seed`` is the
+    run's seed (default: the world's), mixed with ``plan.seed`` for the fault draws.
+
+    Plan times count from now (the start of the run). Only the simulated cell takes a
+    plan: the emulators have their own (``feeder_bt.emulators.faults``)."""
+    if not isinstance(hal, SimHal):
+        raise FeederError(f"fault plans are injected into the simulated cell only (--hal sim), "
+                          f"not a {getattr(hal, 'kind', type(hal).__name__)} cell")
+    if "fault_injector" in hal.extras:
+        raise FeederError("this simulated cell already has a fault plan")
+    return FaultInjector(hal, plan, hal.world.seed if seed is None else seed)

@@ -1,0 +1,85 @@
+"""Shared set-up for the Galil tests: a plant, the emulator on it, the driver on that.
+
+Everything runs on 127.0.0.1 (port 0) or a pty, and is stopped in teardown.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from feeder_bt.clock import RealClock
+from feeder_bt.emulators.faults import FaultPlan
+from feeder_bt.emulators.galil import GalilEmulator
+from feeder_bt.emulators.plant import Plant
+from feeder_bt.hal.galil import GalilController, GalilConveyor, GalilIO, make_galil
+from feeder_bt.hal.galil.driver import PROGRAMS_DIR
+from feeder_bt.jobs import Job
+from feeder_bt.scenario.loader import load_scenario
+from feeder_bt.scenario.model import CellSpec, IoSignal
+
+SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "lenses.yaml"
+JAM_BIT = 3                  # a Galil input added to the cell for the tests
+
+
+def wait_until(cond: Callable[[], object], timeout: float = 2.0, step: float = 0.005) -> bool:
+    """Poll ``cond`` until true or ``timeout`` (wall) seconds; returns the last value."""
+    end = time.monotonic() + timeout
+    while True:
+        value = cond()
+        if value or time.monotonic() > end:
+            return bool(value)
+        time.sleep(step)
+
+
+def wait_job(job: Job, timeout: float = 3.0) -> Job:
+    """Poll a job as a tree would, until it ends (or ``timeout``)."""
+    wait_until(lambda: job.done, timeout)
+    return job
+
+
+def make_cell() -> tuple[object, CellSpec]:
+    sc, cell = load_scenario(SCENARIO)
+    cell.io["jam"] = IoSignal("galil", JAM_BIT, "in")
+    cell.galil.timeout_s = 0.5
+    return sc, cell
+
+
+@dataclass
+class Rig:
+    plant: Plant
+    emu: GalilEmulator
+    cell: CellSpec
+    ctl: GalilController
+    conveyors: dict[str, GalilConveyor]
+    io: GalilIO
+
+
+@contextmanager
+def plant_and_emulator(faults: FaultPlan | None = None, pty: bool = False
+                       ) -> Iterator[tuple[Plant, GalilEmulator, CellSpec]]:
+    sc, cell = make_cell()
+    plant = Plant(sc, cell, seed=1).start()
+    emu = GalilEmulator(plant, "127.0.0.1", 0, faults, pty=pty).start()
+    try:
+        cell.galil.url = emu.pty_path if pty else f"socket://127.0.0.1:{emu.port}"
+        yield plant, emu, cell
+    finally:
+        emu.stop()
+        plant.stop()
+
+
+@contextmanager
+def rig(faults: FaultPlan | None = None, pty: bool = False,
+        programs_dir: Path = PROGRAMS_DIR) -> Iterator[Rig]:
+    """Plant + emulator + connected driver (conveyors and I/O of the cell)."""
+    with plant_and_emulator(faults, pty) as (plant, emu, cell):
+        ctl, conveyors, io = make_galil(cell, RealClock(), programs_dir)
+        try:
+            assert ctl.ready.result(5.0) is True
+            yield Rig(plant, emu, cell, ctl, conveyors, io)
+        finally:
+            ctl.close()
