@@ -187,7 +187,8 @@ class Cell:
             if self.state is CellState.STARTING:
                 self.fault(f"set-up failed: {what}")
             else:   # clean-up failed: nothing more can be done in software
-                self.fault_reason = f"clean-up failed: {what}"
+                first = f"{self.fault_reason}; then " if self.fault_reason else ""
+                self.fault_reason = f"{first}clean-up failed: {what}"
                 self._drop_scenario_objects()
                 self._switch(CellState.FAULT, None)
 

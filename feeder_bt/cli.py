@@ -13,7 +13,8 @@ from pathlib import Path
 from .errors import FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
-TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd")
+TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
+         "users_cmd")
 
 
 def _positive(text: str) -> float:
@@ -43,8 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="feed parts: the main job (simulated cell by default)")
     r.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")
     r.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
-    r.add_argument("--duration", type=_positive, default=60.0,
-                   help="seconds of feeding (virtual seconds on the simulated cell); default 60")
+    r.add_argument("--duration", type=_positive, default=None,
+                   help="seconds of feeding (virtual seconds on the simulated cell); default 60 "
+                        "(with --ui: until Ctrl-C)")
     r.add_argument("--fast", action="store_true",
                    help="simulated cell only: run virtual time as fast as possible")
     r.add_argument("--seed", type=int, default=1, help="random seed of the simulated cell")
@@ -55,8 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="live tree view in real-time runs (default unicode)")
     r.add_argument("--no-skip", dest="skip_idle", action="store_false",
                    help="fast runs: tick every tick even when nothing can change")
-    from .run import add_db_options
+    from .run import add_db_options, add_ui_options
     add_db_options(r)
+    r.add_argument("--faults", metavar="PLAN.yaml",
+                   help="simulated cell: inject the faults of a plan (docs/faults.md)")
+    add_ui_options(r)
 
     t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
     t.add_argument("scenario")
@@ -85,7 +90,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     report = run_job(RunOptions(scenario=args.scenario, cell=args.cell, duration=args.duration,
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
-                                db=args.db))
+                                db=args.db, ui=args.ui, users=args.users, start=args.start,
+                                faults=args.faults))
     p = report["parts"]
     print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
           f"({report['wall_seconds']:.1f} s wall): retrieved "

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from .cell import Cell, CellState
 from .clock import RealClock, SimClock
+from .errors import ConfigError, FeederError
 from .eventlog import EventLog
 from .hal.factory import make_hal
 from .report import build_report, write_report
@@ -27,7 +30,7 @@ DEFAULT_DB = "runs/feeder.db"   # the command line's event log unless --db / --n
 class RunOptions:
     scenario: str
     cell: str | None = None
-    duration: float = 60.0
+    duration: float | None = 60.0  # clock seconds; None: until Ctrl-C (the --ui default)
     fast: bool = False
     seed: int = 1
     report: str | None = None
@@ -35,6 +38,10 @@ class RunOptions:
     view: str = "unicode"          # unicode | ascii | none
     skip_idle: bool = True
     db: str | None = None          # SQLite event log; None or "" for none (CLI: DEFAULT_DB)
+    ui: str | None = None          # "HOST:PORT": serve the operator UI (docs/operator-ui.md)
+    users: str | None = None       # the UI's users file (default: feeder_bt.ui.users)
+    start: bool | None = None      # start feeding at once; None: yes, unless --ui
+    faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
 
 
 def add_db_options(parser: argparse.ArgumentParser) -> None:
@@ -43,6 +50,105 @@ def add_db_options(parser: argparse.ArgumentParser) -> None:
                         help=f"SQLite event log for `feeder report` (default {DEFAULT_DB})")
     parser.add_argument("--no-db", dest="db", action="store_const", const=None,
                         help="do not write the event log")
+
+
+def add_ui_options(parser: argparse.ArgumentParser) -> None:
+    """``--ui [HOST:PORT]``, ``--users FILE``, ``--start`` for ``feeder run``."""
+    from .ui import DEFAULT_BIND, parse_bind
+    from .ui.users import default_path
+
+    def bind(text: str) -> str:
+        parse_bind(text)                 # one-line usage error now, not after the HAL opens
+        return text
+
+    parser.add_argument("--ui", nargs="?", const=DEFAULT_BIND, type=bind, metavar="HOST:PORT",
+                        help=f"serve the operator UI while the cell runs (default {DEFAULT_BIND}"
+                             "; port 0 picks a free one); the cell then waits STOPPED for an "
+                             "operator and the run lasts until Ctrl-C unless --duration")
+    parser.add_argument("--users", metavar="FILE",
+                        help=f"with --ui: the users file (default {default_path()})")
+    parser.add_argument("--start", action="store_true", default=None,
+                        help="with --ui: start feeding at once instead of waiting for an "
+                             "operator")
+
+
+class _FeedSpan:
+    """With --ui the operator starts and stops the cell: the report's feed time is the time
+    spent between starts and the stops (or faults) that ended them, over the starts the
+    cell's statistics cover (the cell keeps counting when the same scenario restarts)."""
+
+    def __init__(self, cell: Cell) -> None:
+        self.cell = cell
+        self.stats: object = None
+        self.done = 0.0                  # closed spans
+        self.since: float | None = None  # the open span's start
+        cell.listeners.append(self._on_state)
+
+    def _on_state(self, old: CellState, new: CellState) -> None:
+        now = self.cell.clock.now()
+        if new is CellState.STARTING:
+            if self.cell.stats is not self.stats:       # fresh statistics: fresh time
+                self.stats, self.done = self.cell.stats, 0.0
+            self.since = now
+        elif new in (CellState.STOPPING, CellState.FAULTING, CellState.FAULT,
+                     CellState.STOPPED) and self.since is not None:
+            self.done += now - self.since
+            self.since = None
+
+    def seconds(self, t_end: float) -> float:
+        return self.done + (t_end - self.since if self.since is not None else 0.0)
+
+
+class _UiLiveView(LiveView):
+    """The live view with the operator UI's address under it."""
+
+    url = ""
+
+    def screen(self) -> str:
+        return super().screen() + f"\n\noperator UI: {self.url}"
+
+
+def _chain(*fns: Callable[[], None] | None) -> Callable[[], None] | None:
+    """One after-tick callback calling each of ``fns`` in order."""
+    todo = [f for f in fns if f is not None]
+    if len(todo) <= 1:
+        return todo[0] if todo else None
+
+    def each() -> None:
+        for f in todo:
+            f()
+    return each
+
+
+def _bind(text: str) -> tuple[str, int]:
+    from .ui import parse_bind
+    try:
+        return parse_bind(text)
+    except argparse.ArgumentTypeError as e:
+        raise FeederError(f"--ui: {e}") from None
+
+
+def _operator_resets(cell: Cell, plan) -> bool:
+    """With a fault plan the run stands in for the operator of an e-stop: it waits for the
+    release, then resets and restarts the cell (docs/faults.md). Any other FAULT ends it."""
+    return plan is not None and cell.fault_reason == "e-stop pressed"
+
+
+def _operator(cell: Cell) -> None:
+    if (cell.state is CellState.FAULT and cell.fault_reason == "e-stop pressed"
+            and not cell.estop_pressed()):
+        cell.stats.emit(cell.clock.now(), "operator", action="reset and start after e-stop")
+        cell.reset()
+        cell.start()
+
+
+def final_speeds() -> dict[str, float | None]:
+    """The speeds the trees followed last (the scenario's, the adjuster's or an operator's)."""
+    import py_trees
+    storage = py_trees.blackboard.Blackboard.storage
+    return {k: (None if storage.get(f"/speeds/{k}") is None
+                else float(storage[f"/speeds/{k}"]))
+            for k in ("horizontal_mm_s", "incline_pct", "robot_speed_pct")}
 
 
 def _start_log(log: EventLog, opts: RunOptions, scenario: Scenario, cell: Cell) -> None:
@@ -67,9 +173,29 @@ class _StopRequest:
 
 
 def run_job(opts: RunOptions) -> dict[str, Any]:
+    if opts.ui and opts.fast:
+        raise FeederError("--ui serves operators in real time: drop --fast")
+    # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
+    duration = 60.0 if opts.duration is None and not opts.ui else opts.duration
+    start = (not opts.ui) if opts.start is None else opts.start
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
+    if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
+        from .ui.app import check_users
+        check_users(opts.users)
+    plan = None
+    if opts.faults:             # like a bad --db: a bad plan fails before the HAL opens
+        from .scenario.faults import load_fault_plan
+        plan = load_fault_plan(opts.faults)
+        if opts.hal != "sim":
+            raise ConfigError("fault plans drive the simulated cell; the emulators take "
+                              "their faults from tests (feeder_bt.emulators.faults)",
+                              key="faults")
     log = EventLog(opts.db) if opts.db else None      # a bad --db fails before the HAL opens
     hal, clock = make_hal(opts.hal, scenario, cell_spec, opts.seed)
+    injector = None
+    if plan is not None:
+        from .hal.sim.faults import inject_faults
+        injector = inject_faults(hal, plan)  # type: ignore[arg-type]
     if not isinstance(clock, SimClock):
         clock = RealClock()
     cell = Cell(cell_spec, hal, clock)
@@ -78,9 +204,9 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
     show: LiveView | Progress | None = None
     if opts.fast:
-        show = Progress(cell, opts.duration)
+        show = Progress(cell, duration or 0.0)
     elif opts.view != "none":
-        show = LiveView(cell, fmt=opts.view)
+        show = (_UiLiveView if opts.ui else LiveView)(cell, fmt=opts.view)
     every = show.update if show else None
     if log:     # after each tick: the view, then the log's batch (cheap when not due)
         every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
@@ -91,23 +217,39 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     interrupted = False
     t_start = clock.now()
     t_stop = t_start
+    ui = None
+    feed = _FeedSpan(cell) if opts.ui else None
     try:
         cell.load(scenario)
-        cell.start()
+        if opts.ui:             # commands run and snapshots are taken in the tick thread
+            from .ui.app import OperatorUi
+            ui = OperatorUi(cell, opts.scenario, opts.cell or scenario.cell_path,
+                            *_bind(opts.ui), users_path=opts.users, t0=t_start)
+            url = ui.start()
+            print(f"operator UI: {url}", file=sys.stderr, flush=True)
+            if isinstance(show, _UiLiveView):
+                show.url = url
+            every = _chain(every, ui.pump)
+        if start:
+            cell.start()
         try:
-            ticker.run(until=t_start + opts.duration,
-                       stop=lambda: request.requested
-                       or cell.state in (CellState.FAULT, CellState.STOPPED),
-                       every=every)
+            ticker.run(until=None if duration is None else t_start + duration,
+                       stop=(lambda: request.requested) if ui else
+                       (lambda: request.requested or cell.state is CellState.STOPPED
+                        or (cell.state is CellState.FAULT and not _operator_resets(cell, plan))),
+                       every=_chain(every, (lambda: _operator(cell)) if plan else None))
         except KeyboardInterrupt:
             pass
         interrupted = request.requested
         t_stop = clock.now()
+        if ui:
+            ui.closing()        # operators see the clean-up but can no longer command
         cell.stop()
         if isinstance(clock, SimClock):   # no need to watch the clean-up in real time
             ticker.fast, ticker.skip_idle = True, opts.skip_idle
         ticker.run(until=clock.now() + STOP_GRACE_S,
-                   stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT))
+                   stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT),
+                   every=ui.pump if ui else None)
         if show:
             show.update(force=True)
             if isinstance(show, Progress):
@@ -115,12 +257,21 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
+        if ui:
+            ui.close()
         hal.close()
         if log:
             log.flush()               # even when interrupted: nothing buffered is lost
     report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
-                          sim_seconds=clock.now() - t_start, feed_seconds=t_stop - t_start,
+                          sim_seconds=clock.now() - t_start,
+                          feed_seconds=feed.seconds(t_stop) if feed else t_stop - t_start,
                           wall_seconds=time.monotonic() - wall0, interrupted=interrupted)
+    report["speeds"] = final_speeds()
+    if injector is not None:
+        report["injected"] = dict(injector.injected)
+        report["fault_plan"] = str(opts.faults)
+    if ui:
+        report["operator"] = ui.report()
     if opts.report:
         Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
         write_report(report, opts.report)

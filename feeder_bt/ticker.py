@@ -11,6 +11,7 @@ run see exactly what they would have seen without skipping, so results are the s
 from __future__ import annotations
 
 import math
+import operator
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,6 +21,8 @@ import numpy as np
 from .cell import Cell
 from .clock import EPS, SimClock
 from .jobs import Job
+
+_STATUS = operator.attrgetter("status")
 
 
 @dataclass
@@ -48,6 +51,8 @@ class Ticker:
         self.k = 0                      # tick index on the grid
         self.t0 = self.clock.now()
         self._last_sig: tuple | None = None
+        self._nodes_of: object = None           # the root whose nodes _node_list holds
+        self._node_list: list | None = None
         self._wall0 = time.monotonic()
 
     @property
@@ -59,7 +64,15 @@ class Ticker:
         c = self.cell
         q = c.ctx.queue.version if c.ctx is not None else 0
         return (Job.finished_total, q, c.stats.version, c.version, c.state,
-                tuple(n.status for n in c.nodes()))
+                tuple(map(_STATUS, self._nodes())))
+
+    def _nodes(self) -> list:
+        """The ticked tree's nodes, listed again only when the cell switches trees: a tree's
+        shape is fixed once built, and walking it every tick cost more than the tick."""
+        root = self.cell.root
+        if root is not self._nodes_of or self._node_list is None:
+            self._nodes_of, self._node_list = root, self.cell.nodes()
+        return self._node_list
 
     def tick_once(self) -> None:
         hz = self.stats.hz

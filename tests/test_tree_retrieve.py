@@ -217,7 +217,7 @@ def test_failed_recovery_escalates_and_branch_stays_running(tree):
     assert bb_get("/faults/escalate") == reason
 
 
-def test_second_servo_timeout_on_retry_escalates(tree):
+def test_second_servo_timeout_on_retry_recovers_again_and_lets_the_part_go(tree):
     ctx, root = tree
     ctx.queue.put(part(300.0))
     tick(root, ctx)
@@ -229,8 +229,24 @@ def test_second_servo_timeout_on_retry_escalates(tree):
     tick(root, ctx)
     fail(ctx.hal, "robot", "pick", ServoTimeout("joint 2 again"))
     assert tick(root, ctx) is Status.RUNNING
-    assert "joint 2 again" in bb_get("/faults/escalate")
-    assert ctx.hal.methods().count("robot.pick") == 2
+    finish(ctx.hal, "robot", "recover")
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "move_safe")
+    tick(root, ctx, n=3)
+    assert [m for m in ctx.hal.methods() if m != "robot.set_speed"] == [
+        "robot.pick", "robot.recover", "robot.move_safe", "robot.pick", "robot.recover",
+        "robot.move_safe"]                           # no third try at the same part
+    assert ctx.stats.faults["servo_timeout"] == 2
+    assert ctx.stats.recoveries["servo_timeout"] == 2
+    assert bb_get("/faults/escalate") is None
+    # a recovery that itself fails is the operator's
+    ctx.queue.put(part(320.0))
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "pick", ServoTimeout("joint 2"))
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "recover", ServoTimeout("power cannot be enabled"))
+    tick(root, ctx)
+    assert "power cannot be enabled" in bb_get("/faults/escalate")
 
 
 def test_robot_speed_follows_the_blackboard(tree):

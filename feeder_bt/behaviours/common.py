@@ -234,7 +234,8 @@ class ErrorIs(Leaf):
 
 
 class CountFault(Leaf):
-    """Count the fault in ``key``, log it, and let the branch go on."""
+    """Count the fault in ``key``, log it, and let the branch go on. A failure while the
+    branch retries through the same kind of fault is one more attempt, not a new fault."""
 
     def __init__(self, name: str, ctx: Ctx, key: str, counter: str | None = None) -> None:
         super().__init__(name, ctx)
@@ -244,8 +245,13 @@ class CountFault(Leaf):
     def update(self) -> Status:
         err = self.bb.get(self.key)
         kind = err.kind if err is not None else "unknown"
-        self.ctx.stats.faults[kind] += 1
-        self.ctx.stats.counted[self.key] = err
+        stats = self.ctx.stats
+        stats.counted[self.key] = err
+        if stats.pending.get(self.key) == kind:     # the same fault, still being retried
+            stats.emit(self.ctx.now(), "retry_failed", kind=kind, message=str(err),
+                       attempt=stats.attempts[self.key])
+            return Status.SUCCESS
+        stats.faults[kind] += 1
         if self.counter:
             self.ctx.stats.count(self.counter)
         self.ctx.stats.emit(self.ctx.now(), "fault", kind=kind, message=str(err))
@@ -329,7 +335,8 @@ class Escalate(Leaf):
         reason = f"{self.what}: {err}" if err is not None else self.what
         if self.bb.get("/faults/escalate") is None:
             self.bb.set("/faults/escalate", reason)
-            if err is None or self.ctx.stats.counted.get(self.key) is not err:
+            episode = err is not None and stats.pending.get(self.key) == err.kind
+            if err is None or (stats.counted.get(self.key) is not err and not episode):
                 self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1
         self.feedback_message = reason
         return Status.RUNNING

@@ -65,6 +65,13 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             Sequence("gone on retry", memory=True, children=[
                 ErrorIs("envelope?", ctx, KEY, ("envelope",)),
                 CountFault("count unreachable", ctx, KEY, counter="unreachable")]),
+            # a new servo fault on the retry: recover again, and let the part go; only a
+            # recovery that fails goes to the operator
+            Sequence("servo fault on retry", memory=True, children=[
+                ErrorIs("servo time-out again?", ctx, KEY, ("servo_timeout",)),
+                CountFault("count servo fault", ctx, KEY),
+                Recover("run recovery program", ctx),
+                MoveSafe("move to safe", ctx)]),
         ]),
     ])
     link = Sequence("link lost", memory=True, children=[

@@ -54,7 +54,20 @@ class AdeptRobot:
 
     def _call(self, verb: str, *args: object, motion: bool = True) -> list[str]:
         timeout = self.motion_timeout_s if motion else self.timeout_s
-        return self.motion.call(verb, *args, timeout=timeout)
+        try:
+            return self.motion.call(verb, *args, timeout=timeout)
+        except CommsLost:
+            if verb in ("PICK", "PLACE"):
+                # the motion may have finished without us hearing: ask the controller
+                # what the gripper holds as soon as the link is back, before anything else
+                self.motion.worker.submit(self._refresh_after_link_loss)
+            raise
+
+    def _refresh_after_link_loss(self) -> None:
+        try:
+            self.refresh_holding()
+        except HalError:
+            pass                # still down: the next PICK/PLACE failure asks again
 
     def pick(self, target: PickTarget) -> Job:
         ox, oy, oz = target.tool_offset

@@ -56,15 +56,24 @@ class Axis:
         return last.t0 if last.a == 0.0 else last.t1
 
     def time_at(self, p: float, after: float) -> float | None:
-        """First time >= ``after`` at which the position reaches ``p`` (moving forward)."""
-        start = len(self.segments) - 1
-        while start > 0 and self.segments[start].t0 > after:
+        """First time >= ``after`` at which the position reaches ``p`` (moving forward).
+
+        The world asks this several times a tick: ``Segment.pos`` is written out here (the
+        same expression) and the segments are indexed rather than sliced.
+        """
+        segs = self.segments
+        n = len(segs)
+        start = n - 1
+        while start > 0 and segs[start].t0 > after:
             start -= 1
-        for seg in self.segments[start:]:
+        reach = p - 1e-9
+        for i in range(start, n):
+            seg = segs[i]
             if seg.t1 <= after:
                 continue
             lo = max(seg.t0, after)
-            if seg.pos(lo) >= p - 1e-9:
+            dt = lo - seg.t0
+            if seg.p0 + seg.v0 * dt + 0.5 * seg.a * dt * dt >= reach:
                 return lo
             t = _first_reach(seg, p, lo)
             if t is not None and t <= seg.t1:

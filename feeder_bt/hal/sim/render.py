@@ -78,7 +78,7 @@ class Renderer:
                    min(int(hi[0]) + p + 2, w), min(int(hi[1]) + p + 2, h)]
             if box[0] < box[2] and box[1] < box[3]:      # else wholly outside the image
                 parts.append((box, [px]))
-        img = self._background.copy()
+        boxes: list[tuple[Box, np.ndarray]] = []
         if parts:
             du, dv = (int(x) for x in rng.integers(0, _TEXTURE_PAD, size=2))
             for (u0, v0, u1, v1), pxs in _merge_boxes(parts):
@@ -88,11 +88,16 @@ class Renderer:
                 comp = b - cov * (b - fg)
                 if self.spec.blur_px > 0:
                     comp = cv2.GaussianBlur(comp, (0, 0), self.spec.blur_px)
-                img[v0:v1, u0:u1] = comp
+                boxes.append(([u0, v0, u1, v1], comp))
         n = h * w
         raw = rng.bit_generator.random_raw((n + 7) // 8).view(np.uint8)[:n].reshape(h, w)
         noise = cv2.LUT(raw, self._noise_lut)
-        return cv2.add(img, noise, dtype=cv2.CV_8U)
+        # The background plus noise, then each box again from its composite: the same sums
+        # as compositing into a copy of the background first, without the copy.
+        img = cv2.add(self._background, noise, dtype=cv2.CV_8U)
+        for (u0, v0, u1, v1), comp in boxes:    # later boxes over earlier, as before
+            img[v0:v1, u0:u1] = cv2.add(comp, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
+        return img
 
 
 Box = list[int]
@@ -131,4 +136,4 @@ def _coverage(polys_px: list[np.ndarray], w: int, h: int) -> np.ndarray:
         pts = np.round((px * k + (k - 1) / 2.0) * (1 << _SHIFT)).astype(np.int32)
         cv2.fillPoly(fine, [pts.reshape(-1, 1, 2)], 255, lineType=cv2.LINE_8, shift=_SHIFT)
     small = cv2.resize(fine, (w, h), interpolation=cv2.INTER_AREA)
-    return small.astype(np.float32) * np.float32(1.0 / 255.0)
+    return np.multiply(small, np.float32(1.0 / 255.0), dtype=np.float32)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ...clock import EPS, SimClock
 from ...encoder import diff, wrap
-from ...errors import AccountingError, EnvelopeError, MissedGrab
+from ...errors import AccountingError, EnvelopeError, HalError, MissedGrab
 from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
 from ...jobs import Job
 from ...robot_model import RobotModel
@@ -136,42 +136,58 @@ class World:
 
     def step(self, now: float) -> None:
         """Process every event up to ``now`` in time order."""
+        limit = now + EPS
         while True:
-            t, kind = self._next_event()
-            if t is None or t > now + EPS:
+            t, kind, arg = self._next_event()
+            if t is None or t > limit:
                 break
             self.t = max(self.t, t)
-            kind(self.t)
+            if arg is None:
+                kind(self.t)
+            else:
+                kind(self.t, arg)
         self.t = now
-        self._hint_notifications()
+        if self.notifications:
+            self._hint_notifications()
         self.check_accounting()
 
-    def _next_event(self) -> tuple[float | None, Callable[[float], None]]:
-        best: tuple[float | None, Callable[[float], None]] = (None, _noop)
-
-        def consider(t: float | None, fn: Callable[[float], None]) -> None:
-            nonlocal best
-            if t is not None and (best[0] is None or t < best[0]):
-                best = (t, fn)
-
+    def _next_event(self) -> tuple[float | None, Callable[..., None], object]:
+        """The earliest pending event: its time, handler and the handler's extra argument
+        (None: none). Candidates are looked at in a fixed order and a later one wins only
+        if strictly earlier. Runs every tick, so it is written out flat (no closures)."""
+        best_t: float | None = None
+        best_fn: Callable[..., None] = _noop
+        best_arg: object = None
+        now = self.t
         if self._timed:
-            consider(self._timed[0][0], self._run_timed)
+            best_t, best_fn = self._timed[0][0], self._run_timed
         if self.hopper:
-            consider(self.incline.time_at(self.next_release, self.t), self._release)
+            t = self.incline.time_at(self.next_release, now)
+            if t is not None and (best_t is None or t < best_t):
+                best_t, best_fn = t, self._release
         if self.on_incline:
             front = self.parts[self.on_incline[0]]
-            consider(self.incline.time_at(front.p_release + self.i_len, self.t), self._land)
+            t = self.incline.time_at(front.p_release + self.i_len, now)
+            if t is not None and (best_t is None or t < best_t):
+                best_t, best_fn = t, self._land
         if self.on_horizontal:
-            lead = max(self.on_horizontal.values(), key=lambda p: p.x0)
-            consider(self.horizontal.time_at(self.h_len - lead.x0, self.t),
-                     lambda t, pid=lead.id: self._fall(t, pid))
+            lead = max(self.on_horizontal.values(), key=_x0)
+            t = self.horizontal.time_at(self.h_len - lead.x0, now)
+            if t is not None and (best_t is None or t < best_t):
+                best_t, best_fn, best_arg = t, self._fall, lead.id
         if self.returning:
-            consider(self.returning[0][0], self._arrive_hopper)
+            t = self.returning[0][0]
+            if best_t is None or t < best_t:
+                best_t, best_fn, best_arg = t, self._arrive_hopper, None
         if self.placed:
-            consider(self.placed[0][0], self._recycle)
+            t = self.placed[0][0]
+            if best_t is None or t < best_t:
+                best_t, best_fn, best_arg = t, self._recycle, None
         for n in self.notifications:
-            consider(n.axis.time_at(n.target, self.t), lambda t, n=n: self._notify(t, n))
-        return best
+            t = n.axis.time_at(n.target, now)
+            if t is not None and (best_t is None or t < best_t):
+                best_t, best_fn, best_arg = t, self._notify, n
+        return best_t, best_fn, best_arg
 
     def _run_timed(self, t: float) -> None:
         _, _, fn = heapq.heappop(self._timed)
@@ -368,6 +384,9 @@ class World:
         pickable and singulated."""
         cx, cy = self.commanded_xy(target, t)
         self.robot_pose = Pose(cx, cy, 0.0, target.angle_deg)
+        if self.gripper is not None:      # one suction cup: the held part stays held
+            self.counts["grip_while_holding"] += 1
+            raise HalError(f"the gripper already holds part {self.gripper}")
         best, best_d = None, math.inf
         for part in self.on_horizontal.values():
             x, y = self.part_xy(part, t)
@@ -432,7 +451,9 @@ class World:
         }
 
     def check_accounting(self) -> None:
-        n = sum(self.census().values())
+        # the census's sum, without building it (this runs on every step)
+        n = (len(self.hopper) + len(self.on_incline) + len(self.on_horizontal)
+             + len(self.returning) + (self.gripper is not None) + len(self.placed))
         if n != self.total:
             raise AccountingError(f"simulated cell holds {n} parts, expected {self.total}: "
                                   f"{self.census()}")
@@ -450,3 +471,7 @@ def _grown(poly: np.ndarray, centre: tuple[float, float], by: float) -> np.ndarr
 
 def _noop(t: float) -> None:
     pass
+
+
+def _x0(part: SimPart) -> float:
+    return part.x0

@@ -1,0 +1,70 @@
+"""``feeder run --ui``: the operator UI put together for one run.
+
+run.py creates an ``OperatorUi`` on the main thread, calls ``pump()`` after every tick
+(commands run there, snapshots are published there) and ``close()`` at the end; the web
+server's thread sees only the bridge.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..cell import Cell
+from .bridge import Bridge
+from .operate import CellOps
+from .server import UiApp, UiServer, make_notice
+from .status import CellPanel
+from .users import UsersError, UsersFile
+
+
+def check_users(path: str | Path | None) -> UsersFile:
+    """The users file for ``--ui``: it must exist and name somebody who can log in."""
+    users = UsersFile(path)
+    if not users.names():               # a damaged file is a one-line UsersError here
+        hint = f" --users {path}" if path else ""
+        raise UsersError(f"no users in {users.path}: nobody could log in; add one with "
+                         f"`feeder users add NAME{hint}`")
+    return users
+
+
+class OperatorUi:
+    """The bridge, the cell's panel and commands, and the web server of one run."""
+
+    def __init__(self, cell: Cell, scenario_path: str | Path, cell_file: str | Path,
+                 host: str, port: int, users_path: str | Path | None = None,
+                 t0: float | None = None) -> None:
+        users = check_users(users_path)
+        self.ops = CellOps(cell, Path(scenario_path).resolve().parent, Path(cell_file))
+        self.panel = CellPanel(cell, self.ops.limits, lambda: sorted(self.ops.scenarios), t0)
+        self.bridge = Bridge(self.ops.execute, self.panel.snapshot)
+        self.web = UiApp(self.bridge, users)
+        self.server = UiServer(self.web, host, port)
+        self.url = ""
+
+    def start(self) -> str:
+        """Publish a first snapshot, then serve; returns the URL (port 0 resolved)."""
+        self.bridge.publish()
+        self.url = self.server.start()
+        notice = make_notice(self.server.host)
+        if notice:
+            print(notice, file=sys.stderr)
+        return self.url
+
+    def pump(self) -> None:
+        """After each tick, on the tick thread."""
+        self.bridge.pump()
+
+    def closing(self) -> None:
+        """The run is ending: refuse commands from now on; keep showing the clean-up."""
+        self.bridge.close()
+
+    def close(self) -> None:
+        """Publish the final state, then stop the server (its thread ends)."""
+        self.bridge.close()
+        self.bridge.pump(force=True)
+        self.server.close()
+
+    def report(self) -> dict[str, Any]:
+        return {"url": self.url, **self.ops.report()}

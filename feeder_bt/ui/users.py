@@ -1,0 +1,228 @@
+"""The users file: who may log in to the operator UI (``feeder users``).
+
+The thesis's GUI sent and kept passwords in plain text. Here a password is never stored:
+each user has a random salt and an scrypt hash (memory-hard, ~50 ms to check), so a stolen
+file costs an attacker that much per guess per user. The file is JSON, written atomically
+with mode 0600; it is re-read when it changes, so ``feeder users add/remove`` takes effect
+on a running UI (a removed user's sessions end at their next request).
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import hashlib
+import hmac
+import json
+import os
+import re
+import secrets
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from ..errors import FeederError
+
+FORMAT = "feeder_bt users 1"
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,31}")
+MIN_PASSWORD = 8
+MAX_PASSWORD = 1024            # scrypt of a megabyte "password" is a cheap denial of service
+
+# scrypt cost: n=2**14, r=8 is 16 MiB and about 50 ms per check on one core.
+SCRYPT_N, SCRYPT_R, SCRYPT_P, SCRYPT_DKLEN, SALT_BYTES = 2 ** 14, 8, 1, 32, 16
+
+
+class UsersError(FeederError):
+    """A bad user name, password or users file: a usage mistake (exit 2)."""
+
+    exit_code = 2
+
+
+def default_path() -> Path:
+    """``$XDG_CONFIG_HOME/feeder_bt/users.json`` (``~/.config/...``): outside any work tree,
+    so the file is not committed or copied with a project by accident."""
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / "feeder_bt" / "users.json"
+
+
+def check_name(name: str) -> str:
+    """A user name: 1-32 letters, digits, ``_ . -``, starting with a letter or digit."""
+    if not NAME_RE.fullmatch(name):
+        raise UsersError(f"bad user name {name!r}: use 1-32 letters, digits, '_', '.' or '-', "
+                         "starting with a letter or digit")
+    return name
+
+
+def check_password(password: str) -> str:
+    if len(password) < MIN_PASSWORD:
+        raise UsersError(f"password too short: at least {MIN_PASSWORD} characters")
+    if len(password) > MAX_PASSWORD:
+        raise UsersError(f"password too long: at most {MAX_PASSWORD} characters")
+    return password
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
+def hash_password(password: str, *, n: int = SCRYPT_N, r: int = SCRYPT_R, p: int = SCRYPT_P,
+                  salt: bytes | None = None) -> str:
+    """``scrypt$N$r$p$SALT$HASH`` (base64): the parameters travel with the hash, so the
+    cost can be raised later without invalidating existing users."""
+    salt = secrets.token_bytes(SALT_BYTES) if salt is None else salt
+    digest = hashlib.scrypt(password.encode("utf-8"), salt=salt, n=n, r=r, p=p,
+                            dklen=SCRYPT_DKLEN, maxmem=256 * n * r + (1 << 20))
+    return f"scrypt${n}${r}${p}${_b64(salt)}${_b64(digest)}"
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """True if ``password`` matches ``stored``; a malformed or weak entry never matches."""
+    try:
+        scheme, n_s, r_s, p_s, salt_s, digest_s = stored.split("$")
+        n, r, p = int(n_s), int(r_s), int(p_s)
+        salt, digest = base64.b64decode(salt_s, validate=True), base64.b64decode(digest_s,
+                                                                                   validate=True)
+    except (ValueError, TypeError):
+        return False
+    if scheme != "scrypt" or n < 2 ** 10 or n > 2 ** 20 or not 1 <= r <= 32 or not 1 <= p <= 16:
+        return False
+    if len(password) > MAX_PASSWORD:
+        return False
+    try:
+        got = hashlib.scrypt(password.encode("utf-8"), salt=salt, n=n, r=r, p=p,
+                             dklen=len(digest), maxmem=256 * n * r + (1 << 20))
+    except (ValueError, MemoryError):
+        return False
+    return hmac.compare_digest(got, digest)
+
+
+_DUMMY: str | None = None
+
+
+def _dummy_hash() -> str:
+    """A hash to check unknown names against, so that a wrong name takes as long as a
+    wrong password (no user enumeration by timing)."""
+    global _DUMMY
+    if _DUMMY is None:
+        _DUMMY = hash_password(secrets.token_urlsafe(16))
+    return _DUMMY
+
+
+class UsersFile:
+    """The users file on disk; ``load()`` caches until the file changes."""
+
+    def __init__(self, path: str | Path | None = None) -> None:
+        self.path = Path(path).expanduser() if path else default_path()
+        self._users: dict[str, dict[str, Any]] = {}
+        self._stamp: tuple[int, int] | None = None
+        self._warned: str | None = None
+
+    # ------------------------------------------------------------------ reading
+    def _read(self) -> dict[str, dict[str, Any]]:
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return {}
+        except OSError as e:
+            raise UsersError(f"{self.path}: cannot read the users file: {e.strerror}") from None
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise UsersError(f"{self.path}:{e.lineno}: not a feeder users file "
+                             f"(bad JSON: {e.msg})") from None
+        if not isinstance(doc, dict) or doc.get("format") != FORMAT \
+                or not isinstance(doc.get("users"), dict):
+            raise UsersError(f"{self.path}: not a feeder users file (expected "
+                             f"\"format\": \"{FORMAT}\" and a \"users\" object)")
+        users = doc["users"]
+        for name, entry in users.items():
+            if not NAME_RE.fullmatch(name) or not isinstance(entry, dict) \
+                    or not str(entry.get("hash", "")).startswith("scrypt$"):
+                raise UsersError(f"{self.path}: users.{name}: not a user entry with an "
+                                 "scrypt hash")
+        return users
+
+    def load(self) -> dict[str, dict[str, Any]]:
+        """The users, re-read only when the file's size or modification time changed."""
+        try:
+            st = self.path.stat()
+            stamp: tuple[int, int] | None = (st.st_mtime_ns, st.st_size)
+        except FileNotFoundError:
+            stamp = None
+        except OSError as e:
+            raise UsersError(f"{self.path}: cannot read the users file: {e.strerror}") from None
+        if stamp != self._stamp or stamp is None:
+            self._users = self._read()
+            self._stamp = stamp
+        return self._users
+
+    def load_or_empty(self) -> dict[str, dict[str, Any]]:
+        """For the running server: a damaged file locks everyone out (fails closed) with
+        one warning, instead of stopping the cell."""
+        try:
+            users = self.load()
+        except UsersError as e:
+            if self._warned != str(e):
+                print(f"feeder: operator UI: {e}; nobody can log in until it is fixed",
+                      file=sys.stderr)
+                self._warned = str(e)
+            self._users, self._stamp = {}, None
+            return {}
+        self._warned = None
+        return users
+
+    def names(self) -> list[str]:
+        return sorted(self.load())
+
+    def exists(self, name: str) -> bool:
+        return name in self.load_or_empty()
+
+    def verify(self, name: str, password: str) -> bool:
+        """Check a login; slow on purpose (scrypt), and as slow for an unknown name."""
+        entry = self.load_or_empty().get(name)
+        if entry is None:
+            verify_password(password, _dummy_hash())
+            return False
+        return verify_password(password, str(entry["hash"]))
+
+    # ------------------------------------------------------------------ writing
+    def add(self, name: str, password: str, replace: bool = False) -> None:
+        check_name(name)
+        check_password(password)
+        users = dict(self.load())
+        if name in users and not replace:
+            raise UsersError(f"user {name!r} already exists in {self.path} (use --replace to "
+                             "set a new password)")
+        users[name] = {"hash": hash_password(password),
+                       "added": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")}
+        self._write(users)
+
+    def remove(self, name: str) -> None:
+        users = dict(self.load())
+        if name not in users:
+            raise UsersError(f"no user {name!r} in {self.path}")
+        del users[name]
+        self._write(users)
+
+    def _write(self, users: dict[str, dict[str, Any]]) -> None:
+        """Atomic replace with mode 0600: a reader sees the old file or the new one."""
+        doc = {"format": FORMAT, "users": dict(sorted(users.items()))}
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+            fd, tmp = tempfile.mkstemp(prefix=".users-", dir=self.path.parent)
+            try:
+                os.fchmod(fd, 0o600)
+                with os.fdopen(fd, "w", encoding="utf-8") as f:
+                    json.dump(doc, f, indent=2)
+                    f.write("\n")
+                    f.flush()
+                    os.fsync(f.fileno())
+                os.replace(tmp, self.path)
+            except BaseException:
+                Path(tmp).unlink(missing_ok=True)
+                raise
+        except OSError as e:
+            raise UsersError(f"{self.path}: cannot write the users file: {e.strerror}") from None
+        self._stamp = None
+        self.load()

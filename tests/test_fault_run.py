@@ -1,0 +1,62 @@
+"""A fast run with every kind of fault injected (``feeder run --faults``): each fault is
+counted, recovered or reported as a FAULT, and no part is lost."""
+
+from __future__ import annotations
+
+import json
+
+from feeder_bt.cli import main
+from feeder_bt.run import RunOptions, run_job
+
+PLAN = """\
+seed: 5
+rates:
+  servo_timeout: {per_pick: 0.01}
+  comms_lost: {per_hour: 8, device: alternate, outage_s: 2.0}
+  grab_failed: {per_frame: 0.004}
+scripted:
+  - {at_s: 1200, kind: conveyor_jam}
+  - {at_s: 500, kind: estop, release_after_s: 20}
+  - {at_s: 900, kind: comms_lost, device: camera, outage_s: 1.0}
+"""
+
+
+def test_every_injected_fault_is_counted_and_recovered(tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(PLAN)
+    r = run_job(RunOptions(scenario="scenarios/lenses.yaml", duration=1800.0, fast=True,
+                           seed=4, view="none", faults=str(plan)))
+    assert r["state"] == "STOPPED", r["fault"]
+    assert r["parts"]["lost"] == 0
+    injected, faults, recovered = r["injected"], r["faults"], r["recoveries"]
+    for kind in ("servo_timeout", "comms_lost", "grab_failed", "estop"):
+        assert injected.get(kind, 0) >= 1, (kind, injected)
+    # each injected fault was met by a branch (a link drop may strike two branches) ...
+    for kind in ("servo_timeout", "comms_lost", "grab_failed", "estop"):
+        assert faults.get(kind, 0) >= injected[kind], (kind, faults, injected)
+    # ... and every fault the trees met was recovered: none ended in FAULT
+    for kind in ("servo_timeout", "comms_lost", "grab_failed", "estop"):
+        assert recovered.get(kind, 0) == faults[kind], (kind, faults, recovered)
+    assert recovered.get("conveyor", 0) == faults.get("conveyor", 0) == injected.get(
+        "conveyor_jam", 0)
+    assert r["parts_per_minute"] > 55
+
+
+def test_a_bad_plan_is_one_line_and_exit_2(tmp_path, capsys):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("rates:\n  servo_timeout: {per_frame: 0.1}\n")
+    code = main(["run", "scenarios/lenses.yaml", "--fast", "--duration", "10", "--no-db",
+                 "--faults", str(plan)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "plan.yaml:2" in err[0]
+
+
+def test_report_names_the_plan(tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("rates:\n  grab_failed: {per_frame: 0.05}\n")
+    out = tmp_path / "r.json"
+    assert main(["run", "scenarios/lenses.yaml", "--fast", "--duration", "120", "--no-db",
+                 "--view", "none", "--faults", str(plan), "--report", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["fault_plan"].endswith("plan.yaml")
+    assert r["injected"]["grab_failed"] >= 1
