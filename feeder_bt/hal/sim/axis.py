@@ -142,15 +142,18 @@ def _first_reach(seg: Segment, p: float, lo: float) -> float | None:
     """Earliest t >= lo with seg.pos(t) = p, on an upward crossing."""
     # p0 + v0 dt + a/2 dt^2 = p, dt measured from seg.t0
     a, b, c = 0.5 * seg.a, seg.v0, seg.p0 - p
+    if abs(a) < 1e-12:          # the usual case (a belt at speed): one root, no list
+        if abs(b) <= 1e-12:
+            return None
+        t = seg.t0 + -c / b
+        if t >= lo - 1e-12 and seg.v0 + seg.a * (t - seg.t0) >= -1e-9:
+            return t
+        return None
     roots: list[float] = []
-    if abs(a) < 1e-12:
-        if abs(b) > 1e-12:
-            roots.append(-c / b)
-    else:
-        disc = b * b - 4 * a * c
-        if disc >= 0:
-            r = math.sqrt(disc)
-            roots.extend(((-b - r) / (2 * a), (-b + r) / (2 * a)))
+    disc = b * b - 4 * a * c
+    if disc >= 0:
+        r = math.sqrt(disc)
+        roots.extend(((-b - r) / (2 * a), (-b + r) / (2 * a)))
     best = None
     for dt in roots:
         t = seg.t0 + dt

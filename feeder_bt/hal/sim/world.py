@@ -93,6 +93,7 @@ class World:
         order = [t for t, n in scenario.hopper.items() for _ in range(n)]
         self.rng.shuffle(order)
         self._outlines: dict[tuple[str, str], np.ndarray] = {}
+        self._poses: dict[str, tuple[list[str], np.ndarray]] = {}
         for ptype in order:
             pid = next(ids)
             self.parts[pid] = SimPart(pid, str(ptype))
@@ -204,9 +205,9 @@ class World:
         part = self.parts[pid]
         part.where, part.p_release = "incline", self.next_release
         spec = self.scenario.parts[part.type]
-        names = list(spec.poses)
-        probs = np.array([spec.poses[n].probability for n in names])
-        part.pose = names[int(self.rng.choice(len(names), p=probs / probs.sum()))]
+        names, cdf = self._pose_table(part.type)
+        # what rng.choice(len(names), p=...) does, draw for draw, without its checks
+        part.pose = names[int(cdf.searchsorted(self.rng.random(), side="right"))]
         part.pickable = spec.poses[part.pose].pickable
         part.angle = float(self.rng.uniform(-180.0, 180.0))
         part.y = float(self.rng.uniform(EDGE_MARGIN_MM, self.h_width - EDGE_MARGIN_MM))
@@ -214,6 +215,22 @@ class World:
         self.on_incline.append(pid)
         self.counts["released"] += 1
         self.next_release = self._draw_gap(self.next_release) if self.hopper else math.inf
+
+    def _pose_table(self, ptype: str) -> tuple[list[str], np.ndarray]:
+        """A part type's poses and the cumulative distribution ``rng.choice`` would build
+        from their probabilities (the same arithmetic), made once."""
+        table = self._poses.get(ptype)
+        if table is None:
+            spec = self.scenario.parts[ptype]
+            names = list(spec.poses)
+            probs = np.array([spec.poses[n].probability for n in names])
+            p = probs / probs.sum()
+            if not (np.all(p >= 0) and np.isfinite(p).all()):
+                raise ValueError(f"part {ptype}: pose probabilities must be >= 0")
+            cdf = p.cumsum()
+            cdf /= cdf[-1]
+            table = self._poses[ptype] = (names, cdf)
+        return table
 
     def _land(self, t: float) -> None:
         pid = self.on_incline.popleft()
@@ -223,7 +240,13 @@ class World:
         land_x = part.x0
         part.x0 = land_x - self.horizontal.pos(t)
         part.where = "horizontal"
+        belt = self.horizontal.pos(t)
+        ax, ay = part.x0 + belt, part.y             # part_xy(part, t)
         for other in self.on_horizontal.values():
+            # _touch's own first test, here without a call per part on the belt
+            if math.hypot(ax - (other.x0 + belt), ay - other.y) > \
+                    part.radius + other.radius + TOUCH_GAP_MM:
+                continue
             if self._touch(part, other, t):
                 part.touching.add(other.id)
                 other.touching.add(part.id)
