@@ -125,7 +125,7 @@ def test_position_cache_follows_the_belt_and_the_robot(rig):
     for _ in range(1000):                             # reads come from the cache
         pos.belt_encoder()
         pos.pose()
-    assert time.monotonic() - t0 < 0.05
+    assert time.monotonic() - t0 < 0.5                # no socket round trip per read
 
 
 def test_motion_commands_and_position_mid_motion(rig):
@@ -134,7 +134,7 @@ def test_motion_commands_and_position_mid_motion(rig):
     assert wait_job(robot.set_speed(50)).ok
     t0 = time.monotonic()
     job = robot.move_to(Pose(900.0, 400.0, 0.0, 30.0))
-    assert time.monotonic() - t0 < 0.05              # returns at once
+    assert not job.done and time.monotonic() - t0 < 0.5   # returns at once, still moving
     counts = set()
     while not job.done:                               # the position socket answers meanwhile
         counts.add(pos.belt_encoder())

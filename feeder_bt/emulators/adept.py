@@ -118,13 +118,7 @@ class AdeptEmulator:
         self._stop.set()
         for lsock in self._listeners.values():
             lsock.close()
-        with self._lock:
-            conns = list(self._conns)
-        for conn in conns:
-            try:
-                conn.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
+        self.drop_clients()
         for t in self._threads:
             t.join(timeout=3.0)
         self._threads.clear()

@@ -331,6 +331,31 @@ class _Wrapper:
         return getattr(self._inner, name)
 
 
+class _Tracking(_Wrapper):
+    """A wrapper that remembers its jobs in flight, so a fault can end them."""
+
+    def __init__(self, inner: Any, inj: FaultInjector) -> None:
+        super().__init__(inner, inj)
+        self._jobs: list[Job] = []
+
+    def _track(self, job: Job) -> Job:
+        if not job.done:
+            self._jobs.append(job)
+            job.add_done_callback(self._untrack)
+        return job
+
+    def _untrack(self, job: Job) -> None:
+        if job in self._jobs:
+            self._jobs.remove(job)
+
+    def _fail_jobs(self, err: HalError, which: Callable[[Job], bool] = lambda job: True
+                   ) -> bool:
+        jobs = [j for j in self._jobs if which(j) and not j.done]
+        for job in jobs:
+            _fail_timed(self._inj.world, job, err)
+        return bool(jobs)
+
+
 class FaultyRobot(_Wrapper):
     """The robot with arm power and the Adept link: motions fail at once while either is
     off; ``recover()`` turns the power back on."""
@@ -396,7 +421,7 @@ class FaultyRobotPosition(_Wrapper):
         return self._frozen[1]
 
 
-class FaultyConveyor(_Wrapper):
+class FaultyConveyor(_Tracking):
     """A conveyor on the Galil link, which may stall (``fault()``) until the next motion
     command. While the link is down, commands fail at once and reads return the last
     values; the belt itself goes on as it was commanded."""
@@ -405,18 +430,7 @@ class FaultyConveyor(_Wrapper):
         super().__init__(inner, inj)
         self.name: str = inner.name
         self.jam: HalError | None = None
-        self._jobs: list[Job] = []
         self._frozen: tuple[float, int] | None = None
-
-    def _track(self, job: Job) -> Job:
-        if not job.done:
-            self._jobs.append(job)
-            job.add_done_callback(self._untrack)
-        return job
-
-    def _untrack(self, job: Job) -> None:
-        if job in self._jobs:
-            self._jobs.remove(job)
 
     def _motion(self, method: str, *args: Any) -> Job:
         refused = self._inj.refused("galil", f"{self.name}.{method}")
@@ -466,7 +480,7 @@ class FaultyConveyor(_Wrapper):
         """The link dropped at ``t``: remember the reads, fail the jobs in flight (the
         belt's motion itself is not touched). True if any job failed."""
         self._frozen = (self._inner.speed(), self._inj.world.galil_count(t))
-        return self._fail_jobs(err, lambda job: True)
+        return self._fail_jobs(err)
 
     def jammed(self, err: HalError) -> bool:
         """The belt stalled: ``fault()`` reports it, motions in flight end with it (their
@@ -474,19 +488,9 @@ class FaultyConveyor(_Wrapper):
         self.jam = err
         return self._fail_jobs(err, lambda job: isinstance(job, TimedJob))
 
-    def _fail_jobs(self, err: HalError, which: Callable[[Job], bool]) -> bool:
-        jobs = [j for j in self._jobs if which(j) and not j.done]
-        for job in jobs:
-            _fail_timed(self._inj.world, job, err)
-        return bool(jobs)
 
-
-class FaultyCamera(_Wrapper):
+class FaultyCamera(_Tracking):
     """The camera on its own link; a grab may come back with no image (``GrabFailed``)."""
-
-    def __init__(self, inner: Any, inj: FaultInjector) -> None:
-        super().__init__(inner, inj)
-        self._jobs: list[Job] = []
 
     def grab(self) -> Job:
         inj = self._inj
@@ -505,24 +509,13 @@ class FaultyCamera(_Wrapper):
                 job.fail(GrabFailed("camera: no image (grab failed)"))
 
             return job.at(w.now() + w.cell.camera.grab_s, fail)
-        job = self._inner.grab()
-        if not job.done:
-            self._jobs.append(job)
-            job.add_done_callback(self._untrack)
-        return job
-
-    def _untrack(self, job: Job) -> None:
-        if job in self._jobs:
-            self._jobs.remove(job)
+        return self._track(self._inner.grab())
 
     def set_exposure(self, ms: float) -> Job:
         return self._inj.refused("camera", "camera.set_exposure") or self._inner.set_exposure(ms)
 
     def fail_in_flight(self, err: HalError) -> bool:
-        jobs = [j for j in self._jobs if not j.done]
-        for job in jobs:
-            job.fail(err)
-        return bool(jobs)
+        return self._fail_jobs(err)
 
 
 class FaultyIO(_Wrapper):
