@@ -2,7 +2,7 @@
 
     python benchmarks/throughput_bench.py [--duration 3600] [--seeds 5] [--workers 2]
         [--scenarios lenses squares] [--adjusters water_marks supply_queue]
-        [--policies fifo shortest_cycle] [--original] [--out PATH]
+        [--policies fifo lookahead] [--extra none:fifo] [--original] [--out PATH]
 
 Only ``adjust`` and ``retrieve.policy`` differ between the runs of one scenario: the cell,
 the vision, the seeds and the simulator are the same. ``--original`` adds the original
@@ -31,11 +31,13 @@ from feeder_bt.run import RunOptions, run_job  # noqa: E402
 ADJUST_SECTIONS: dict[str, str | None] = {
     "scenario": None,
     "none": "adjust:\n  algorithm: none\n",
+    "queue_proportional": ("adjust:\n  algorithm: queue_proportional\n  period_s: 0.5\n"),
     "water_marks": ("adjust:\n  algorithm: water_marks\n  period_s: 0.5\n  params: {high: 100, "
                     "low: 50, gain: 0.10, step: 5, min_mm_s: 80, max_mm_s: 200, "
                     "median_mm_s: 150}\n"),
     "supply_queue": ("adjust:\n  algorithm: supply_queue\n  period_s: 0.5\n  params: "
-                     "{target_queue: 12, horizontal_mm_s: 250, max_incline_pct: 150}\n"),
+                     "{target_queue: 24, horizontal_mm_s: 250, max_incline_pct: 200, "
+                     "max_mm_s: 400}\n"),
 }
 
 
@@ -84,14 +86,36 @@ def summarise(rows: list[dict]) -> list[dict]:
     return out
 
 
+def targets(summary: list[dict]) -> dict[str, dict]:
+    """Issue 5's checks per scenario: the best adjuster + policy against the water-mark
+    adjuster with the thesis's FIFO order, and against the robot bound."""
+    out: dict[str, dict] = {}
+    for scen in sorted({row["scenario"] for row in summary}):
+        rows = [r for r in summary if r["scenario"] == scen]
+        best = max(rows, key=lambda r: r["ppm_mean"])
+        entry = {"best": f"{best['adjuster']} + {best['policy']}",
+                 "best_ppm": best["ppm_mean"],
+                 "of_robot_bound": round(best["ppm_mean"] / best["robot_bound_ppm"], 3)}
+        wm = [r for r in rows if r["adjuster"] == "water_marks" and r["policy"] == "fifo"]
+        if wm:
+            entry["water_marks_fifo_ppm"] = wm[0]["ppm_mean"]
+            entry["vs_water_marks"] = round(best["ppm_mean"] / wm[0]["ppm_mean"], 3)
+        out[scen] = entry
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=3600.0)
     ap.add_argument("--seeds", type=int, default=5, help="seeds 1..N")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenarios", nargs="*", default=["lenses", "squares"])
-    ap.add_argument("--adjusters", nargs="*", default=["water_marks", "supply_queue"])
-    ap.add_argument("--policies", nargs="*", default=["fifo", "shortest_cycle"])
+    ap.add_argument("--adjusters", nargs="*",
+                    default=["none", "queue_proportional", "water_marks", "supply_queue"])
+    ap.add_argument("--policies", nargs="*",
+                    default=["fifo", "earliest_deadline", "shortest_cycle", "lookahead"])
+    ap.add_argument("--extra", nargs="*", default=[], metavar="ADJUSTER:POLICY",
+                    help="single pairs added to the grid, e.g. none:fifo")
     ap.add_argument("--original", action="store_true", help="add the original CWRU feeder")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "throughput.json"))
     args = ap.parse_args(argv)
@@ -100,7 +124,10 @@ def main(argv: list[str] | None = None) -> dict:
         jobs = []
         for name in args.scenarios:
             src = ROOT / "scenarios" / f"{name}.yaml"
-            for adj, pol in itertools.product(args.adjusters, args.policies):
+            pairs = list(itertools.product(args.adjusters, args.policies))
+            pairs += [tuple(p.split(":", 1)) for p in args.extra
+                      if tuple(p.split(":", 1)) not in pairs]
+            for adj, pol in pairs:
                 path = str(variant(src, adj, pol, tmp))
                 jobs += [(path, name, adj, pol, s, args.duration)
                          for s in range(1, args.seeds + 1)]
@@ -118,6 +145,7 @@ def main(argv: list[str] | None = None) -> dict:
     rows.sort(key=lambda r: (r["scenario"], r["adjuster"], r["policy"], r["seed"]))
     result = {"machine": platform.platform(), "python": platform.python_version(),
               "duration_s": args.duration, "seeds": args.seeds, "summary": summarise(rows),
+              "targets": targets(summarise(rows)),
               "runs": rows}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(result, indent=2) + "\n")

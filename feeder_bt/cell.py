@@ -81,7 +81,11 @@ class Cell:
             raise CellCommandError("no scenario loaded")
         if self.estop_pressed():
             raise CellCommandError("the e-stop is pressed: release it first")
+        held = py_trees.blackboard.Blackboard.storage.get("/retrieve/part")
         self.ctx = self._make_ctx(self.scenario)
+        if held is not None and held.type in self.scenario.parts and self.hal.robot.holding():
+            # stopped (an e-stop) between pick and place: the new run places it first
+            py_trees.blackboard.Blackboard.storage["/retrieve/part"] = held
         if self.stats.started_at is None:
             self.stats.started_at = self.clock.now()
         self.feeding = build_feeding(self.ctx)

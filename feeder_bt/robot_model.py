@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .scenario.model import RobotSpec
 
 
@@ -32,6 +34,16 @@ class RobotModel:
         sp = self.spec
         return trapezoid_time(d_xy + sp.approach_mm, sp.v_max_mm_s * s, sp.a_max_mm_s2 * s * s)
 
+    def arch_times(self, d_xy: np.ndarray, speed_pct: float) -> np.ndarray:
+        """``arch_time`` for many moves at once (a pick policy prices a whole queue)."""
+        s = max(speed_pct, 1e-3) / 100.0
+        sp = self.spec
+        v, a = sp.v_max_mm_s * s, sp.a_max_mm_s2 * s * s
+        d = np.abs(d_xy) + sp.approach_mm
+        ramp = v * v / a
+        short = 2.0 * np.sqrt(d / a)
+        return np.where(d <= ramp, short, 2.0 * v / a + (d - ramp) / v)
+
     def standard_cycle(self, speed_pct: float = 100.0) -> float:
         """The 25/305/25 mm cycle, there and back."""
         return 2 * self.arch_time(305.0, speed_pct)
@@ -40,6 +52,12 @@ class RobotModel:
         bx, by = self.spec.base_mm
         r = math.hypot(x - bx, y - by)
         return self.spec.inner_reach_mm <= r <= self.spec.reach_mm
+
+    def reachable_mask(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """``reachable`` for many points at once."""
+        bx, by = self.spec.base_mm
+        r = np.hypot(x - bx, y - by)
+        return (r >= self.spec.inner_reach_mm) & (r <= self.spec.reach_mm)
 
     def pick_place_time(self, start: tuple[float, float], pick: tuple[float, float],
                         place: tuple[float, float], speed_pct: float,

@@ -2,8 +2,8 @@
 tick's time, ticks the cell's tree, records how long the tick took.
 
 On a virtual clock with ``fast``, ticks in which nothing can change are skipped: when two
-ticks in a row leave every node's status, the queue, the statistics and the finished-job
-count unchanged, the clock jumps to the next time something is known to happen (a job's
+ticks in a row leave every node's status, the queue, the statistics, the finished-job
+count and the count of branch cycles unchanged, the clock jumps to the next time something is known to happen (a job's
 end, a belt-distance notification, a timer), rounded up to the tick grid. The ticks that
 run see exactly what they would have seen without skipping, so results are the same.
 """
@@ -21,6 +21,7 @@ import numpy as np
 from .cell import Cell
 from .clock import EPS, SimClock
 from .jobs import Job
+from .trees.build import Loop
 
 _STATUS = operator.attrgetter("status")
 
@@ -63,7 +64,7 @@ class Ticker:
     def _signature(self) -> tuple:
         c = self.cell
         q = c.ctx.queue.version if c.ctx is not None else 0
-        return (Job.finished_total, q, c.stats.version, c.version, c.state,
+        return (Job.finished_total, Loop.restarts, q, c.stats.version, c.version, c.state,
                 tuple(map(_STATUS, self._nodes())))
 
     def _nodes(self) -> list:

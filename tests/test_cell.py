@@ -264,3 +264,25 @@ def test_cleanup_failure_ends_in_fault(rig):
         rig.tick(int(4.2 / DT))
     assert rig.cell.state is CellState.FAULT
     assert rig.cell.fault_reason.startswith("clean-up failed")
+
+
+def test_cleanup_runs_the_recovery_program_when_power_is_off(rig):
+    """A stop between a servo time-out and its recovery: the move to safe is refused with
+    power off, so clean-up runs the recovery program first, then moves, and stops."""
+    rig.start()
+    rig.cell.stop()
+    since = len(rig.hal.jobs)
+    rig.tick()
+    pending(rig.hal, "horizontal", "stop").succeed()
+    pending(rig.hal, "incline", "stop").succeed()
+    rig.tick()
+    pending(rig.hal, "io", "set").succeed()
+    rig.tick()
+    fail(rig.hal, "robot", "move_safe", ServoTimeout("robot power is off"))
+    rig.tick()
+    pending(rig.hal, "robot", "recover").succeed()
+    rig.tick()
+    pending(rig.hal, "robot", "move_safe").succeed()
+    rig.drive_until(CellState.STOPPED, max_s=1.0)
+    assert [m for m in rig.hal.methods()[since:] if m.startswith("robot.")] == [
+        "robot.move_safe", "robot.recover", "robot.move_safe"]

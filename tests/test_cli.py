@@ -62,7 +62,7 @@ def test_missing_file_and_bad_arguments(tmp_path):
 
 def test_check_reports_every_bad_file(tmp_path, capsys):
     good = "scenarios/lenses.yaml"
-    bad = bad_scenario(tmp_path, "tick_hz: 50", "tick_hz: 2")
+    bad = bad_scenario(tmp_path, "tick_hz: 200", "tick_hz: 2")
     assert main(["check", good, str(bad)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "tick_hz" in err[0]

@@ -152,3 +152,41 @@ def test_estop_while_stopped_blocks_start():
         rig.cell.start()
     assert rig.cell.state is CellState.STOPPED
     assert rig.hal.calls == []
+
+
+def test_a_part_held_through_an_estop_is_placed_first_after_the_restart():
+    rig = Rig()
+    rig.start()
+    held = part(1000.0, 100.0)
+    rig.cell.ctx.queue.put(held)
+    rig.tick(2)
+    finish(rig.hal, "robot", "pick")
+    rig.hal.robot.held = True                  # gripped; the place is under way
+    rig.tick()
+    assert pending(rig.hal, "robot", "place")
+    rig.hal.io.values["estop"] = True
+    rig.tick()
+    assert rig.cell.state is CellState.FAULT
+    rig.hal.io.values["estop"] = False
+    rig.cell.reset()
+    rig.start()
+    n = len(rig.hal.calls)
+    rig.cell.ctx.queue.put(part(1000.0, 300.0))
+    rig.tick()
+    moves = [m for m in rig.hal.methods()[n:] if m.startswith("robot.") and "speed" not in m]
+    assert moves == ["robot.place"]
+    rig.hal.robot.held = False
+    finish(rig.hal, "robot", "place")
+    rig.tick()
+    assert rig.cell.stats.retrieved["lens"] == 1          # the held part, counted once
+    assert pending(rig.hal, "robot", "pick")               # then feeding goes on
+
+
+def test_a_part_the_run_did_not_pick_goes_to_the_operator():
+    ctx = make_ctx()
+    ctx.hal.robot.held = True                  # e.g. put in the gripper by hand
+    root = retrieve.build(ctx)
+    ctx.queue.put(part(1000.0, 100.0))
+    tick(root, ctx)
+    assert "did not pick" in bb_get("/faults/escalate")
+    assert not ctx.hal.pending("robot", "pick")

@@ -11,7 +11,7 @@ from treeutil import make_ctx, part, pending, tick
 
 from feeder_bt.adjusters import AdjusterParamError, AdjustInputs, make_adjuster
 from feeder_bt.behaviours.locate import QueueEmpty
-from feeder_bt.behaviours.retrieve import POLICIES, ShortestCycle
+from feeder_bt.behaviours.policies import POLICIES, ShortestCycle
 from feeder_bt.hal.interfaces import Pose
 from feeder_bt.hal.sim import devices
 from feeder_bt.run import RunOptions, run_job

@@ -3,103 +3,14 @@ belt), place it, count it."""
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
-
 from py_trees.common import Status
 
 from ..encoder import diff
 from ..hal.interfaces import PickTarget, Pose
 from ..jobs import Job
 from ..parts import Part
-from ..robot_model import RobotModel
 from .common import Ctx, JobLeaf, Leaf, client
-
-
-class Policy:
-    """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
-
-    A policy that needs more reads the robot's pose through ``ctx``; ``NextPart`` keeps
-    ``belt_mm_s`` (the horizontal speed on the blackboard) current before each choice."""
-
-    name = "fifo"
-
-    def __init__(self, ctx: Ctx | None = None) -> None:
-        self.ctx = ctx
-        self.belt_mm_s = 0.0
-
-    def choose(self, parts: list[Part], x_now: Callable[[Part], float]) -> Part | None:
-        return parts[0] if parts else None
-
-
-class Fifo(Policy):
-    name = "fifo"
-
-
-class EarliestDeadline(Policy):
-    """The part that leaves the pick window first: the one furthest down the belt."""
-
-    name = "earliest_deadline"
-
-    def choose(self, parts: list[Part], x_now: Callable[[Part], float]) -> Part | None:
-        return max(parts, key=x_now, default=None)
-
-
-class ShortestCycle(Policy):
-    """Thesis 8.2.3 / Figure 8-5, "does location matter": the part whose pick-and-place
-    from the robot's current pose takes least time, by the robot model.
-
-    The intercept is predicted from the belt speed (tracking), a part still upstream of the
-    reach costs its wait, and a part that would pass ``too_far`` before the grip is skipped.
-    When parts arrive faster than the robot can take them, taking the cheap ones first
-    turns the surplus into shorter cycles instead of longer queues."""
-
-    name = "shortest_cycle"
-
-    def __init__(self, ctx: Ctx | None = None) -> None:
-        super().__init__(ctx)
-        self.model = RobotModel(ctx.cell.robot) if ctx is not None else None
-
-    def cost(self, part: Part, x_now: Callable[[Part], float], speed_mm_s: float) -> float:
-        """Seconds from now to the part's release at its place pose (inf: not feasible)."""
-        assert self.ctx is not None and self.model is not None
-        r, sp = self.ctx.scenario.retrieve, self.ctx.cell.robot
-        spec = self.ctx.scenario.parts[part.type]
-        pose = self.ctx.hal.robot_position.pose()
-        pct = r.robot_speed_pct
-        v = speed_mm_s if r.tracking else 0.0
-        ox, oy, _ = spec.tool_offset
-        x0, y = x_now(part) + ox, part.y_mm + oy
-        t = 0.0
-        for _ in range(4):                     # intercept on the moving belt
-            t = self.model.arch_time(math.dist((pose.x, pose.y), (x0 + v * t, y)), pct)
-        if not self.model.reachable(x0 + v * t, y):
-            bx, by = sp.base_mm
-            if v <= 0 or abs(y - by) >= sp.reach_mm:
-                return math.inf
-            x_enter = bx - math.sqrt(sp.reach_mm ** 2 - (y - by) ** 2) + 1.0
-            if x0 + v * t > x_enter:
-                return math.inf                # already through the reach
-            t = (x_enter - x0) / v
-        t_grip = t + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
-        x_grip = x0 + v * t_grip
-        if x_grip - ox > r.too_far_mm or not self.model.reachable(x_grip, y):
-            return math.inf
-        place = (spec.place.x, spec.place.y)
-        return t_grip + self.model.arch_time(math.dist((x_grip, y), place), pct) + sp.release_s
-
-    def choose(self, parts: list[Part], x_now: Callable[[Part], float]) -> Part | None:
-        if not parts:
-            return None
-        if self.ctx is None:
-            return parts[0]
-        costs = [(self.cost(p, x_now, self.belt_mm_s), i) for i, p in enumerate(parts)]
-        best, i = min(costs)
-        return parts[i] if math.isfinite(best) else max(parts, key=x_now)
-
-
-POLICIES: dict[str, type[Policy]] = {"fifo": Fifo, "earliest_deadline": EarliestDeadline,
-                                     "shortest_cycle": ShortestCycle}
+from .policies import POLICIES
 
 
 class NextPart(Leaf):
@@ -126,7 +37,7 @@ class NextPart(Leaf):
             self.feedback_message = "waiting for a part"
             return Status.RUNNING
         self.policy.belt_mm_s = float(self.bb.get("/speeds/horizontal_mm_s"))
-        lead = self.policy.belt_mm_s * r.reach_time_s if r.tracking else 0.0
+        lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:
             self.ctx.stats.count("too_far", len(gone))
@@ -203,6 +114,17 @@ class Holding(Leaf):
 
     def update(self) -> Status:
         return Status.SUCCESS if self.ctx.hal.robot.holding() else Status.FAILURE
+
+
+class HeldPartKnown(Leaf):
+    """Condition: the part in the gripper is the one this run chose (``/retrieve/part``)."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/retrieve/part",))
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.bb.get("/retrieve/part") is not None else Status.FAILURE
 
 
 class Recover(JobLeaf):

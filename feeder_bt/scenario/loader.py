@@ -80,7 +80,8 @@ __all__ = [
 # ============================================================================ allowed values
 
 PRESENT_MODES: tuple[str, ...] = ("continuous", "incremental")
-RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline", "shortest_cycle")
+RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline", "shortest_cycle",
+                                      "lookahead")
 THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")

@@ -116,7 +116,7 @@ class LocateParams:
 
 @dataclass
 class RetrieveParams:
-    policy: str = "fifo"                 # fifo | earliest_deadline
+    policy: str = "fifo"                 # fifo | earliest_deadline | shortest_cycle | lookahead
     robot_speed_pct: float = 100.0
     tracking: bool = True
     too_far_mm: float = 1190.0

@@ -11,10 +11,12 @@ from __future__ import annotations
 import py_trees
 from py_trees.behaviours import Success
 from py_trees.composites import Selector, Sequence
+from py_trees.decorators import Inverter
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
 from ..behaviours.retrieve import (
     FollowRobotSpeed,
+    HeldPartKnown,
     Holding,
     MoveSafe,
     NextPart,
@@ -37,6 +39,15 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     pick = load_class(ctx.scenario.retrieve.leaf) if ctx.scenario.retrieve.leaf else Pick
     pick_and_place = Sequence("pick and place", memory=True, children=[
         FollowRobotSpeed("robot speed", ctx),
+        # a part still held (the cell was stopped between pick and place) goes first;
+        # one the controller did not pick is the operator's to remove
+        Selector("hands free", memory=True, children=[
+            Inverter("not holding?", Holding("holding a part?", ctx)),
+            Sequence("place the held part", memory=True, children=[
+                HeldPartKnown("held part known?", ctx), Place("place", ctx)]),
+            Escalate("unknown part held", ctx, None,
+                     "the gripper holds a part this run did not pick: remove it"),
+        ]),
         NextPart("next part", ctx),
         pick("pick", ctx),
         Place("place", ctx),

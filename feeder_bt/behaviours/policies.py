@@ -1,0 +1,187 @@
+"""Pick policies: which located part the robot takes next (``retrieve.policy``).
+
+``fifo`` and ``earliest_deadline`` need only the queue. ``shortest_cycle`` and
+``lookahead`` price every part by the robot model (thesis Figure 8-5, "does location
+matter"): the seconds from now until the part is released at its place pose, with the
+intercept on the moving belt predicted from the belt speed. All parts of a choice are
+priced at once with numpy, so a choice over a long queue stays well inside a tick.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..parts import Part
+from ..robot_model import RobotModel
+from .common import Ctx
+
+XNow = Callable[[Part], float]
+
+
+class Policy:
+    """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
+
+    A policy that needs more reads the robot's pose through ``ctx``; ``NextPart`` keeps
+    ``belt_mm_s`` (the horizontal speed on the blackboard) current before each choice."""
+
+    name = "fifo"
+
+    def __init__(self, ctx: Ctx | None = None) -> None:
+        self.ctx = ctx
+        self.belt_mm_s = 0.0
+
+    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
+        return parts[0] if parts else None
+
+    def lead_s(self) -> float:
+        """How long before the grip a part must be dropped as too far: the scenario's
+        ``reach_time_s`` for a policy that does not price the pick itself."""
+        return self.ctx.scenario.retrieve.reach_time_s if self.ctx is not None else 0.0
+
+
+class Fifo(Policy):
+    name = "fifo"
+
+
+class EarliestDeadline(Policy):
+    """The part that leaves the pick window first: the one furthest down the belt."""
+
+    name = "earliest_deadline"
+
+    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
+        return max(parts, key=x_now, default=None)
+
+
+@dataclass
+class _Batch:
+    """The candidate parts as columns: where each is now, and where each is placed."""
+
+    x: np.ndarray          # belt x of the tool point (part + tool offset), now
+    y: np.ndarray
+    ox: np.ndarray         # tool offset along the belt (too_far is about the part itself)
+    place_x: np.ndarray
+    place_y: np.ndarray
+
+
+class ShortestCycle(Policy):
+    """The part whose pick-and-place from the robot's current pose takes least time.
+
+    A part still upstream of the reach costs its wait, and a part that would pass
+    ``too_far`` before the grip is skipped. When parts arrive faster than the robot can
+    take them, taking the cheap ones first turns the surplus into shorter cycles instead
+    of longer queues."""
+
+    name = "shortest_cycle"
+
+    def __init__(self, ctx: Ctx | None = None) -> None:
+        super().__init__(ctx)
+        self.model = RobotModel(ctx.cell.robot) if ctx is not None else None
+
+    def lead_s(self) -> float:
+        """The pricing skips what cannot be caught, so only what no pick can reach in time
+        is dropped: the settle and grip after the shortest possible move."""
+        if self.ctx is None or self.model is None:
+            return super().lead_s()
+        sp, r = self.ctx.cell.robot, self.ctx.scenario.retrieve
+        fastest = float(self.model.arch_times(np.zeros(1), r.robot_speed_pct)[0])
+        return fastest + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
+
+    def _batch(self, parts: list[Part], x_now: XNow) -> _Batch:
+        assert self.ctx is not None
+        specs = self.ctx.scenario.parts
+        rows = []
+        for p in parts:
+            spec = specs[p.type]
+            ox, oy, _ = spec.tool_offset
+            rows.append((x_now(p) + ox, p.y_mm + oy, ox, spec.place.x, spec.place.y))
+        cols = np.array(rows, dtype=float).reshape(-1, 5).T
+        return _Batch(*cols)
+
+    def costs(self, b: _Batch, start: tuple[float, float], speed_mm_s: float,
+              after_s: float = 0.0) -> np.ndarray:
+        """Seconds from a robot free at ``start`` ``after_s`` from now to each part's
+        release (inf: not feasible), the parts having moved on meanwhile."""
+        assert self.ctx is not None and self.model is not None
+        r, sp = self.ctx.scenario.retrieve, self.ctx.cell.robot
+        pct = r.robot_speed_pct
+        v = speed_mm_s if r.tracking else 0.0
+        x0 = b.x + v * after_s
+        sx, sy = start
+        t = np.zeros_like(x0)
+        for _ in range(4):                     # intercept on the moving belt
+            t = self.model.arch_times(np.hypot(x0 + v * t - sx, b.y - sy), pct)
+        inside = self.model.reachable_mask(x0 + v * t, b.y)
+        if not inside.all():                   # wait for parts still upstream of the reach
+            bx, by = sp.base_mm
+            half = np.sqrt(np.maximum(sp.reach_mm ** 2 - (b.y - by) ** 2, 0.0))
+            x_enter = bx - half + 1.0
+            can_wait = (v > 0) & (np.abs(b.y - by) < sp.reach_mm) & (x0 + v * t <= x_enter)
+            wait = (x_enter - x0) / v if v > 0 else np.zeros_like(x0)
+            t = np.where(inside, t, np.where(can_wait, wait, np.inf))
+        t_grip = t + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
+        x_grip = x0 + v * t_grip
+        ok = np.isfinite(t_grip) & (x_grip - b.ox <= r.too_far_mm) \
+            & self.model.reachable_mask(np.where(np.isfinite(x_grip), x_grip, 0.0), b.y)
+        back = self.model.arch_times(np.hypot(x_grip - b.place_x, b.y - b.place_y), pct)
+        return np.where(ok, t_grip + back + sp.release_s, np.inf)
+
+    def cost(self, part: Part, x_now: XNow, speed_mm_s: float) -> float:
+        """One part's seconds from now to its release at its place pose (inf: not feasible)."""
+        assert self.ctx is not None
+        pose = self.ctx.hal.robot_position.pose()
+        return float(self.costs(self._batch([part], x_now), (pose.x, pose.y), speed_mm_s)[0])
+
+    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
+        if not parts:
+            return None
+        if self.ctx is None:
+            return parts[0]
+        pose = self.ctx.hal.robot_position.pose()
+        c = self.costs(self._batch(parts, x_now), (pose.x, pose.y), self.belt_mm_s)
+        i = int(np.argmin(c))
+        return parts[i] if math.isfinite(c[i]) else max(parts, key=x_now)
+
+
+class Lookahead(ShortestCycle):
+    """Plans two picks, commits to the first: the part ``i`` that minimises the time to
+    release ``i`` and then the best next part from ``i``'s place pose, the belt having
+    moved on meanwhile.
+
+    Shortest-cycle is greedy: it takes a cheap part now even when that part would be
+    cheaper still a cycle later, further down the belt and nearer the place pose, and lets
+    a part go that can only be had now. Pricing the pair takes the one about to leave and
+    leaves the one still coming; only the ``CANDIDATES`` cheapest first picks are tried.
+    """
+
+    name = "lookahead"
+    CANDIDATES = 6
+
+    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
+        if len(parts) < 2 or self.ctx is None:
+            return super().choose(parts, x_now)
+        pose = self.ctx.hal.robot_position.pose()
+        b = self._batch(parts, x_now)
+        first = self.costs(b, (pose.x, pose.y), self.belt_mm_s)
+        order = [int(i) for i in np.argsort(first)[:self.CANDIDATES] if np.isfinite(first[i])]
+        if not order:
+            return max(parts, key=x_now)
+        fallback = float(first[order[-1]])     # no second part in reach: a plain cycle
+        best, best_i = math.inf, order[0]
+        for i in order:
+            then = self.costs(b, (b.place_x[i], b.place_y[i]), self.belt_mm_s,
+                              after_s=float(first[i]))
+            then[i] = np.inf
+            nxt = float(then.min())
+            total = float(first[i]) + (nxt if math.isfinite(nxt) else fallback)
+            if total < best:
+                best, best_i = total, i
+        return parts[best_i]
+
+
+POLICIES: dict[str, type[Policy]] = {
+    "fifo": Fifo, "earliest_deadline": EarliestDeadline,
+    "shortest_cycle": ShortestCycle, "lookahead": Lookahead}
