@@ -3,6 +3,10 @@ tick at the scenario's rate (no idle ticks skipped), p50/p99/max and overruns; J
 
     python benchmarks/tick_bench.py [--duration 300] [--out PATH]
 
+Besides each shipped scenario as it is, ``lenses+best`` is lenses with the throughput
+benchmark's best pair (``supply_queue`` + ``lookahead``): the most parts on the belt and
+the costliest choice of the next part.
+
 The world is simulated on virtual time, so the wall time of a tick is the controller's own
 cost (the recipe runs on the vision worker and is not in it). Measured here, never in tests.
 """
@@ -13,14 +17,17 @@ import argparse
 import json
 import platform
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from throughput_bench import variant  # noqa: E402
+
 from feeder_bt.run import RunOptions, run_job  # noqa: E402
 
-SCENARIOS = ("lenses", "squares", "lenses_and_squares", "original_cwru_lenses")
+SCENARIOS = ("lenses", "lenses+best", "squares", "lenses_and_squares", "original_cwru_lenses")
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -31,8 +38,12 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "ticks.json"))
     args = ap.parse_args(argv)
     rows = []
+    tmp = Path(tempfile.mkdtemp())
     for name in args.scenarios:
-        r = run_job(RunOptions(scenario=str(ROOT / "scenarios" / f"{name}.yaml"),
+        path = ROOT / "scenarios" / f"{name.split('+')[0]}.yaml"
+        if name.endswith("+best"):
+            path = variant(path, "supply_queue", "lookahead", tmp)
+        r = run_job(RunOptions(scenario=str(path),
                                duration=args.duration, fast=True, seed=args.seed, view="none",
                                skip_idle=False))
         t = r["tick"]
