@@ -9,9 +9,10 @@ import numpy as np
 import py_trees
 import pytest
 from py_trees.common import Status
-from treeutil import finish, make_ctx, part, pending, tick
+from treeutil import bb_set, finish, make_ctx, part, pending, tick
 
 from feeder_bt.behaviours.policies import POLICIES, Lookahead, ShortestCycle
+from feeder_bt.behaviours.retrieve import NextPart
 from feeder_bt.hal.interfaces import Pose
 from feeder_bt.robot_model import RobotModel
 from feeder_bt.scenario.loader import RETRIEVE_POLICIES
@@ -143,3 +144,20 @@ def test_a_pricing_policy_drops_only_what_no_pick_can_catch(policy, kept):
     tick(root, ctx)
     assert ctx.stats.counts["too_far"] == (0 if kept else 1)
     assert bool(ctx.hal.pending("robot", "pick")) is kept
+
+
+def test_pricing_follows_the_robot_speed_on_the_blackboard():
+    """The operator or the adjuster may slow the robot: picks are priced at that speed."""
+    ctx = make_ctx(retrieve={"policy": "shortest_cycle", "tracking": False})
+    ctx.hal.robot_position.at = PLACE
+    root = retrieve.build(ctx)
+    p = part(1100.0, 100.0)
+    full = ShortestCycle(ctx).cost(p, x_now, 0.0)
+    bb_set("/speeds/robot_speed_pct", 50.0)
+    ctx.queue.put(p)
+    tick(root, ctx)
+    policy = next(n for n in root.iterate() if isinstance(n, NextPart)).policy
+    assert policy.robot_pct == 50.0
+    r = ctx.cell.robot
+    fixed = r.grip_s + r.release_s                 # only the moves scale with speed
+    assert policy.cost(p, x_now, 0.0) == pytest.approx(2 * (full - fixed) + fixed)

@@ -18,7 +18,8 @@ def robot_calls(ctx) -> list[str]:
     return [m for m in ctx.hal.methods() if m in MOTION]
 
 
-def test_servo_timeout_during_place_recovers_and_places_the_held_part():
+def _place_fails_holding(error: Exception):
+    """A retrieve tree whose first place fails with ``error``, the part in the gripper."""
     ctx = make_ctx()
     root = retrieve.build(ctx)
     ctx.queue.put(part(400.0))
@@ -26,7 +27,12 @@ def test_servo_timeout_during_place_recovers_and_places_the_held_part():
     finish(ctx.hal, "robot", "pick")
     ctx.hal.robot.held = True
     tick(root, ctx)
-    fail(ctx.hal, "robot", "place", ServoTimeout("joint 1 following error"))
+    fail(ctx.hal, "robot", "place", error)
+    return ctx, root
+
+
+def test_servo_timeout_during_place_recovers_and_places_the_held_part():
+    ctx, root = _place_fails_holding(ServoTimeout("joint 1 following error"))
     tick(root, ctx)
     finish(ctx.hal, "robot", "recover")
     tick(root, ctx)
@@ -45,14 +51,7 @@ def test_servo_timeout_during_place_recovers_and_places_the_held_part():
 
 
 def test_lost_robot_link_backs_off_then_places_the_held_part_and_goes_on():
-    ctx = make_ctx()
-    root = retrieve.build(ctx)
-    ctx.queue.put(part(400.0))
-    tick(root, ctx)
-    finish(ctx.hal, "robot", "pick")
-    ctx.hal.robot.held = True
-    tick(root, ctx)
-    fail(ctx.hal, "robot", "place", CommsLost("motion server: connection reset"))
+    ctx, root = _place_fails_holding(CommsLost("motion server: connection reset"))
     tick(root, ctx)
     assert ctx.stats.faults["comms_lost"] == 1
     tick(root, ctx, n=20)                       # back-off 0.5 s: no robot call meanwhile

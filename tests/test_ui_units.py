@@ -513,6 +513,13 @@ class FakeSocket:
         self.closed = code
 
 
+def _connect(ui, ws, session):
+    """A websocket client of ``session`` on ``ui``, its send loop running (in a loop)."""
+    client = ui_server._Client(ws, session.token)
+    ui.clients.add(client)
+    return client, asyncio.create_task(ui._send_loop(client))
+
+
 def _ui_with_session(tmp_path: Path):
     users = UsersFile(tmp_path / "users.json")
     users.add("alice", "alice-secret-1")
@@ -527,9 +534,7 @@ def test_a_slow_client_gets_only_the_latest_snapshot(tmp_path):
 
     async def scenario() -> FakeSocket:
         ws = FakeSocket(delay=0.05)
-        client = ui_server._Client(ws, session.token)
-        ui.clients.add(client)
-        task = asyncio.create_task(ui._send_loop(client))
+        client, task = _connect(ui, ws, session)
         for _ in range(20):                         # 20 snapshots in 0.1 s
             bridge.publish()
             ui.wake_all()
@@ -553,9 +558,7 @@ def test_a_stuck_client_is_dropped(tmp_path, monkeypatch):
 
     async def scenario() -> tuple[FakeSocket, bool, bool]:
         ws = FakeSocket(stuck=True)
-        client = ui_server._Client(ws, session.token)
-        ui.clients.add(client)
-        task = asyncio.create_task(ui._send_loop(client))
+        client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
         await asyncio.sleep(0.3)
@@ -570,9 +573,7 @@ def test_a_client_whose_session_ends_is_told_and_closed(tmp_path):
 
     async def scenario() -> FakeSocket:
         ws = FakeSocket()
-        client = ui_server._Client(ws, session.token)
-        ui.clients.add(client)
-        task = asyncio.create_task(ui._send_loop(client))
+        client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
         await asyncio.sleep(0.01)
@@ -640,9 +641,7 @@ def test_a_client_hears_of_control_changes_but_never_the_same_thing_twice(tmp_pa
 
     async def scenario() -> FakeSocket:
         ws = FakeSocket()
-        client = ui_server._Client(ws, session.token)
-        ui.clients.add(client)
-        task = asyncio.create_task(ui._send_loop(client))
+        client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
         await asyncio.sleep(0.01)

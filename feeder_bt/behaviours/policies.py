@@ -26,13 +26,15 @@ class Policy:
     """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
 
     A policy that needs more reads the robot's pose through ``ctx``; ``NextPart`` keeps
-    ``belt_mm_s`` (the horizontal speed on the blackboard) current before each choice."""
+    ``belt_mm_s`` and ``robot_pct`` (the horizontal belt and robot speeds on the
+    blackboard, which the adjuster or the operator may change) current before each choice."""
 
     name = "fifo"
 
     def __init__(self, ctx: Ctx | None = None) -> None:
         self.ctx = ctx
         self.belt_mm_s = 0.0
+        self.robot_pct = ctx.scenario.retrieve.robot_speed_pct if ctx is not None else 100.0
 
     def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
         return parts[0] if parts else None
@@ -87,7 +89,7 @@ class ShortestCycle(Policy):
         if self.ctx is None or self.model is None:
             return super().lead_s()
         sp, r = self.ctx.cell.robot, self.ctx.scenario.retrieve
-        fastest = float(self.model.arch_times(np.zeros(1), r.robot_speed_pct)[0])
+        fastest = float(self.model.arch_times(np.zeros(1), self.robot_pct)[0])
         return fastest + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
 
     def _batch(self, parts: list[Part], x_now: XNow) -> _Batch:
@@ -107,7 +109,7 @@ class ShortestCycle(Policy):
         release (inf: not feasible), the parts having moved on meanwhile."""
         assert self.ctx is not None and self.model is not None
         r, sp = self.ctx.scenario.retrieve, self.ctx.cell.robot
-        pct = r.robot_speed_pct
+        pct = self.robot_pct
         v = speed_mm_s if r.tracking else 0.0
         x0 = b.x + v * after_s
         sx, sy = start

@@ -19,7 +19,7 @@ class NextPart(Leaf):
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/speeds/horizontal_mm_s",),
+        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/robot_speed_pct"),
                          write=("/retrieve/part", "/retrieve/error"))
         self.policy = POLICIES[ctx.scenario.retrieve.policy](ctx)
         self.seq = list(ctx.scenario.retrieve.sequence)
@@ -37,6 +37,7 @@ class NextPart(Leaf):
             self.feedback_message = "waiting for a part"
             return Status.RUNNING
         self.policy.belt_mm_s = float(self.bb.get("/speeds/horizontal_mm_s"))
+        self.policy.robot_pct = float(self.bb.get("/speeds/robot_speed_pct"))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:

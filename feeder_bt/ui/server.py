@@ -186,6 +186,17 @@ class UiApp:
             return _refuse("the body must be a JSON object", 400)
         return body
 
+    async def _signed_in_body(self, request: Request
+                              ) -> tuple[dict[str, Any], Session] | Response:
+        """The body and session of a signed-in user's request, or the refusal to send."""
+        body = await self._body(request)
+        if isinstance(body, Response):
+            return body
+        s = self.session_of(request)
+        if s is None:
+            return _refuse("not logged in", 401)
+        return body, s
+
     # ------------------------------------------------------------------ login
     async def login(self, request: Request) -> Response:
         body = await self._body(request)
@@ -258,12 +269,10 @@ class UiApp:
 
     # ------------------------------------------------------------------ control
     async def control_action(self, request: Request) -> Response:
-        body = await self._body(request)
-        if isinstance(body, Response):
-            return body
-        s = self.session_of(request)
-        if s is None:
-            return _refuse("not logged in", 401)
+        got = await self._signed_in_body(request)
+        if isinstance(got, Response):
+            return got
+        body, s = got
         action = body.get("action")
         if action == "take":
             ok, msg = self.control.take(s)
@@ -279,12 +288,10 @@ class UiApp:
 
     async def command(self, request: Request) -> Response:
         """An operator command: only from the holder of control; run on the tick thread."""
-        body = await self._body(request)
-        if isinstance(body, Response):
-            return body
-        s = self.session_of(request)
-        if s is None:
-            return _refuse("not logged in", 401)
+        got = await self._signed_in_body(request)
+        if isinstance(got, Response):
+            return got
+        body, s = got
         name = body.pop("command", None)
         if name not in COMMANDS:
             return _refuse(f"unknown command {name!r} (one of: {', '.join(COMMANDS)})", 400)
