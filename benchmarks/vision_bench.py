@@ -1,11 +1,12 @@
 """Vision time per frame: our recipe against a scikit-image and an OpenCV blob-detector pipeline.
 
     python benchmarks/vision_bench.py [--frames 200] [--repeats 5] [--scenarios lenses squares]
+                                      [--baseline OLD_LOCATOR.py]
 
 The frames are the ones the simulated camera grabs in a short fast run of each scenario
 (``feeder render``'s ``render_frames``: 640 x 484, noise, blur, vignetting, touching parts,
 parts cut by the image border), with the simulator's ground truth kept for scoring only.
-Three pipelines see the same frames and the same golden image:
+Three pipelines (four with ``--baseline``) see the same frames and the same golden image:
 
 * ``ours``: ``feeder_bt.vision.locator.Locator`` with the scenario's recipe.
 * ``skimage``: golden-image subtraction in numpy, ``skimage.filters`` threshold (the
@@ -20,6 +21,9 @@ Three pipelines see the same frames and the same golden image:
   filters set from the recipe's area / circularity / aspect ranges (converted to the
   detector's own measures, see ``BlobPipeline``). It cannot tell the faces of a chiral
   part apart: its answers there name the part only.
+* ``baseline`` (only with ``--baseline FILE``): another version of ``locator.py`` (e.g. an
+  older one, ``git show REV:feeder_bt/vision/locator.py > old.py``), checked and timed
+  alongside ours, so a before/after comparison shares the frames and the machine's mood.
 
 First the answers are checked: every pipeline's parts are matched to the truth's whole,
 singulated parts and to ours by position (within 2 mm): matched / missed / extra, and the
@@ -35,6 +39,7 @@ scikit-image is an optional extra: ``pip install -e '.[bench]'`` (or
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import math
 import platform
@@ -92,6 +97,24 @@ class Ours:
 
     def __call__(self, img: np.ndarray) -> list[Answer]:
         return [(d.x_mm, d.y_mm, d.part or "", d.pose) for d in self.locator.locate(img).parts]
+
+
+class Baseline(Ours):
+    """Another version of ``feeder_bt/vision/locator.py`` (``--baseline``), run as ours is."""
+
+    name = "baseline"
+    path: Path | None = None
+
+    def __init__(self, recipe: VisionRecipe, parts: dict[str, PartSpec], cal: Calibration,
+                 golden: np.ndarray) -> None:
+        # a sibling module of feeder_bt.vision.locator, so its relative imports resolve
+        spec = importlib.util.spec_from_file_location("feeder_bt.vision._baseline_locator",
+                                                      self.path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+        self.locator = module.Locator(recipe, parts, cal)
+        self.locator.set_golden(golden)
 
 
 class SkimagePipeline:
@@ -387,9 +410,8 @@ def bench_scenario(name: str, n_frames: int, repeats: int, seed: int,
     cam = cell.camera
     cal = Calibration(cam.calibration)
     got = render_frames(str(path), n_frames, seed)
-    pipes = [Ours(scenario.vision, scenario.parts, cal, got.golden),
-             SkimagePipeline(scenario.vision, scenario.parts, cal, got.golden),
-             BlobPipeline(scenario.vision, scenario.parts, cal, got.golden)]
+    kinds = [Ours, SkimagePipeline, BlobPipeline] + ([Baseline] if Baseline.path else [])
+    pipes = [kind(scenario.vision, scenario.parts, cal, got.golden) for kind in kinds]
     truth = _truth_answers(got.truth)
     answers = {p.name: [p(img) for img in got.frames] for p in pipes}
     check = {p.name: {"vs_truth": _score(answers[p.name], truth),
@@ -408,7 +430,7 @@ def bench_scenario(name: str, n_frames: int, repeats: int, seed: int,
         "parts_in_view": sum(len(t["parts"]) for t in got.truth),
         "answers": check, "timing": timing,
         "ours_faster_than_peers": all(ours < v["p50_ms"] for k, v in timing.items()
-                                      if k != "ours"),
+                                      if k not in ("ours", "baseline")),
         "render": _render_ms(name, scenario, cam, got.truth, seed),
     }
 
@@ -422,7 +444,10 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--min-agreement", type=float, default=0.95,
                     help="fail below this matched / (matched + missed + extra)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "vision.json")
+    ap.add_argument("--baseline", type=Path, default=None,
+                    help="another locator.py to check and time alongside ours")
     args = ap.parse_args(argv)
+    Baseline.path = args.baseline
     if skimage is None:
         raise SystemExit("vision_bench needs scikit-image for its peer pipeline: "
                          "pip install -e '.[bench]'   (or: pip install 'scikit-image>=0.22')")

@@ -83,6 +83,7 @@ def test_locate_writes_annotated_images_and_table(mixed_frames, tmp_path, capsys
                   "--annotate", str(tmp_path / "ann")) == 0
     out = capsys.readouterr().out
     assert "frame_004.png:" in out and "area_mm2" in out
+    assert "nan" not in out          # every feature is measured for the table, not only those used
     ann = tmp_path / "ann" / "frame_004_annotated.png"
     import cv2
     img = cv2.imread(str(ann))

@@ -11,6 +11,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from hypothesis import given
@@ -27,6 +28,7 @@ from feeder_bt.scenario.model import (
     VisionRecipe,
 )
 from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.features import FEATURES
 from feeder_bt.vision.locator import LocateResult, Locator
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -389,3 +391,121 @@ def test_without_backlight_nothing_is_found():
     assert len(locator.locate(renderer.render(outlines, rng)).parts) == 3
     dark = (renderer.render(outlines, rng) * 0.08).astype(np.uint8)
     assert locator.locate(dark).parts == []
+
+
+# ------------------------------------------------------------------ locator internals
+
+
+def _random_mask(rng: np.random.Generator, h: int = 120, w: int = 160) -> np.ndarray:
+    """Discs, bars and specks, some cut by the image's edges and corners, with noise."""
+    mask = np.zeros((h, w), np.uint8)
+    for _ in range(int(rng.integers(1, 7))):
+        centre = (int(rng.integers(-5, w + 5)), int(rng.integers(-5, h + 5)))
+        if rng.random() < 0.5:
+            cv2.circle(mask, centre, int(rng.integers(1, 18)), 255, -1)
+        else:
+            size = (int(rng.integers(1, 30)), int(rng.integers(1, 12)))
+            box = cv2.boxPoints((centre, size, float(rng.uniform(0, 180))))
+            cv2.fillPoly(mask, [box.astype(np.int32)], 255)
+    noise = rng.random((h, w))
+    mask[noise < 0.01] = 255
+    mask[noise > 0.995] = 0
+    return mask
+
+
+@pytest.mark.parametrize("open_px,close_px", [(3, 3), (0, 0), (5, 3), (4, 0)])
+def test_contours_on_bands_equal_the_whole_frame(open_px, close_px):
+    """The packed bands (with mirrors at the image's edges) give exactly the contours, in
+    the same order, as morphology and findContours on the whole frame."""
+    parts, recipe = load("lenses")
+    recipe = dataclasses.replace(recipe, morphology=dataclasses.replace(
+        recipe.morphology, open_px=open_px, close_px=close_px))
+    loc = Locator(recipe, parts, Calibration(build_camera().calibration))
+    rng = np.random.default_rng(open_px * 10 + close_px)
+    for _ in range(150):
+        mask = _random_mask(rng)
+        whole = loc._morph(mask.copy())
+        for full, chain in ((True, cv2.CHAIN_APPROX_NONE), (False, cv2.CHAIN_APPROX_SIMPLE)):
+            want, _ = cv2.findContours(whole, cv2.RETR_EXTERNAL, chain)
+            got = loc._contours(mask, full)
+            assert len(got) == len(want)
+            for g, w in zip(got, want, strict=True):
+                assert np.array_equal(g, w)
+
+
+def test_chain_corners_give_the_full_chain():
+    from feeder_bt.vision.locator import _chain_steps, _full_chain
+    rng = np.random.default_rng(5)
+    for _ in range(100):
+        mask = _random_mask(rng)
+        full, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+        corners, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        assert _chain_steps(list(corners)) == [len(c) for c in full]
+        for f, c in zip(full, corners, strict=True):
+            assert np.array_equal(_full_chain(c), f)
+            mf, mc = cv2.moments(f), cv2.moments(c)
+            assert all(mf[k] == pytest.approx(mc[k], rel=1e-12, abs=1e-9)
+                       for k in ("m00", "m10", "m01"))
+
+
+def test_smoothed_length_is_the_moving_average_length():
+    from feeder_bt.vision.locator import _WINDOW, _smooth_length
+    rng = np.random.default_rng(6)
+    for n in list(range(3, 40)) + [100, 101, 250, 255]:
+        pts = rng.integers(0, 200, size=(n, 2)).astype(np.int32)
+        if n < 2 * _WINDOW:
+            want = cv2.arcLength(pts.astype(np.float32), True)
+        else:
+            means = np.array([pts[np.arange(i - 2, i + 3) % n].mean(axis=0) for i in range(n)])
+            want = np.hypot(*(np.roll(means, -1, axis=0) - means).T).sum()
+        assert _smooth_length(pts.reshape(-1, 1, 2)) == pytest.approx(want, rel=1e-6)
+
+
+def test_cut_corner_signatures_at_once_equal_one_by_one():
+    from feeder_bt.vision.locator import _corner_signature, _corner_signatures
+    parts, _ = load("squares")
+    outline = pose_outline(parts["square"], "face_up")
+    rng = np.random.default_rng(7)
+    outlines = []
+    for _ in range(12):
+        o = place_outline(outline if rng.random() < 0.5 else outline * [1.0, -1.0],
+                          *rng.uniform(-100, 100, 2), float(rng.uniform(-180, 180)))
+        outlines.append((o + rng.normal(0, 0.1, o.shape)).astype(np.float32))
+    together = _corner_signatures(outlines)
+    assert together == [_corner_signature(o) for o in outlines]
+    assert all(s is not None for s in together)
+
+
+def test_features_are_measured_only_as_far_as_the_classes_need():
+    scene = Scene("lenses", seed=28)
+    layout = scene.random_layout(4)
+    img = scene.renderer.render([p["outline"] for p in layout], scene.rng)
+    lean = scene.locator.locate(img)
+    every = scene.locator.locate(img, all_features=True)
+    assert [(d.part, d.pose, d.x_mm, d.y_mm) for d in lean.parts] == \
+        [(d.part, d.pose, d.x_mm, d.y_mm) for d in every.parts]
+    for d, e in zip(lean.parts + lean.rejected, every.parts + every.rejected, strict=True):
+        assert "area_mm2" in d.features
+        assert set(e.features) >= set(FEATURES)
+        assert all(e.features[k] == pytest.approx(v, rel=1e-12) for k, v in d.features.items())
+    flat = [d for d in lean.parts if d.pose == "flat"]
+    assert flat and all(set(d.features) == {"area_mm2", "perimeter_mm", "circularity"}
+                        for d in flat)
+    measured = scene.locator.measure_blobs(img)
+    assert all(set(m.features) == set(FEATURES) for m in measured)
+
+
+def test_one_locator_serves_several_threads():
+    from concurrent.futures import ThreadPoolExecutor
+    scene = Scene("squares", seed=29)
+    frames = [scene.renderer.render([p["outline"] for p in scene.random_layout(5)], scene.rng)
+              for _ in range(8)]
+
+    def answers(img: np.ndarray) -> list:
+        return [(d.part, d.pose, d.x_mm, d.y_mm, d.angle_deg)
+                for d in scene.locator.locate(img).parts]
+
+    alone = [answers(f) for f in frames]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(3):
+            assert list(pool.map(answers, frames)) == alone

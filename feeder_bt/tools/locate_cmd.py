@@ -44,7 +44,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
         check_size(path, img, golden)
     out: list[dict[str, Any]] = []
     for path, img in images:
-        result = locator.locate(img)
+        result = locator.locate(img, all_features=True)   # the table shows every feature
         row = {"image": path, "ms": round(result.ms, 3),
                "parts": [_det_dict(d) for d in result.parts],
                "rejected": [_det_dict(d) for d in result.rejected]}

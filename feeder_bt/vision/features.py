@@ -10,3 +10,20 @@ FEATURES: dict[str, str] = {
     "hu1": "first Hu moment invariant",
     "hu2": "second Hu moment invariant",
 }
+
+#: Features that one measurement gives together, cheapest first. ``Locator.locate`` measures
+#: a group only when a class it checks ranges over one of its features (the area always: it
+#: decides most blobs alone), so a blob's ``features`` hold the area plus what its checks
+#: needed; ``Locator.measure_blobs`` (recipe tuning) measures them all.
+GROUPS: tuple[tuple[str, ...], ...] = (
+    ("area_mm2",),                       # the contour's moments (also the centroid)
+    ("hu1", "hu2"),                      # the same moments
+    ("perimeter_mm", "circularity"),     # the contour smoothed along itself
+    ("aspect", "rectangularity"),        # the minimum-area rectangle
+    ("solidity",),                       # the convex hull
+)
+
+#: Each feature's group, by index into ``GROUPS`` (its cost rank).
+GROUP_OF: dict[str, int] = {name: i for i, group in enumerate(GROUPS) for name in group}
+
+assert set(GROUP_OF) == set(FEATURES), "every feature belongs to one group"

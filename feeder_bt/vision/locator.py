@@ -3,13 +3,21 @@
 It sees only pixels, the cell's calibration and the recipe — never ground truth.
 Pipeline: golden-image subtraction (dark parts become bright), threshold, morphology,
 external contours; blobs touching the image border or smaller than ``min_area_mm2`` are
-rejected; every feature of ``FEATURES`` is measured in mm (mm² for areas) through the
-calibration, corrected for pixelisation so that it is close to the physical value (a
+rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
+calibration, corrected for pixelisation so that they are close to the physical value (a
 50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
 names the part and pose. Position is the blob's area centroid, which is the part frame's
 origin (``geometry``).
 Merged (touching) parts fall outside every class and are rejected, so they are never
 picked.
+
+Features are measured as a cascade, cheapest first (``features.GROUPS``): every blob gets
+its area and centroid from the contour's moments; a class's other features are measured
+only when the blob is checked against that class and its cheaper ranges held. So a
+``Detection``'s ``features`` hold ``area_mm2`` plus the features its checks needed (and
+``mirrored`` once a face was looked at) — a flat lens has area, perimeter and circularity,
+a blob rejected as too big only its area. ``locate(..., all_features=True)`` and
+``measure_blobs`` measure every feature of every blob, for tools that show or tune them.
 
 Recipe semantics worth knowing:
 
@@ -19,15 +27,18 @@ Recipe semantics worth knowing:
 * ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
   (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
   which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
-  fall back to the principal axis when elongated, else 0.
+  fall back to the principal axis when elongated, else 0. The face and angle are read
+  from the blob's outline to a fraction of a pixel (``Locator._faces``).
 
-Each call of ``locate`` uses only local state (the golden image is read, never written),
-so one ``Locator`` may serve several threads.
+Each call of ``locate`` uses only local state and per-thread scratch images (the golden
+image is read, never written), so one ``Locator`` may serve several threads.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -37,14 +48,20 @@ import numpy as np
 from ..geometry import pose_outline, wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .calibration import Calibration
-from .features import FEATURES
+from .features import FEATURES, GROUP_OF
 
-_FINE = 4                      # upsampling of the sub-pixel outline used for orientation
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
+_WINDOW = 5                    # points in the moving average of the smoothed perimeter
+# the four 4-neighbours of a pixel (u, v): where the outline may cross between them
+_DU = np.array([1, -1, 0, 0])
+_DV = np.array([0, 0, 1, -1])
 
 
 @dataclass
 class Detection:
+    """One blob: its class (None if rejected, with ``reason``), pose in the belt frame and
+    in pixels, and the features measured on the way (see the module docstring)."""
+
     part: str | None
     pose: str | None
     pickable: bool
@@ -63,6 +80,27 @@ class LocateResult:
     rejected: list[Detection]
     ms: float
     contours: list[np.ndarray] = field(default_factory=list, repr=False)  # parts + rejected, px
+
+
+class _Blob:
+    """One contour on its way through the cascade: what has been measured so far."""
+
+    __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
+                 "face", "oriented")
+
+    def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
+                 mom: dict[str, float], area_px: float, det: Detection, full: bool) -> None:
+        self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
+        self.full = full                  # every boundary pixel (else the chain's corners)
+        self.box = box                    # bounding box u, v, width, height
+        self.mom = mom                    # its moments (cv2.moments)
+        self.area_px = area_px            # pixel count (Pick's theorem on the contour)
+        self.det = det
+        self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
+        self.hull: np.ndarray | None = None         # convex hull (``Locator._hull``)
+        self.faced = False                # ``face`` measured (``Locator._faces``)
+        self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
+        self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
 
 
 # ------------------------------------------------------------------- cut-corner signature
@@ -87,44 +125,69 @@ def _from_frame(vx: float, vy: float, c: float, s: float) -> tuple[float, float]
     return vx * c - vy * s, vx * s + vy * c
 
 
-def _sign(v: float) -> float:
-    return 1.0 if v > 0 else -1.0 if v < 0 else 0.0
-
-
 _SQRT2 = math.sqrt(2.0)
 
 
 def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
-    """Cut-corner signature of a closed outline given as dense points in mm.
+    """Cut-corner signature of one closed outline given as points in mm."""
+    return _corner_signatures([np.asarray(pts, dtype=np.float32).reshape(-1, 2)])[0]
+
+
+_CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's corners,
+_CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
+
+
+def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | None]:
+    """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
+    (at least one point each).
 
     The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
     from the outline is the cut one; the cut is longer along one side than the other,
-    which tells the faces apart. Works on the x and y columns separately and on Python
-    floats for the 2-vectors: this runs once per chiral blob, where numpy's per-call cost
-    dominated (the arithmetic, and so the answer, is the same as the matrix form).
+    which tells the faces apart. All of it reads only the outline's convex hull (the
+    rectangle, the points nearest the rectangle's corners and at the ends of its sides),
+    and all the hulls go through one set of array operations on complex numbers (numpy's
+    per-call cost dominates when done one by one).
     """
-    (cx, cy), (w, h), a = cv2.minAreaRect(pts.astype(np.float32))
-    alpha = math.radians(a)
-    hx, hy = w / 2.0, h / 2.0
-    c, s = math.cos(alpha), math.sin(alpha)
-    dx, dy = pts[:, 0] - cx, pts[:, 1] - cy
-    qx, qy = dx * c + dy * s, -dx * s + dy * c       # the outline in the rectangle's frame
-    # squared distance of the nearest outline point to each rectangle corner (a row each)
-    d2 = (qx - np.array([[hx], [-hx], [-hx], [hx]])) ** 2
-    d2 += (qy - np.array([[hy], [hy], [-hy], [-hy]])) ** 2
-    k = int(np.argmax(d2.min(axis=1)))
-    sx, sy = _sign((hx, -hx, -hx, hx)[k]), _sign((hy, hy, -hy, -hy)[k])
-    fx, fy = qx * sx, qy * sy                 # cut corner now at (+, +)
+    hulls = [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
+    rects = [cv2.minAreaRect(hl) for hl in hulls]
+    n = len(hulls)
+    counts = [len(hl) for hl in hulls]
+    seg = np.repeat(np.arange(n), counts)                       # each point's outline
+    starts = np.cumsum([0] + counts[:-1])
+    z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
+    # per outline: centre, angle, half-sides
+    par = np.array([(cx, cy, math.radians(a), w / 2.0, h / 2.0)
+                    for (cx, cy), (w, h), a in rects]).reshape(n, 5)
+    half = par[:, 3:]
+    centre = par[:, 0] + 1j * par[:, 1]
+    q = (z - centre[seg]) * np.exp(-1j * par[:, 2])[seg]     # in the rectangle's frame
+    # distance of the nearest hull point to each rectangle corner (a column each)
+    corners = half[:, :1] * _CORNER_X + 1j * (half[:, 1:] * _CORNER_Y)       # (n, 4)
+    k = np.minimum.reduceat(np.abs(q[:, None] - corners[seg]), starts).argmax(axis=1)
+    sx = np.sign(half[:, 0] * _CORNER_X[k])
+    sy = np.sign(half[:, 1] * _CORNER_Y[k])
+    fx, fy = q.real * sx[seg], q.imag * sy[seg]           # cut corner now at (+, +)
     tol = 1.5
-    top = fx[np.abs(fy - hy) < tol]
-    right = fy[np.abs(fx - hx) < tol]
-    if len(top) == 0 or len(right) == 0:
-        return None
-    leg_x = hx - float(top.max())             # cut length along the side parallel to x
-    leg_y = hy - float(right.max())
-    corner = _from_frame(sx / _SQRT2, sy / _SQRT2, c, s)
-    leg = _from_frame(-sx, 0.0, c, s) if leg_x >= leg_y else _from_frame(0.0, -sy, c, s)
-    return _CornerSignature(corner=corner, leg=leg, alpha=alpha)
+    # the far end of the side parallel to x (y) short of the cut: the top (right) side's
+    # points within tol of it, their largest x (y); -inf if it has none
+    top = np.maximum.reduceat(np.where(np.abs(fy - half[seg, 1]) < tol, fx, -np.inf), starts)
+    right = np.maximum.reduceat(np.where(np.abs(fx - half[seg, 0]) < tol, fy, -np.inf),
+                                starts)
+    out: list[_CornerSignature | None] = []
+    for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
+                                                      top.tolist(), right.tolist(),
+                                                      strict=True):
+        if tj == -math.inf or rj == -math.inf:
+            out.append(None)
+            continue
+        cj, sj = math.cos(aj), math.sin(aj)
+        leg_x = hxj - tj                     # cut length along the side parallel to x
+        leg_y = hyj - rj
+        corner = _from_frame(sxj / _SQRT2, syj / _SQRT2, cj, sj)
+        leg = (_from_frame(-sxj, 0.0, cj, sj) if leg_x >= leg_y
+               else _from_frame(0.0, -syj, cj, sj))
+        out.append(_CornerSignature(corner=corner, leg=leg, alpha=aj))
+    return out
 
 
 def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:
@@ -162,6 +225,18 @@ class Locator:
             for name in cls.ranges:
                 if name not in FEATURES:
                     raise ValueError(f"class {cls.part}/{cls.pose}: unknown feature {name!r}")
+        # each class's ranges, cheapest feature first: the cascade's order of checks
+        self._checks: list[tuple[VisionClass, list[tuple[str, float, float]]]] = [
+            (cls, sorted(((n, lo, hi) for n, (lo, hi) in cls.ranges.items()),
+                         key=lambda r: GROUP_OF[r[0]]))
+            for cls in recipe.classes]
+        # The smoothed perimeter and the face's outline read every boundary pixel of the
+        # contour; without them only the chain's corners are kept (the same polygon: the
+        # same moments, hull and rectangle, fewer points to trace and sum).
+        self._full_chain = any(GROUP_OF[n] == GROUP_OF["perimeter_mm"]
+                               for cls in recipe.classes for n in cls.ranges) or (
+            recipe.orientation == "cut_corner"
+            and any(cls.mirrored is not None for cls in recipe.classes))
         self._signatures: dict[str, _CornerSignature] = {}
         if recipe.orientation == "cut_corner":
             for cls in recipe.classes:
@@ -178,10 +253,15 @@ class Locator:
         self._close = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (m.close_px, m.close_px))
                        if m.close_px > 1 else None)
         # Opening then closing reads the thresholded mask up to this far (px) from a pixel:
-        # bands of the image this far clear of foreground are left empty by them.
+        # regions of the image this far clear of foreground are left empty by them.
         reach = sum(2 * (k.shape[0] // 2) for k in (self._open, self._close) if k is not None)
         self._margin = reach + 1
+        # kernels symmetric about their centre: an image's mirror stays its mirror
+        self._mirror = all(k.shape[0] % 2 == 1 and k.shape[1] % 2 == 1
+                           and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
+                           for k in (self._open, self._close) if k is not None)
         self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
+        self._scratch = threading.local()         # per-thread frame-sized images, reused
 
     # -------------------------------------------------------------- images
 
@@ -196,42 +276,54 @@ class Locator:
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
-        return self._segment(_grey(image))[0]
+        return self._morph(self._threshold(_grey(image))[0].copy())
 
-    def _segment(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray, float | None]:
-        """Mask, the difference image it was cut from, and the level (None: adaptive)."""
-        mask, diff, level = self._threshold(img)
-        return self._morph(mask), self._diff(img) if diff is None else diff, level
+    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A frame-sized uint8 scratch image of this thread's, reused from frame to frame.
 
-    def _diff(self, img: np.ndarray) -> np.ndarray:
+        A fresh frame-sized array each frame costs more than the operation writing it when
+        the allocator hands the pages back and faults them in again (2-3x on the bench).
+        """
+        bufs: dict[str, np.ndarray] | None = getattr(self._scratch, "bufs", None)
+        if bufs is None:
+            bufs = self._scratch.bufs = {}
+        buf = bufs.get(name)
+        if buf is None or buf.shape != shape:
+            buf = bufs[name] = np.empty(shape, dtype=np.uint8)
+        return buf
+
+    def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
         """Dark parts on a bright belt -> bright: the golden image minus the frame."""
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
-            return cv2.subtract(golden, img)
-        return cv2.bitwise_not(img)
+            return cv2.subtract(golden, img, dst=dst)
+        return cv2.bitwise_not(img, dst=dst)
 
     def _threshold(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, float | None]:
         """The thresholded mask (before morphology), the difference image (None if it was
-        not needed: ``_diff`` makes it) and the level (None: adaptive)."""
+        not needed) and the level (None: adaptive). The images are this thread's scratch
+        images, valid until its next frame."""
         th = self.recipe.threshold
+        mask = self._buffer("mask", img.shape)
         if th.method == "fixed" and self.recipe.golden_image and self._below is not None \
                 and self._below.shape == img.shape:
             # the same mask as subtract-then-threshold, in one pass over the frame
-            return cv2.compare(img, self._below, cv2.CMP_LT), None, float(th.value)
-        diff = self._diff(img)
+            return cv2.compare(img, self._below, cv2.CMP_LT, dst=mask), None, float(th.value)
+        diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
-            _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
+            cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "otsu":
-            level, mask = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+            level, _ = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU,
+                                     dst=mask)
             if level < th.value:
                 level = float(th.value)
-                _, mask = cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY)
+                cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "adaptive":
             level = None
             block = max(3, int(th.block_px) | 1)
-            mask = cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
-                                         cv2.THRESH_BINARY, block, -th.c)
+            cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
+                                  cv2.THRESH_BINARY, block, -th.c, dst=mask)
         else:
             raise ValueError(f"unknown threshold method {th.method!r}")
         return mask, diff, level
@@ -243,248 +335,379 @@ class Locator:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
         return mask
 
-    def _contours(self, mask: np.ndarray) -> list[np.ndarray]:
-        """External contours of the opened and closed ``mask``, in ``findContours``' order.
+    def _rois(self, mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Rectangles (v0, v1, u0, u1) that hold all the foreground, each with a margin of
+        empty pixels wider than the morphology reaches (or the image's edge).
 
-        Most of a frame is empty belt, so the morphology and the contour search run only on
-        bands of rows (cut to their columns) around the foreground, each with a margin of
-        empty pixels wider than the morphology reaches: inside a band every pixel comes out
-        as on the whole frame, outside the bands nothing does. ``findContours`` lists the
-        contours last-found first, so the bands are searched bottom-up.
+        Rows with foreground are cut into bands where ``2 * margin`` empty rows part them,
+        then each band's columns likewise: most of a frame is empty belt.
         """
         h, w = mask.shape
         m = self._margin
-        rows = np.flatnonzero(cv2.reduce(mask, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S))
+        rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel().nonzero()[0]
         if len(rows) == 0:
             return []
-        cuts = np.flatnonzero(np.diff(rows) > 2 * m)
-        firsts = [int(rows[0])] + rows[cuts + 1].tolist()
-        lasts = rows[cuts].tolist() + [int(rows[-1])]
-        out: list[np.ndarray] = []
-        for a, b in zip(reversed(firsts), reversed(lasts), strict=True):
-            cols = np.flatnonzero(cv2.reduce(mask[a:b + 1], 0, cv2.REDUCE_SUM,
-                                             dtype=cv2.CV_32S))
-            r0, r1 = max(a - m, 0), min(b + m + 1, h)
-            c0, c1 = max(int(cols[0]) - m, 0), min(int(cols[-1]) + m + 1, w)
-            band = self._morph(mask[r0:r1, c0:c1])
-            cs, _ = cv2.findContours(band, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE,
-                                     offset=(c0, r0))
-            out.extend(cs)
+        out = []
+        for a, b in _runs(rows, 2 * m):
+            cols = cv2.reduce(mask[a:b + 1], 0, cv2.REDUCE_SUM,
+                              dtype=cv2.CV_32S).ravel().nonzero()[0]
+            v0, v1 = max(a - m, 0), min(b + m + 1, h)
+            out += [(v0, v1, max(c0 - m, 0), min(c1 + m + 1, w))
+                    for c0, c1 in _runs(cols, 2 * m)]
         return out
 
-    def locate(self, image: np.ndarray) -> LocateResult:
-        """Find, measure and classify every blob in ``image``."""
+    def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
+        """External contours of the opened and closed ``mask``, in ``findContours``' order
+        (as on the whole frame: by first point, last found first).
+
+        The morphology and the contour search run only on ``_rois``: inside each, every
+        pixel comes out as on the whole frame, outside them nothing does. The rectangles
+        are laid side by side in one small image (their margins keep them apart, as on the
+        frame), so a frame costs two morphology calls and one contour search however many
+        blobs it has. Where a rectangle meets the image's edge, which the morphology reads
+        as "nothing there to constrain", it gets a mirror image of itself as wide as the
+        margin: with a symmetric kernel each operation keeps the mirror a mirror, so up to
+        the edge every pixel comes out as on the frame. The mirrors are cleared before the
+        contour search (whose own border is empty, as at the image's edge).
+        """
+        h, w = mask.shape
+        rois = self._rois(mask)
+        if not rois:
+            return []
+        chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
+        morph = self._open is not None or self._close is not None
+        # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
+        # the morphology), which also keeps it one pixel clear of its neighbours
+        pad = self._margin if morph else 1
+        out: list[tuple[int, np.ndarray]] = []    # (whole frame's raster index of 1st point, c)
+        srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
+        starts: list[int] = []
+        shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
+        mirrors = []
+        x = height = 0
+        for v0, v1, u0, u1 in rois:
+            src = mask[v0:v1, u0:u1]
+            top = left = 0
+            if v0 == 0 or u0 == 0 or v1 == h or u1 == w:
+                top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
+                    pad * (u0 == 0), pad * (u1 == w)
+                if morph and not self._mirror:
+                    cs, _ = cv2.findContours(self._morph(src), cv2.RETR_EXTERNAL, chain,
+                                             offset=(u0, v0))
+                    out += [(c.item(1) * w + c.item(0), c) for c in cs]
+                    continue
+                src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
+                mirrors.append((x, top, bottom, left, right, src.shape))
+            srcs.append((x, src))
+            starts.append(x)
+            shifts.append(u0 - x - left + ((v0 - top) << 32))
+            x += src.shape[1]
+            height = max(height, src.shape[0])
+        if srcs:
+            packed = np.zeros((height, x), dtype=np.uint8)
+            for x0, src in srcs:
+                packed[:src.shape[0], x0:x0 + src.shape[1]] = src
+            if morph:
+                packed = self._morph(packed)
+            for x0, top, bottom, left, right, (sh, sw) in mirrors:
+                if top:
+                    packed[:top, x0:x0 + sw] = 0
+                if bottom:
+                    packed[sh - bottom:sh, x0:x0 + sw] = 0
+                if left:
+                    packed[:, x0:x0 + left] = 0
+                if right:
+                    packed[:, x0 + sw - right:x0 + sw] = 0
+            cs, _ = cv2.findContours(packed, cv2.RETR_EXTERNAL, chain)
+            for c in cs:
+                flat = c.view(np.int64)
+                flat += shifts[bisect.bisect_right(starts, c.item(0)) - 1]
+                out.append((c.item(1) * w + c.item(0), c))
+        # the whole frame's findContours lists contours by first point, last found first
+        out.sort(key=_first, reverse=True)
+        return [c for _, c in out]
+
+    # -------------------------------------------------------------- locate
+
+    def locate(self, image: np.ndarray, all_features: bool = False) -> LocateResult:
+        """Find, measure and classify every blob in ``image``.
+
+        ``all_features``: measure every feature of every blob (for tools that show them),
+        not only those the cascade needed (see the module docstring).
+        """
         t0 = time.perf_counter()
         img = _grey(image)
         mask, diff, level = self._threshold(img)
-        contours = self._contours(mask)
-        h, w = img.shape[:2]
+        full = all_features or self._full_chain
+        blobs = self._blobs(self._contours(mask, full), img.shape[:2], all_features, full=full)
+        # classes first; the blobs that need a face wait for one batch of fine outlines
+        waiting = [b for b in blobs if not b.det.reason and not self._classify(b)]
+        if waiting:
+            self._faces(waiting, img, diff, level)
+            for b in waiting:
+                self._classify(b)
         parts: list[Detection] = []
         rejected: list[Detection] = []
-        kept: list[np.ndarray] = []
-        for c, box, length in self._blobs(contours):
-            bu, bv, bw, bh = box
-            det, xy = self._measure(c, length)
-            if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h:
-                det.reason = "touches border"
-            elif det.features["area_mm2"] < self.recipe.min_area_mm2:
-                det.reason = "too small"
-            else:
-                if diff is None and self._signatures:    # the fine outline reads it
-                    diff = self._diff(img)
-                self._classify(det, c, xy, diff, level, box)
-            (rejected if det.reason else parts).append(det)
-            kept.append(c)
+        for b in blobs:
+            (rejected if b.det.reason else parts).append(b.det)
         ms = (time.perf_counter() - t0) * 1e3
-        return LocateResult(parts=parts, rejected=rejected, ms=ms, contours=kept)
+        return LocateResult(parts=parts, rejected=rejected, ms=ms,
+                            contours=[b.contour for b in blobs])
 
     def measure_blobs(self, image: np.ndarray) -> list[Detection]:
-        """Every blob's features, unclassified, measured exactly as ``locate`` measures them.
+        """Every blob's features, unclassified, measured exactly as ``locate`` measures them
+        (all of ``FEATURES``, as with ``all_features``).
 
         For tools that tune a recipe (``feeder recipe suggest``): one feature extractor for
         tuning and feeding. ``reason`` marks blobs ``locate`` would reject before
         classification ("touches border", "too small"); ``part`` is always None.
         """
         img = _grey(image)
-        contours = self._contours(self._threshold(img)[0])
-        h, w = img.shape[:2]
-        out: list[Detection] = []
-        for c, (bu, bv, bw, bh), length in self._blobs(contours):
-            det, _ = self._measure(c, length)
-            if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h:
-                det.reason = "touches border"
-            elif det.features["area_mm2"] < self.recipe.min_area_mm2:
-                det.reason = "too small"
-            out.append(det)
-        return out
+        blobs = self._blobs(self._contours(self._threshold(img)[0], True), img.shape[:2],
+                            all_features=True, full=True)
+        return [b.det for b in blobs]
 
     # -------------------------------------------------------------- per blob
 
-    def _blobs(self, contours: list[np.ndarray]
-               ) -> list[tuple[np.ndarray, tuple[int, int, int, int], float]]:
-        """The contours worth reporting (not specks), with their bounding boxes and
-        smoothed lengths in px (``_smooth_lengths``: all of a frame's in one pass)."""
-        min_px = self.recipe.min_area_mm2 / self.calibration.mm2_per_px2
-        kept = []
+    def _blobs(self, contours: list[np.ndarray], shape: tuple[int, int], all_features: bool,
+               full: bool = True) -> list[_Blob]:
+        """The contours worth reporting (not specks), measured as far as every blob is:
+        area, centroid (mm), the border and size rules; with ``all_features`` every feature
+        of every blob, the rejected ones too.
+
+        ``full``: the contours have every boundary pixel (else only the chain's corners).
+        The centroids go to mm in one call.
+        """
+        h, w = shape
+        s2 = self.calibration.mm2_per_px2
+        min_px = self.recipe.min_area_mm2 / s2
+        blobs: list[_Blob] = []
+        centres = []
         for c in contours:
             box = cv2.boundingRect(c)
-            if box[2] * box[3] >= min_px * 0.5:
-                kept.append((c, box))
-        lengths = _smooth_lengths([c for c, _ in kept])
-        return [(c, box, length) for (c, box), length in zip(kept, lengths, strict=True)]
+            if box[2] * box[3] < min_px * 0.5:
+                continue
+            bu, bv, bw, bh = box
+            mom = cv2.moments(c)
+            m00 = mom["m00"]
+            # The contour runs through the centres of the boundary pixels; by Pick's theorem
+            # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
+            area_px = abs(m00) + 1.0                # + boundary pixels / 2, below
+            if m00 != 0:
+                cu, cv = mom["m10"] / m00, mom["m01"] / m00
+            else:
+                cu, cv = (float(v) for v in c.reshape(-1, 2).mean(axis=0))
+            centres.append((cu, cv))
+            touches = bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
+            det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
+                            "touches border" if touches else "")
+            blobs.append(_Blob(c, box, mom, area_px, det, full))
+        if not blobs:
+            return blobs
+        steps = ([len(b.contour) for b in blobs] if full
+                 else _chain_steps([b.contour for b in blobs]))
+        for b, n in zip(blobs, steps, strict=True):
+            b.area_px += 0.5 * n
+            b.det.features["area_mm2"] = area = b.area_px * s2
+            if not b.det.reason and area < self.recipe.min_area_mm2:
+                b.det.reason = "too small"
+        xy = self.calibration.px_to_mm(np.array(centres)).tolist()
+        for b, (x, y) in zip(blobs, xy, strict=True):
+            b.det.x_mm, b.det.y_mm = x, y
+        if all_features:
+            for b in blobs:
+                for name in FEATURES:
+                    self._feature(b, name)
+        if self.recipe.orientation == "principal_axis":
+            for b in blobs:            # as before the cascade: the rejected ones' too
+                b.det.angle_deg = self._principal_angle(cv2.moments(self._contour_mm(b)))
+        return blobs
 
-    def _measure(self, contour: np.ndarray, smooth_length: float
-                 ) -> tuple[Detection, np.ndarray | None]:
-        """Features and centroid of one contour, and the contour in mm if already needed.
-        ``smooth_length`` is the contour's ``_smooth_lengths`` (px).
+    def _feature(self, b: _Blob, name: str) -> float:
+        """One feature of the blob, measuring its group (``features.GROUPS``) if not yet.
 
         The calibration is a similarity (scale, rotation, reflection), so lengths scale by
         ``mm_per_px``, areas by its square and the ratios and Hu invariants not at all:
-        shape features are measured on the pixel contour (cheaper) and scaled. Angles are
-        only ever taken from the contour mapped to mm, which is mapped only for blobs whose
-        angle is asked for (``_contour_mm``): most blobs never need it.
+        shape features are measured on the pixel contour (cheaper) and scaled.
         """
-        cal = self.calibration
-        s, s2 = cal.mm_per_px, cal.mm2_per_px2
-        mom = cv2.moments(contour)
-        m00 = mom["m00"]
-        area = abs(m00)
-        uv = contour.reshape(-1, 2)
-        # The contour runs through the centres of the boundary pixels; by Pick's theorem
-        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
-        area_px = area + 0.5 * len(uv) + 1.0
-        # A pixel staircase is up to 8 % longer than the edge it follows: measure the
-        # contour smoothed along itself instead, then move it out the half pixel to the
-        # blob's edge (which adds 2·π·0.5 to a closed convex outline).
-        perim = smooth_length + math.pi
-        if area > 0:
-            cu, cv = mom["m10"] / m00, mom["m01"] / m00
+        feats = b.det.features
+        v = feats.get(name)
+        if v is not None:
+            return v
+        s = self.calibration.mm_per_px
+        c, area_px = b.contour, b.area_px
+        group = GROUP_OF[name]
+        if group == GROUP_OF["hu1"]:
             # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
-            n20, n02, n11 = mom["nu20"], mom["nu02"], mom["nu11"]
-            hu1, hu2 = n20 + n02, (n20 - n02) * (n20 - n02) + 4 * n11 * n11
-        else:
-            cu, cv = (float(v) for v in uv.mean(axis=0))
-            hu1 = hu2 = 0.0
-        (_, _), (rw, rh), _ = cv2.minAreaRect(contour)
-        rw, rh = rw + 1.0, rh + 1.0
-        hull = cv2.convexHull(contour)
-        hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
-        feats = {
-            "area_mm2": area_px * s2,
-            "perimeter_mm": perim * s,
-            "circularity": 4 * math.pi * area_px / (perim * perim) if perim > 0 else 0.0,
-            "aspect": max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0,
-            "rectangularity": area_px / (rw * rh) if rw * rh > 0 else 0.0,
-            "solidity": min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0,
-            "hu1": float(hu1),
-            "hu2": float(hu2),
-        }
-        x, y = cal.px_to_mm(np.array([[cu, cv]]))[0]
-        det = Detection(part=None, pose=None, pickable=False, x_mm=float(x), y_mm=float(y),
-                        angle_deg=0.0, u_px=float(cu), v_px=float(cv), features=feats)
-        xy = None
-        if self.recipe.orientation == "principal_axis":
-            xy = self._contour_mm(contour)
-            det.angle_deg = self._principal_angle(cv2.moments(xy))
-        return det, xy
+            mom = b.mom
+            if mom["m00"] != 0:
+                n20, n02, n11 = mom["nu20"], mom["nu02"], mom["nu11"]
+                feats["hu1"] = float(n20 + n02)
+                feats["hu2"] = float((n20 - n02) * (n20 - n02) + 4 * n11 * n11)
+            else:
+                feats["hu1"] = feats["hu2"] = 0.0
+        elif group == GROUP_OF["perimeter_mm"]:
+            if b.length is None:
+                b.length = _smooth_length(c if b.full else _full_chain(c))
+            # A pixel staircase is up to 8 % longer than the edge it follows: measure the
+            # contour smoothed along itself instead, then move it out the half pixel to the
+            # blob's edge (which adds 2·π·0.5 to a closed convex outline).
+            perim = b.length + math.pi
+            feats["perimeter_mm"] = perim * s
+            feats["circularity"] = (4 * math.pi * area_px / (perim * perim)
+                                    if perim > 0 else 0.0)
+        elif group == GROUP_OF["aspect"]:
+            # the rectangle of the hull is the contour's (the hull is kept for the face)
+            (_, _), (rw, rh), _ = cv2.minAreaRect(self._hull(b))
+            rw, rh = rw + 1.0, rh + 1.0
+            feats["aspect"] = max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0
+            feats["rectangularity"] = area_px / (rw * rh) if rw * rh > 0 else 0.0
+        elif group == GROUP_OF["solidity"]:
+            hull = self._hull(b)
+            hull_area = cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1.0
+            feats["solidity"] = min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0
+        return feats[name]
 
-    def _contour_mm(self, contour: np.ndarray) -> np.ndarray:
+    def _in_ranges(self, b: _Blob, checks: list[tuple[str, float, float]]) -> bool:
+        """Whether every range of a class holds, measuring features only as far as needed."""
+        feats = b.det.features
+        for name, lo, hi in checks:
+            v = feats.get(name)
+            if v is None:
+                v = self._feature(b, name)
+            if not lo <= v <= hi:
+                return False
+        return True
+
+    @staticmethod
+    def _hull(b: _Blob) -> np.ndarray:
+        """The contour's convex hull, (k, 1, 2) pixels (measured once per blob)."""
+        if b.hull is None:
+            b.hull = cv2.convexHull(b.contour)
+        return b.hull
+
+    def _contour_mm(self, b: _Blob) -> np.ndarray:
         """The pixel contour mapped to belt mm (float32), for angles."""
-        return self.calibration.px_to_mm(contour.reshape(-1, 2)).astype(np.float32)
+        return self.calibration.px_to_mm(b.contour.reshape(-1, 2)).astype(np.float32)
 
-    def _fine_contour(self, diff: np.ndarray, level: float | None,
-                      box: tuple[int, int, int, int]) -> np.ndarray | None:
-        """The blob's outline in mm to a fraction of a pixel, for orientation.
+    def _faces(self, blobs: list[_Blob], img: np.ndarray, diff: np.ndarray | None,
+               level: float | None) -> None:
+        """Measure each blob's cut-corner signature (``_Blob.face``) on its outline to a
+        fraction of a pixel, all of a frame's blobs in one set of array operations.
 
         A binary contour moves in whole pixels, which limits the angle of a near-axis edge
-        to about 1°. Interpolating the difference image at ``_FINE``x and cutting it at
-        the same level puts the edge where the grey levels say it is. ``box`` is the
-        blob's bounding box (u, v, width, height) in pixels.
+        to about 1°. The grey levels say where the edge is: between each boundary pixel of
+        the contour (a recipe with faces keeps them all) and each of its 4-neighbours
+        outside the level, the difference image (interpolated linearly, as a bilinear image
+        is along that line) crosses the level at one point. Only the blob's own boundary is
+        read, so a neighbour in its box is no trouble. Without a level (adaptive threshold),
+        or if a blob has too few such points, the contours' pixels are used.
         """
-        if level is None:
-            return None
-        h, w = diff.shape
-        bu, bv, bw, bh = box
-        u0, v0 = max(bu - 2, 0), max(bv - 2, 0)
-        u1, v1 = min(bu + bw + 2, w), min(bv + bh + 2, h)
-        k = _FINE
-        up = cv2.resize(diff[v0:v1, u0:u1], ((u1 - u0) * k, (v1 - v0) * k),
-                        interpolation=cv2.INTER_LINEAR)
-        _, m = cv2.threshold(up, level, 255, cv2.THRESH_BINARY)
-        # SIMPLE keeps every vertex of the staircase: the hull and the extremes are intact
-        cs, _ = cv2.findContours(m, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        if not cs:
-            return None
-        best = cs[0] if len(cs) == 1 else max(cs, key=cv2.contourArea)
-        # (p + 0.5) / k - 0.5 + origin, folded: exact in floating point for k a power of 2
-        uv = best.reshape(-1, 2) * (1.0 / k) + np.array([u0 + (0.5 / k - 0.5),
-                                                       v0 + (0.5 / k - 0.5)])
-        return self.calibration.px_to_mm(uv)
+        contours = [b.contour for b in blobs]
+        uv = np.concatenate(contours).reshape(-1, 2)
+        counts = [len(c) for c in contours]
+        pts: np.ndarray = uv
+        if level is not None:
+            w = img.shape[1]
+            at = uv[:, 1] * w + uv[:, 0]          # inside the image: touching blobs are out
+            near = at[:, None] + np.array([1, -1, w, -w])        # the 4-neighbours, a row each
+            inside, around = self._diff_at(img, diff, at), self._diff_at(img, diff, near)
+            cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
+            i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
+            found = np.bincount(np.repeat(np.arange(len(blobs)), counts)[i],
+                                minlength=len(blobs))
+            if found.min() >= 3:
+                a = inside[i].astype(np.float64)
+                t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
+                pts = np.empty((len(i), 2))
+                pts[:, 0] = uv[i, 0] + t * _DU[k]
+                pts[:, 1] = uv[i, 1] + t * _DV[k]
+                counts = found.tolist()
+        xy = self.calibration.px_to_mm(pts).astype(np.float32)
+        ends = np.cumsum(counts).tolist()
+        sigs = _corner_signatures([xy[e - n:e] for e, n in zip(ends, counts, strict=True)])
+        for b, sig in zip(blobs, sigs, strict=True):
+            b.face, b.faced = sig, True
+
+    def _diff_at(self, img: np.ndarray, diff: np.ndarray | None, at: np.ndarray) -> np.ndarray:
+        """``_diff`` at flat pixel indices ``at`` (from the frame's if it was made)."""
+        if diff is not None:
+            return diff.ravel()[at]
+        golden = self._golden
+        if self.recipe.golden_image and golden is not None:
+            g = golden.ravel()[at].astype(np.int16)
+            return np.maximum(g - img.ravel()[at], 0).astype(np.uint8)
+        return 255 - img.ravel()[at]
 
     @staticmethod
     def _principal_angle(mom: dict[str, float]) -> float:
         a = 0.5 * math.atan2(2 * mom["mu11"], mom["mu20"] - mom["mu02"])
         return wrap_deg(math.degrees(a), 180.0)
 
-    def _classify(self, det: Detection, contour: np.ndarray, xy: np.ndarray | None,
-                  diff: np.ndarray | None, level: float | None,
-                  box: tuple[int, int, int, int]) -> None:
-        """First class whose ranges (and face, for chiral parts) fit; else a reason.
+    def _classify(self, b: _Blob) -> bool:
+        """First class whose ranges (and face, for chiral parts) fit; else a reason. False
+        (nothing decided) if a chiral class fits but the blob's face is not measured yet:
+        ``_faces`` measures it, then this runs again.
 
-        The contour in mm (``xy``, None if not mapped yet) and the fine outline are made
-        only when an angle or a face is asked for.
+        Classes are tried in the recipe's order, each range cheapest first, so a feature
+        is measured only when a class still fits without it.
         """
-        feats = det.features
-        matches = [c for c in self.recipe.classes if _in_ranges(c, feats)]
-        if not matches:
-            det.reason = "touching parts / no class"
-            return
+        det = b.det
         chosen: VisionClass | None = None
-        faces: dict[str, tuple[float, bool] | None] = {}    # part -> (angle, mirrored)
-        for cls in matches:
+        looked = False                       # a face was asked for
+        for cls, checks in self._checks:
+            if not self._in_ranges(b, checks):
+                continue
             if cls.mirrored is None:
                 chosen = cls
-                det.angle_deg = self._symmetric_angle(det, contour, xy)
+                det.angle_deg = self._symmetric_angle(b)
                 break
-            sig = self._signatures.get(cls.part) if self.recipe.orientation == "cut_corner" \
+            model = self._signatures.get(cls.part) if self.recipe.orientation == "cut_corner" \
                 else None
-            if sig is None:
+            if model is None:
                 chosen = cls                  # no way to tell the faces apart: trust the class
                 break
-            if cls.part not in faces:
-                fxy = self._fine_contour(diff, level, box) if diff is not None else None
-                if fxy is None:
-                    fxy = xy if xy is not None else self._contour_mm(contour)
-                faces[cls.part] = self._cut_corner(sig, fxy)
-            oriented = faces[cls.part]
+            if not b.faced:
+                return False
+            looked = True
+            oriented = b.oriented.get(cls.part, False)
+            if oriented is False:
+                oriented = b.oriented[cls.part] = self._orient(model, b.face)
             if oriented is None:
                 continue
             angle, mirrored = oriented
-            feats["mirrored"] = 1.0 if mirrored else 0.0
+            det.features["mirrored"] = 1.0 if mirrored else 0.0
             if mirrored == cls.mirrored:
                 chosen = cls
                 det.angle_deg = angle
                 break
         if chosen is None:
-            det.reason = "no class (face)"
-            return
-        det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
+            det.reason = "no class (face)" if looked else "touching parts / no class"
+        else:
+            det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
+        return True
 
-    def _symmetric_angle(self, det: Detection, contour: np.ndarray,
-                         xy: np.ndarray | None) -> float:
+    def _symmetric_angle(self, b: _Blob) -> float:
         """Angle of a class without a face to tell: its long axis if it has one, else 0."""
         o = self.recipe.orientation
         if o == "none":
             return 0.0
-        if o == "principal_axis" or det.features["aspect"] > _ELONGATED:
-            return self._principal_angle(cv2.moments(
-                xy if xy is not None else self._contour_mm(contour)))
+        if o == "principal_axis":
+            return b.det.angle_deg            # measured with the blob
+        if self._feature(b, "aspect") > _ELONGATED:
+            return self._principal_angle(cv2.moments(self._contour_mm(b)))
         return 0.0
 
     @staticmethod
     def _cut_corner(model: _CornerSignature, xy: np.ndarray) -> tuple[float, bool] | None:
         """Angle (deg) and face at which the model outline matches the blob, or None."""
-        obs = _corner_signature(np.asarray(xy, dtype=float).reshape(-1, 2))
+        return Locator._orient(model, _corner_signature(np.asarray(xy, dtype=float)
+                                                        .reshape(-1, 2)))
+
+    @staticmethod
+    def _orient(model: _CornerSignature, obs: _CornerSignature | None
+                ) -> tuple[float, bool] | None:
+        """Angle (deg) and face at which the model's signature matches the blob's."""
         if obs is None:
             return None
         mirrored = (_cross(model.corner, model.leg) * _cross(obs.corner, obs.leg)) < 0
@@ -531,47 +754,81 @@ def _label(out: np.ndarray, text: str, at: tuple[int, int], dy: int,
                 cv2.LINE_AA)
 
 
-def _smooth_lengths(contours: list[np.ndarray], window: int = 5) -> list[float]:
-    """Length of each closed pixel contour after a circular moving average of its points.
+def _full_chain(contour: np.ndarray) -> np.ndarray:
+    """The ``CHAIN_APPROX_NONE`` contour of a ``CHAIN_APPROX_SIMPLE`` one: each segment
+    between two corners is a straight horizontal, vertical or diagonal run of pixels."""
+    pts = contour.reshape(-1, 2)
+    step = np.roll(pts, -1, axis=0) - pts
+    n = np.abs(step).max(axis=1)
+    if len(pts) == 1 or not n.all():
+        return contour
+    at = np.repeat(np.arange(len(pts)), n)
+    k = np.arange(len(at)) - np.repeat(np.cumsum(n) - n, n)       # steps into the segment
+    return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
 
-    All of a frame's contours go through one set of array operations (one per contour
-    cost more than the arithmetic): each is padded with its own wrap-around, the running
-    sums run over all of them, and each length is summed over its own slice. The running
-    sums are exact integers, so every window mean, difference and length is the same
-    float as when each contour is done on its own.
+
+def _first(item: tuple[int, np.ndarray]) -> int:
+    return item[0]
+
+
+def _chain_steps(contours: list[np.ndarray]) -> list[int]:
+    """Points of the full 8-connected chain (``CHAIN_APPROX_NONE``) of closed contours
+    given by their ``CHAIN_APPROX_SIMPLE`` vertices: each segment between two vertices is
+    a straight horizontal, vertical or diagonal run of max(|du|, |dv|) steps. All the
+    contours in one set of array operations."""
+    sizes = [len(c) for c in contours]
+    pts = np.concatenate(contours).reshape(-1, 2)
+    ends = np.cumsum(sizes)
+    nxt = np.empty_like(pts)
+    nxt[:-1] = pts[1:]
+    nxt[ends - 1] = pts[ends - sizes]             # each contour closes on its first point
+    steps = np.abs(nxt - pts).max(axis=1)
+    out = np.add.reduceat(steps, ends - sizes).tolist()
+    return [n if size > 1 else 1 for n, size in zip(out, sizes, strict=True)]
+
+
+def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
+    first, last = int(idx[0]), int(idx[-1])
+    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
+        return [(first, last)]
+    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
+    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
+    lasts = idx[cuts].tolist() + [int(idx[-1])]
+    return list(zip(firsts, lasts, strict=True))
+
+
+_STRIDES: dict[int, np.ndarray] = {}        # n -> the order visiting a closed n-chain by
+                                            # steps of _WINDOW points
+
+
+def _smooth_length(contour: np.ndarray, window: int = _WINDOW) -> float:
+    """Length of a closed pixel contour after a circular moving average of its points.
+
+    The averaged points' steps are ``(p[i + window] - p[i]) / window`` (neighbouring windows
+    differ by one point in, one out), so the length is the sum of the distances between
+    points ``window`` apart: the perimeter of the polygon that visits the contour
+    ``window`` points at a time (one closed tour when n and ``window`` are coprime, else
+    ``window`` of them), which ``cv2.arcLength`` measures in one call. A contour shorter
+    than two windows keeps its plain length.
     """
-    out = [0.0] * len(contours)
-    h = window // 2
-    pieces: list[np.ndarray] = []
-    starts: list[int] = []
-    sizes: list[int] = []
-    at = 0
-    for i, c in enumerate(contours):
-        uv = c.reshape(-1, 2)
-        n = len(uv)
-        if n < 2 * window:
-            out[i] = float(cv2.arcLength(uv.astype(np.float32), True))
-            continue
-        pieces += [uv[-h - 1:], uv, uv[:h]]
-        starts.append(at)
-        sizes.append(n)
-        at += n + window
-    if not starts:
-        return out
-    c = np.concatenate(pieces).cumsum(axis=0)
-    sm = (c[window:] - c[:-window]) / window      # contour j's means: sm[start_j + i]
-    d = np.empty_like(sm)                         # sm[i + 1] - sm[i], closing back to sm[0]
-    np.subtract(sm[1:], sm[:-1], out=d[:-1])
-    first = np.array(starts)
-    last = first + np.array(sizes) - 1
-    d[last] = sm[first] - sm[last]
-    step = np.hypot(d[:, 0], d[:, 1])
-    j = 0
-    for i, cnt in enumerate(contours):
-        if len(cnt) >= 2 * window:
-            out[i] = float(step[starts[j]:starts[j] + sizes[j]].sum())
-            j += 1
-    return out
+    uv = contour.reshape(-1, 2)
+    n = len(uv)
+    if n < 2 * window:
+        return float(cv2.arcLength(uv, True))
+    order = _STRIDES.get(n)
+    if order is None:
+        if len(_STRIDES) > 4096:
+            _STRIDES.clear()
+        if n % window:
+            order = _STRIDES[n] = np.arange(n) * window % n
+        else:                               # window tours, one a row
+            order = _STRIDES[n] = np.arange(n).reshape(-1, window).T.copy()
+    # gather (u, v) pairs as one int64 each: numpy's gather of rows is far slower
+    tours = uv.view(np.int64).ravel()[order].view(np.int32)
+    if order.ndim == 1:
+        return float(cv2.arcLength(tours.reshape(-1, 2), True)) / window
+    return sum(float(cv2.arcLength(t.reshape(-1, 2), True)) for t in tours) / window
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -590,11 +847,3 @@ def _face_up(part: PartSpec) -> str:
         if not pose.mirror and pose.silhouette is None:
             return name
     return next(iter(part.poses))
-
-
-def _in_ranges(cls: VisionClass, feats: dict[str, float]) -> bool:
-    for name, (lo, hi) in cls.ranges.items():
-        v = feats.get(name)
-        if v is None or not (lo <= v <= hi):
-            return False
-    return True
