@@ -37,8 +37,8 @@ class TriangleLocator(Locator):
             if len(outline) == 3 and cls.part not in self._models:
                 self._models[cls.part] = _labelled(outline)
 
-    def locate(self, image: np.ndarray) -> LocateResult:
-        result = super().locate(image)
+    def locate(self, image: np.ndarray, all_features: bool = False) -> LocateResult:
+        result = super().locate(image, all_features)
         keep: list[Detection] = []
         for det in result.parts:
             model = self._models.get(det.part or "")
