@@ -55,6 +55,24 @@ class PickResult:
     belt_x_mm: float = 0.0
 
 
+@dataclass(frozen=True)
+class Held:
+    """What the robot controller says its gripper holds, asked after a reply was lost.
+
+    The cell sends the part's id with every ``pick``; the controller keeps the id of the
+    part it gripped until it lets it go, and the id of the last part it released at a
+    place pose. So after a link cut at any step of a pick-and-place the cell can tell
+    "picked, reply lost" from "never picked" and "placed, reply lost" from "still held"."""
+
+    part_id: int | None = None          # the commanded part in the gripper; None: nothing
+    unknown: bool = False               # something is gripped that no pick of ours gripped
+    last_placed: int | None = None      # the last part released at a place pose
+
+    @property
+    def empty(self) -> bool:
+        return self.part_id is None and not self.unknown
+
+
 @dataclass
 class IoChange:
     signal: str
@@ -121,7 +139,12 @@ class Robot(Protocol):
     def recover(self) -> Job:
         """Run the controller's recovery program and re-enable power (after a servo error)."""
 
-    def holding(self) -> bool: ...
+    def holding(self) -> bool:
+        """Cheap local view (the last reply's word); after a lost reply ask ``held()``."""
+
+    def held(self) -> Job:
+        """Ask the controller what the gripper holds; result ``Held``. On a controller
+        still finishing a motion whose reply was lost, the answer comes after the motion."""
 
 
 class RobotPosition(Protocol):
