@@ -81,11 +81,18 @@ class Cell:
             raise CellCommandError("no scenario loaded")
         if self.estop_pressed():
             raise CellCommandError("the e-stop is pressed: release it first")
-        held = py_trees.blackboard.Blackboard.storage.get("/retrieve/part")
+        storage = py_trees.blackboard.Blackboard.storage
+        # this cell's own last run only (the blackboard is process-wide)
+        ran = self.ctx is not None
+        held = storage.get("/retrieve/part") if ran else None
+        phase = storage.get("/retrieve/phase") if ran else None
         self.ctx = self._make_ctx(self.scenario)
-        if held is not None and held.type in self.scenario.parts and self.hal.robot.holding():
-            # stopped (an e-stop) between pick and place: the new run places it first
-            py_trees.blackboard.Blackboard.storage["/retrieve/part"] = held
+        if held is not None and held.type in self.scenario.parts and (
+                phase is not None or self.hal.robot.holding()):
+            # stopped (an e-stop) between pick and place, or with a reply lost: the new
+            # run settles with the controller and places the part first
+            storage["/retrieve/part"] = held
+            storage["/retrieve/phase"] = phase or "held"
         if self.stats.started_at is None:
             self.stats.started_at = self.clock.now()
         self.feeding = build_feeding(self.ctx)

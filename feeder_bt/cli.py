@@ -17,6 +17,11 @@ TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emul
          "users_cmd")
 
 
+#: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
+#: the world or the trees, never the operator's doing): docs/faults.md
+EXIT_ACCOUNTING = 4
+
+
 def _positive(text: str) -> float:
     try:
         v = float(text)
@@ -98,6 +103,13 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{sum(p['retrieved'].values())} {json.dumps(p['retrieved'])}, "
           f"{report['parts_per_minute']:.1f} parts/min, located {p['located']}, "
           f"missed {p['missed']}, lost {p['lost']}")
+    problems = p.get("accounting") or []
+    if problems:
+        for prob in problems[:10]:
+            where = prob.get("last_place") or " and ".join(prob.get("places", []))
+            print(f"ACCOUNTING: part {prob['id']} ({prob['type']}) {prob['kind']}: "
+                  f"{where} at t={prob['t']:g} s", file=sys.stderr)
+        return EXIT_ACCOUNTING
     if report["fault"]:
         print(f"FAULT: {report['fault']}", file=sys.stderr)
         return 3

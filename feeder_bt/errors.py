@@ -54,6 +54,12 @@ class CommsLost(HalError):
     kind = "comms_lost"
 
 
+class UnknownPart(HalError):
+    """The gripper holds something no pick of this run gripped: the operator's to remove."""
+
+    kind = "unknown_part"
+
+
 class GrabFailed(HalError):
     kind = "grab_failed"
 

@@ -52,6 +52,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                                                             else {})}
     total = sum(retrieved.values())
     world = getattr(cell.hal, "world", None)
+    if world is not None:
+        world.audit()                     # the final check, part by part
     parts: dict[str, Any] = {
         "retrieved": retrieved,
         "located": s.counts["located"],
@@ -63,7 +65,12 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "recirculated": world.counts["recirculated"] if world else None,
         "misoriented": world.counts["misoriented"] if world else None,
         "lost": world.lost() if world else None,
+        "duplicated": world.duplicated() if world else None,
+        "misplaced": dict(world.misplaced_by_type) if world else None,
+        "dropped": s.counts["dropped"],
     }
+    if world is not None and world.problems:
+        parts["accounting"] = world.problems[:50]      # each part named, id and place
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario) if cell.scenario
                               else (0.0, 0.0))
     report: dict[str, Any] = {

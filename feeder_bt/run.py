@@ -142,6 +142,21 @@ def _operator(cell: Cell) -> None:
         cell.start()
 
 
+def _watch_accounting(cell: Cell) -> Callable[[], bool]:
+    """On the simulated cell: every part the world finds lost or duplicated is an event in
+    the cell's log, and ends the run (``broken()``); elsewhere nothing to watch."""
+    world = getattr(cell.hal, "world", None)
+    if world is None:
+        return lambda: False
+
+    def tell(problem: dict[str, Any]) -> None:
+        cell.stats.emit(cell.clock.now(), f"part_{problem['kind']}",
+                        **{k: v for k, v in problem.items() if k != "kind"})
+
+    world.listeners.append(tell)
+    return lambda: cell.hal.world.broken      # type: ignore[attr-defined]
+
+
 def final_speeds() -> dict[str, float | None]:
     """The speeds the trees followed last (the scenario's, the adjuster's or an operator's)."""
     import py_trees
@@ -199,6 +214,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     if not isinstance(clock, SimClock):
         clock = RealClock()
     cell = Cell(cell_spec, hal, clock)
+    broken = _watch_accounting(cell)
     if log:
         _start_log(log, opts, scenario, cell)
     ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
@@ -234,8 +250,9 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             cell.start()
         try:
             ticker.run(until=None if duration is None else t_start + duration,
-                       stop=(lambda: request.requested) if ui else
-                       (lambda: request.requested or cell.state is CellState.STOPPED
+                       stop=(lambda: request.requested or broken()) if ui else
+                       (lambda: request.requested or broken()
+                        or cell.state is CellState.STOPPED
                         or (cell.state is CellState.FAULT and not _operator_resets(cell, plan))),
                        every=_chain(every, (lambda: _operator(cell)) if plan else None))
         except KeyboardInterrupt:

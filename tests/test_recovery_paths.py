@@ -25,7 +25,7 @@ def _place_fails_holding(error: Exception):
     ctx.queue.put(part(400.0))
     tick(root, ctx)
     finish(ctx.hal, "robot", "pick")
-    ctx.hal.robot.held = True
+    ctx.hal.robot.gripping = True
     tick(root, ctx)
     fail(ctx.hal, "robot", "place", error)
     return ctx, root
@@ -42,7 +42,7 @@ def test_servo_timeout_during_place_recovers_and_places_the_held_part():
     assert robot_calls(ctx) == ["robot.pick", "robot.place", "robot.recover",
                                 "robot.move_safe", "robot.place"]
     finish(ctx.hal, "robot", "place")
-    ctx.hal.robot.held = False
+    ctx.hal.robot.gripping = False
     tick(root, ctx)
     assert ctx.stats.retrieved["lens"] == 1
     assert ctx.stats.faults["servo_timeout"] == 1
@@ -59,7 +59,7 @@ def test_lost_robot_link_backs_off_then_places_the_held_part_and_goes_on():
     tick(root, ctx, n=10)
     assert robot_calls(ctx) == ["robot.pick", "robot.place", "robot.place"]
     finish(ctx.hal, "robot", "place")
-    ctx.hal.robot.held = False
+    ctx.hal.robot.gripping = False
     tick(root, ctx)
     assert ctx.stats.recoveries["comms_lost"] == 1
     assert ctx.stats.retrieved["lens"] == 1
@@ -160,7 +160,7 @@ def test_a_part_held_through_an_estop_is_placed_first_after_the_restart():
     rig.cell.ctx.queue.put(held)
     rig.tick(2)
     finish(rig.hal, "robot", "pick")
-    rig.hal.robot.held = True                  # gripped; the place is under way
+    rig.hal.robot.gripping = True                  # gripped; the place is under way
     rig.tick()
     assert pending(rig.hal, "robot", "place")
     rig.hal.io.values["estop"] = True
@@ -173,8 +173,8 @@ def test_a_part_held_through_an_estop_is_placed_first_after_the_restart():
     rig.cell.ctx.queue.put(part(1000.0, 300.0))
     rig.tick()
     moves = [m for m in rig.hal.methods()[n:] if m.startswith("robot.") and "speed" not in m]
-    assert moves == ["robot.place"]
-    rig.hal.robot.held = False
+    assert moves == ["robot.held", "robot.place"]     # the controller's word, then the place
+    rig.hal.robot.gripping = False
     finish(rig.hal, "robot", "place")
     rig.tick()
     assert rig.cell.stats.retrieved["lens"] == 1          # the held part, counted once
@@ -183,7 +183,7 @@ def test_a_part_held_through_an_estop_is_placed_first_after_the_restart():
 
 def test_a_part_the_run_did_not_pick_goes_to_the_operator():
     ctx = make_ctx()
-    ctx.hal.robot.held = True                  # e.g. put in the gripper by hand
+    ctx.hal.robot.gripping = True                  # e.g. put in the gripper by hand
     root = retrieve.build(ctx)
     ctx.queue.put(part(1000.0, 100.0))
     tick(root, ctx)

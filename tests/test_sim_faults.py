@@ -21,7 +21,7 @@ from feeder_bt.errors import (
     MissedGrab,
     ServoTimeout,
 )
-from feeder_bt.hal.interfaces import PickTarget, Pose
+from feeder_bt.hal.interfaces import Held, PickTarget, Pose
 from feeder_bt.hal.mock.hal import MockHal
 from feeder_bt.hal.sim.devices import make_sim_hal
 from feeder_bt.hal.sim.faults import POWER_OFF, FaultInjector, inject_faults
@@ -205,40 +205,47 @@ def test_scripted_pick_faults_arm_the_next_pick(rig):
 # ---------------------------------------------------------------------------- links
 
 
-def test_adept_link_drop_fails_the_pick_in_flight_and_refuses_calls(rig):
+def test_adept_link_drop_loses_the_picks_reply_but_the_robot_finishes_the_pick(rig):
     drop_at = WARM_S + 0.1
     r = rig(plan(scripted=[ScriptedFault(at_s=drop_at, kind="comms_lost", device="adept",
                                          outage_s=2.0)]))
     warm(r)
     target = r.target()
-    assert r.grip_time(target) > drop_at
+    t_grip = r.grip_time(target)
+    assert t_grip > drop_at
     job = r.hal.robot.pick(target)
     r.to(drop_at - EPS, dt=0.01)
     assert not job.done
     enc_before = r.hal.robot_position.belt_encoder()
     r.to(drop_at)
+    # the cell hears nothing more, but the controller goes on with the pick
     assert job.state is JobState.FAILED and isinstance(job.error, CommsLost)
-    assert target.part_id in r.world.on_horizontal and r.world.robot_busy is None
+    assert target.part_id in r.world.on_horizontal and r.world.robot_busy is not None
     assert r.inj.injected == {"comms_lost": 1} and r.inj.log[0]["device"] == "adept"
+    r.to(t_grip)
+    assert r.world.gripper == target.part_id and r.world.robot_busy.done
     # reads keep their last value while the belt moves on
     r.to(drop_at + 1.0, dt=0.1)
     frozen = r.hal.robot_position.belt_encoder()
     assert frozen == pytest.approx(enc_before, abs=20 * 150 * 0.02)   # within one step
     assert r.world.robot_count() != frozen
     for call in (lambda: r.hal.robot.move_safe(), lambda: r.hal.robot.recover(),
-                 lambda: r.hal.robot.set_speed(80)):
+                 lambda: r.hal.robot.set_speed(80), lambda: r.hal.robot.held()):
         j = call()
         assert j.state is JobState.FAILED and isinstance(j.error, CommsLost)
     r.to(drop_at + 2.0 - EPS, dt=0.01)
     assert isinstance(r.hal.robot.move_safe().error, CommsLost)
     r.to(drop_at + 2.0)
     assert r.hal.robot_position.belt_encoder() == r.world.robot_count()
+    # back: the controller says what it gripped, by the id the pick carried
+    held = r.hal.robot.held()
+    assert held.ok and held.result == Held(target.part_id, False, None)
     move = r.hal.robot.move_safe()
     r.to(r.clock.now() + 2.0)
     assert move.ok and r.inj.injected == {"comms_lost": 1}
 
 
-def test_adept_link_drop_during_a_place_keeps_the_part_in_the_gripper(rig, lenses):
+def test_adept_link_drop_during_a_place_loses_the_reply_and_the_part_is_placed(rig, lenses):
     r = rig()
     warm(r)
     target = r.target()
@@ -253,13 +260,15 @@ def test_adept_link_drop_during_a_place_keeps_the_part_in_the_gripper(rig, lense
     place = r.hal.robot.place(Pose(spec.x, spec.y))
     r.to(t_place + 0.05, dt=0.01)
     assert place.state is JobState.FAILED and isinstance(place.error, CommsLost)
-    assert r.world.gripper == target.part_id and r.hal.robot.holding()
-    assert r.world.parts[target.part_id].where == "gripper"
+    assert r.world.gripper == target.part_id             # still on its way
+    asked = r.hal.robot.held()
+    assert isinstance(asked.error, CommsLost)              # nobody to ask yet
     r.to(t_place + 0.05 + 3.0)
-    again = r.hal.robot.place(Pose(spec.x, spec.y))
-    r.to(r.clock.now() + 2.0)
-    assert again.ok and r.world.gripper is None
+    assert r.world.gripper is None
     assert r.world.parts[target.part_id].where == "placed"
+    held = r.hal.robot.held()
+    assert held.ok and held.result == Held(None, False, target.part_id)
+    assert r.world.misplaced_by_type == {}
 
 
 def test_galil_link_drop_fails_notifications_but_the_belts_run_on(rig):

@@ -126,7 +126,7 @@ def init_blackboard(scenario: Scenario) -> None:
     py_trees.blackboard.Blackboard.clear()
     bb = py_trees.blackboard.Client(name="cell")
     for key in ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct",
-                "/present/request", "/present/completed", "/retrieve/part",
+                "/present/request", "/present/completed", "/retrieve/part", "/retrieve/phase",
                 "/retrieve/error", "/faults/escalate", "/locate/frame", "/locate/result",
                 "/locate/found", "/locate/error", "/present/error", "/present/hold"):
         bb.register_key(key=key, access=Access.WRITE)
@@ -136,6 +136,7 @@ def init_blackboard(scenario: Scenario) -> None:
     bb.set("/present/request", None)
     bb.set("/present/completed", 0)
     bb.set("/retrieve/part", None)
+    bb.set("/retrieve/phase", None)    # what the robot was last told to do with the part
     bb.set("/retrieve/error", None)
     bb.set("/locate/error", None)      # read by the fallbacks even when no job ever failed
     bb.set("/present/error", None)
@@ -326,9 +327,13 @@ class Escalate(Leaf):
                 and stats.attempts[self.key] < self.max_attempts
                 and self.bb.get("/faults/escalate") is None):
             if stats.counted.get(self.key) is not err:
-                stats.faults[err.kind] += 1
                 stats.counted[self.key] = err
-                stats.emit(self.ctx.now(), "fault", kind=err.kind, message=str(err))
+                if stats.pending.get(self.key) == err.kind:     # the same outage, still
+                    stats.emit(self.ctx.now(), "retry_failed", kind=err.kind,
+                               message=str(err), attempt=stats.attempts[self.key])
+                else:
+                    stats.faults[err.kind] += 1
+                    stats.emit(self.ctx.now(), "fault", kind=err.kind, message=str(err))
             stats.retrying(self.key, err.kind)
             self.feedback_message = f"{err}: starting over"
             return Status.SUCCESS

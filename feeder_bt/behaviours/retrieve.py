@@ -1,12 +1,18 @@
 """Part retrieval: choose the next part, check it is not too far, pick it (tracking the
-belt), place it, count it."""
+belt), place it, count it.
+
+The cell records what it told the robot to do with the part (``/retrieve/phase``: "pick",
+"held", "place") before each command leaves, so that after a lost reply ``Reconcile`` can
+ask the controller what the gripper holds (``Robot.held``) and settle where the part
+really is: still on the belt, in the gripper, or placed."""
 
 from __future__ import annotations
 
 from py_trees.common import Status
 
 from ..encoder import diff
-from ..hal.interfaces import PickTarget, Pose
+from ..errors import HalError, UnknownPart
+from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
 from ..parts import Part
 from .common import Ctx, JobLeaf, Leaf, client
@@ -55,6 +61,18 @@ class NextPart(Leaf):
         return Status.SUCCESS
 
 
+PHASE = "/retrieve/phase"
+
+
+def count_retrieved(ctx: Ctx, part: Part, **data: object) -> None:
+    """The part is at its place pose: count it, once."""
+    stats = ctx.stats
+    stats.retrieved[part.type] += 1
+    stats.last_retrieved = part.type
+    stats.count("retrieved")
+    stats.emit(ctx.now(), "retrieved", id=part.id, type=part.type, **data)
+
+
 class PartJob(JobLeaf):
     """A robot job about the part the retriever chose (``/retrieve/part``)."""
 
@@ -62,7 +80,7 @@ class PartJob(JobLeaf):
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part",))
+        self.bb = client(self, read=("/retrieve/part",), write=(PHASE,))
 
     @property
     def part(self) -> Part:
@@ -74,16 +92,27 @@ class Pick(PartJob):
         part = self.part
         spec = self.ctx.scenario.parts[part.type]
         self.feedback_message = f"picking part {part.id}"
+        self.bb.set(PHASE, "pick")          # recorded before the command leaves
         return self.ctx.hal.robot.pick(PickTarget(
             part_id=part.id, x_mm=part.x_mm, y_mm=part.y_mm, angle_deg=part.angle_deg,
             latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
             tool_offset=tuple(spec.tool_offset)))
+
+    def on_success(self, result: object) -> Status:
+        self.bb.set(PHASE, "held")
+        return Status.SUCCESS
+
+    def on_failure(self, error: HalError) -> Status:
+        if error.kind != "comms_lost":      # the controller's own word: nothing gripped
+            self.bb.set(PHASE, None)
+        return super().on_failure(error)
 
     def terminate(self, new_status: Status) -> None:
         was_running = self.status is Status.RUNNING and self.job is not None and not self.job.done
         super().terminate(new_status)
         if new_status is Status.INVALID and was_running:
             # pre-empted (pause, stop) before the grip: the part is still on the belt
+            self.bb.set(PHASE, None)
             self.ctx.queue.put_front(self.part)
 
 
@@ -92,6 +121,7 @@ class Place(PartJob):
         part = self.part
         place = self.ctx.scenario.parts[part.type].place
         rz = -part.angle_deg if place.orient else 0.0
+        self.bb.set(PHASE, "place")
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))
 
     def terminate(self, new_status: Status) -> None:
@@ -101,13 +131,76 @@ class Place(PartJob):
             self.on_success(self.job.result)      # pre-empted, but the part was placed
 
     def on_success(self, result: object) -> Status:
-        part = self.part
-        stats = self.ctx.stats
-        stats.retrieved[part.type] += 1
-        stats.last_retrieved = part.type
-        stats.count("retrieved")
-        stats.emit(self.ctx.now(), "retrieved", id=part.id, type=part.type)
+        self.bb.set(PHASE, None)
+        count_retrieved(self.ctx, self.part)
         return Status.SUCCESS
+
+    def on_failure(self, error: HalError) -> Status:
+        if error.kind != "comms_lost":      # e.g. a servo fault: the part is still held
+            self.bb.set(PHASE, "held")
+        return super().on_failure(error)
+
+
+class Reconcile(PartJob):
+    """After a lost reply (or a restart), ask the controller what the gripper holds and
+    settle where the part the cell commanded really is:
+
+    - the gripper holds it: ``held`` (the next step places it);
+    - the pick's reply was lost and nothing is held: it was never gripped, so it is still
+      on the belt: back to the front of the queue (too far by now, it is dropped there);
+    - a place's reply was lost and the controller released it at the place pose: counted
+      as retrieved; released anywhere else: counted as dropped (the world has it);
+    - the gripper holds something no pick of ours gripped: ``UnknownPart``."""
+
+    def start(self) -> Job:
+        self.feedback_message = "asking the robot what it holds"
+        return self.ctx.hal.robot.held()
+
+    def on_success(self, result: object) -> Status:
+        held: Held = result                   # type: ignore[assignment]
+        part = self.part
+        phase = self.bb.get(PHASE)
+        stats = self.ctx.stats
+        if held.unknown or (held.part_id is not None
+                            and (part is None or held.part_id != part.id)):
+            what = "something" if held.part_id is None else f"part {held.part_id}"
+            return self.on_failure(UnknownPart(
+                f"the gripper holds {what}, which this run did not pick: remove it"))
+        if held.part_id is not None:
+            if phase != "held":
+                stats.emit(self.ctx.now(), "reconciled", id=part.id, found="in the gripper",
+                           phase=phase)
+            self.bb.set(PHASE, "held")
+            self.feedback_message = f"part {part.id} is in the gripper"
+            return Status.SUCCESS
+        if phase == "pick":
+            self.ctx.queue.put_front(part)
+            found = "on the belt (never gripped)"
+        elif phase in ("held", "place") and held.last_placed == part.id:
+            count_retrieved(self.ctx, part, reconciled=True)
+            found = "placed (its reply was lost)"
+        elif phase in ("held", "place"):
+            stats.count("dropped")
+            found = "dropped (let go away from the place pose)"
+        else:
+            found = None
+        if found is not None:
+            stats.emit(self.ctx.now(), "reconciled", id=part.id, found=found, phase=phase)
+            self.feedback_message = f"part {part.id}: {found}"
+        self.bb.set(PHASE, None)
+        return Status.SUCCESS
+
+
+class PhaseIs(Leaf):
+    """Condition: the retriever's record of the part is ``phase`` (None: nothing pending)."""
+
+    def __init__(self, name: str, ctx: Ctx, phase: str | None) -> None:
+        super().__init__(name, ctx)
+        self.phase = phase
+        self.bb = client(self, read=(PHASE,))
+
+    def update(self) -> Status:
+        return Status.SUCCESS if self.bb.get(PHASE) == self.phase else Status.FAILURE
 
 
 class Holding(Leaf):
@@ -115,17 +208,6 @@ class Holding(Leaf):
 
     def update(self) -> Status:
         return Status.SUCCESS if self.ctx.hal.robot.holding() else Status.FAILURE
-
-
-class HeldPartKnown(Leaf):
-    """Condition: the part in the gripper is the one this run chose (``/retrieve/part``)."""
-
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part",))
-
-    def update(self) -> Status:
-        return Status.SUCCESS if self.bb.get("/retrieve/part") is not None else Status.FAILURE
 
 
 class Recover(JobLeaf):

@@ -33,6 +33,13 @@ RATE_KEYS: tuple[str, ...] = ("per_pick", "per_frame", "per_hour")
 #: Which link a ``comms_lost`` drops; ``alternate`` takes galil, adept, galil, ... in turn.
 COMMS_DEVICES: tuple[str, ...] = ("galil", "adept", "camera", "alternate")
 
+#: The steps of a pick-and-place at which a scripted ``comms_lost`` may cut a link: the
+#: first such step after ``at_s``. ``before_pick``: the pick command is never sent;
+#: ``after_grip``: the robot gripped the part and its reply is lost; ``during_place``:
+#: half-way through the move to the place pose; ``after_release``: the part is let go at
+#: the place pose and the reply is lost. The robot finishes a motion it has started.
+PHASES: tuple[str, ...] = ("before_pick", "after_grip", "during_place", "after_release")
+
 #: The kind each injected kind is counted under in the report's ``faults`` and
 #: ``recoveries``: the ``HalError.kind`` the trees see (``estop`` is the cell's own count).
 ERROR_KINDS: dict[str, str] = {
@@ -73,6 +80,7 @@ class ScriptedFault:
     release_after_s: float = 30.0        # estop: how long the e-stop input stays pressed
     device: str = "alternate"            # comms_lost: as FaultRate.device
     outage_s: float = 2.0                # comms_lost: as FaultRate.outage_s
+    phase: str | None = None             # comms_lost: at this step of the next pick (PHASES)
 
 
 @dataclass
@@ -89,6 +97,7 @@ class FaultPlanSpec:
 _ONLY_FOR: dict[str, tuple[str, ...]] = {
     "device": ("comms_lost",),
     "outage_s": ("comms_lost",),
+    "phase": ("comms_lost",),
     "release_after_s": ("estop",),
 }
 

@@ -36,6 +36,7 @@ from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.faults import (
     COMMS_DEVICES,
     FAULT_KINDS,
+    PHASES,
     FaultPlanSpec,
     FaultRate,
     ScriptedFault,
@@ -218,6 +219,7 @@ RANGES: dict[tuple[type, str], Range] = {
 ENUMS[(FaultRate, "device")] = COMMS_DEVICES
 ENUMS[(ScriptedFault, "device")] = COMMS_DEVICES
 ENUMS[(ScriptedFault, "kind")] = FAULT_KINDS
+ENUMS[(ScriptedFault, "phase")] = PHASES
 
 #: Adjuster algorithms and the ``adjust.params`` keys each accepts (all optional; an
 #: adjuster supplies its own defaults). Keys ending in ``_mm_s`` are horizontal belt speeds

@@ -3,30 +3,33 @@
 Recovery (thesis 8.2.1.1, hierarchical error handling): a missed grab or an unreachable
 part is counted and skipped; a servo time-out runs the controller's recovery program,
 re-enables power, moves clear and finishes the part once (a part still held is placed,
-else the pick is retried); a dropped link is retried with back-off and a held part placed;
-what cannot be recovered goes to the operator (FAULT)."""
+else the pick is retried); a dropped link is retried with back-off, then the controller is
+asked what the gripper holds (``Reconcile``): a part it gripped or released while its
+reply was lost is placed or counted where it really is. Only a part no pick of this run
+gripped, or what cannot be recovered, goes to the operator (FAULT)."""
 
 from __future__ import annotations
 
 import py_trees
-from py_trees.behaviours import Success
 from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
 from ..behaviours.retrieve import (
     FollowRobotSpeed,
-    HeldPartKnown,
     Holding,
     MoveSafe,
     NextPart,
+    PhaseIs,
     Pick,
     Place,
+    Reconcile,
     Recover,
 )
 from ..scenario.plugins import load_class
 
 KEY = "/retrieve/error"
+UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
 
 
 def _place_held(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -34,20 +37,27 @@ def _place_held(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         Holding("holding a part?", ctx), Place("place", ctx)])
 
 
+def _settle(ctx: Ctx, name: str) -> py_trees.behaviour.Behaviour:
+    """Ask the controller what it holds, and place the part if it is ours."""
+    return Sequence(name, memory=True, children=[
+        Reconcile("what does the gripper hold?", ctx),
+        Selector("place it if held", memory=True, children=[
+            Inverter("not held?", PhaseIs("held?", ctx, "held")),
+            Place("place", ctx)])])
+
+
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     # a scenario may replace the pick step with a leaf class of its own (retrieve.leaf)
     pick = load_class(ctx.scenario.retrieve.leaf) if ctx.scenario.retrieve.leaf else Pick
     pick_and_place = Sequence("pick and place", memory=True, children=[
         FollowRobotSpeed("robot speed", ctx),
-        # a part still held (the cell was stopped between pick and place) goes first;
-        # one the controller did not pick is the operator's to remove
+        # nothing pending and the gripper empty: go on; else (a reply was lost, the cell
+        # restarted with a part in the gripper) settle with the controller first
         Selector("hands free", memory=True, children=[
-            Inverter("not holding?", Holding("holding a part?", ctx)),
-            Sequence("place the held part", memory=True, children=[
-                HeldPartKnown("held part known?", ctx), Place("place", ctx)]),
-            Escalate("unknown part held", ctx, None,
-                     "the gripper holds a part this run did not pick: remove it"),
-        ]),
+            Sequence("nothing pending", memory=True, children=[
+                PhaseIs("nothing pending?", ctx, None),
+                Inverter("not holding?", Holding("holding a part?", ctx))]),
+            _settle(ctx, "settle the part")]),
         NextPart("next part", ctx),
         pick("pick", ctx),
         Place("place", ctx),
@@ -89,10 +99,12 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
         CountFault("count link fault", ctx, KEY),
         Retry("reconnect (back-off)", ctx, KEY),
-        Selector("then", memory=True, children=[
-            _place_held(ctx), Success("nothing held")]),
+        _settle(ctx, "settle the part"),
     ])
+    unknown = Sequence("unknown part held", memory=True, children=[
+        ErrorIs("unknown part?", ctx, KEY, ("unknown_part",)),
+        Escalate("to the operator", ctx, None, UNKNOWN_PART)])
     return Selector("retrieve", memory=True, children=[
-        pick_and_place, missed, unreachable, servo, link,
+        pick_and_place, missed, unreachable, servo, link, unknown,
         Escalate("robot failed", ctx, KEY, "robot could not recover"),
     ])

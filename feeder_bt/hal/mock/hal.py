@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ...jobs import Job
-from ..interfaces import Hal, IoChange, Pose
+from ...jobs import DoneJob, Job
+from ..interfaces import Hal, Held, IoChange, Pose
 
 
 class MockJob(Job):
@@ -78,16 +78,42 @@ class MockCamera(_Device):
 
 
 class MockRobot(_Device):
+    """Keeps a controller's record of its gripper: a pick the test finishes grips the
+    commanded part, a place the test finishes releases it; the test may also set
+    ``gripping`` and ``held_id`` by hand (a part put in the gripper, a lost reply)."""
+
     def __init__(self, hal: MockHal, name: str) -> None:
         super().__init__(hal, name)
-        self.held = False
+        self.gripping = False
+        self.held_id: int | None = None
+        self.last_placed: int | None = None
         self.speed_pct = 100.0
 
+    def grip(self, part_id: int | None) -> None:
+        self.gripping, self.held_id = True, part_id
+
     def pick(self, target) -> Job:
-        return self._job("pick", target)
+        job = self._job("pick", target)
+        job.add_done_callback(lambda j: j.ok and self.grip(target.part_id))
+        return job
 
     def place(self, pose: Pose) -> Job:
-        return self._job("place", pose)
+        job = self._job("place", pose)
+        job.add_done_callback(lambda j: j.ok and self._released())
+        return job
+
+    def _released(self) -> None:
+        if self.gripping:
+            self.last_placed = self.held_id
+        self.gripping, self.held_id = False, None
+
+    def held(self) -> Job:
+        self._hal.calls.append((self._name, "held", ()))
+        if not self.gripping:
+            h = Held(None, False, self.last_placed)
+        else:
+            h = Held(self.held_id, self.held_id is None, self.last_placed)
+        return DoneJob("robot.held", h)
 
     def move_to(self, pose: Pose) -> Job:
         return self._job("move_to", pose)
@@ -105,7 +131,7 @@ class MockRobot(_Device):
         return self._job("recover")
 
     def holding(self) -> bool:
-        return self.held
+        return self.gripping
 
 
 class MockRobotPosition:

@@ -199,6 +199,17 @@ class SimRobot:
     def holding(self) -> bool:
         return self.world.gripper is not None
 
+    def held(self) -> Job:
+        """The controller's record of its gripper; a motion still running (its reply was
+        lost) finishes first, as the motion server answers one request at a time."""
+        w = self.world
+        busy = w.robot_busy
+        if busy is None or busy.done:
+            return DoneJob("robot.held", w.held_now())
+        job = Job("robot.held")
+        busy.add_done_callback(lambda _: job.succeed(w.held_now()))
+        return job
+
 
 class SimRobotPosition:
     def __init__(self, world: World) -> None:
@@ -240,6 +251,9 @@ class SimHal(Hal):
 
     def changeover(self, scenario: Scenario) -> None:
         fresh = make_sim_hal(scenario, self.world.cell, self.world.clock, self.world.seed)
+        # the operator swaps the parts; what the old world found wrong is still a finding
+        fresh.world.listeners = self.world.listeners
+        fresh.world.problems = self.world.problems
         self.camera.close()
         self.__dict__.update(fresh.__dict__)
 

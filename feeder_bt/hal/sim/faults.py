@@ -13,6 +13,11 @@ draws come from the injector's own generators (one per kind), seeded from the pl
 seed and the run's, so a run is repeatable and the world's random stream is untouched.
 No part is ever moved by a fault: a failed pick leaves its part on the belt, a failed
 place leaves it in the gripper, and the world's accounting check runs on every step.
+
+A dropped robot link loses the *reply*, not the motion: the controller finishes a pick or
+place it has started (as a V+ server task does when its socket breaks), so a part may be
+gripped or placed while the cell hears nothing. The cell must ask (``Robot.held``).
+Scripted link cuts can strike at a chosen step of the next pick-and-place (``phase``).
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ from ...errors import (
     MissedGrab,
     ServoTimeout,
 )
-from ...jobs import DoneJob, Job
+from ...jobs import DoneJob, Job, JobState
 from ...scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
 from ..interfaces import IoChange, PickTarget, Pose
 from .devices import SimHal, TimedJob
@@ -84,6 +89,7 @@ class FaultInjector:
         self._rngs = {kind: np.random.default_rng([plan.seed & _MASK64, seed & _MASK64, i])
                       for i, kind in enumerate(FAULT_KINDS)}
         self._armed: Counter[str] = Counter()     # scripted per-pick/per-frame faults waiting
+        self._cuts: list[ScriptedFault] = []      # scripted link cuts waiting for their step
         self._alternate = itertools.cycle(("galil", "adept"))
         self._outage_entry: dict[str, dict[str, Any]] = {}
         self._jam_entry: dict[str, Any] | None = None
@@ -159,6 +165,8 @@ class FaultInjector:
     def _scripted(self, sf: ScriptedFault, t: float) -> None:
         if sf.kind in ("servo_timeout", "missed_grab", "grab_failed"):
             self._armed[sf.kind] += 1          # the next pick (or grab) gets it
+        elif sf.kind == "comms_lost" and sf.phase is not None:
+            self._cuts.append(sf)              # at that step of the next pick-and-place
         elif sf.kind == "estop":
             self._estop(t, sf.release_after_s)
         else:
@@ -233,21 +241,31 @@ class FaultInjector:
             self.power_on = True
 
     # ------------------------------------------------------------------ links
-    def _drop(self, link: str, t: float, outage_s: float) -> None:
-        """The link goes down for ``outage_s``: calls fail at once, jobs in flight fail now."""
+    def cut(self, phase: str, t: float) -> bool:
+        """A scripted link cut waiting for ``phase`` strikes now; True if it did."""
+        sf = next((c for c in self._cuts if c.phase == phase), None)
+        if sf is None:
+            return False
+        self._cuts.remove(sf)
+        link = sf.device if sf.device != "alternate" else next(self._alternate)
+        self._drop(link, t, sf.outage_s, phase)
+        return True
+
+    def _drop(self, link: str, t: float, outage_s: float, phase: str | None = None) -> None:
+        """The link goes down for ``outage_s``: calls fail at once; the replies of jobs in
+        flight are lost now (a robot motion itself goes on to its end)."""
         if self.down[link]:
             return                              # already down: not a second fault
         self.down[link] = True
+        at = f" ({phase.replace('_', ' ')})" if phase else ""
         entry = self._record(t, "comms_lost", link,
-                             f"{_LINK_NAMES[link]} connection lost for {outage_s:g} s",
+                             f"{_LINK_NAMES[link]} connection lost for {outage_s:g} s{at}",
                              seen=False)
         self._outage_entry[link] = entry
         err = CommsLost(f"{_LINK_NAMES[link]}: connection lost")
         if link == "adept":
             self.position.freeze(t)
-            busy = self.world.robot_busy
-            if busy is not None and not busy.done:
-                _fail_timed(self.world, busy, err)
+            if self.robot.lose_replies(err):
                 entry["seen"] = True
         elif link == "galil":
             for conv in self.conveyors.values():
@@ -356,9 +374,35 @@ class _Tracking(_Wrapper):
         return bool(jobs)
 
 
-class FaultyRobot(_Wrapper):
+class ReplyJob(Job):
+    """The cell's side of a robot command: it ends when the controller's reply arrives.
+    When the link drops the reply is lost (``lose``) while the motion (``inner``) goes
+    on in the world; ``before_reply`` may cut the link just as the reply would leave."""
+
+    def __init__(self, inner: Job, before_reply: Callable[[Job], None] | None = None) -> None:
+        super().__init__(inner.name)
+        self.inner = inner
+        self.before_reply = before_reply
+        inner.add_done_callback(self._reply)
+
+    def _reply(self, inner: Job) -> None:
+        if self.before_reply is not None and not self.done:
+            self.before_reply(inner)            # may lose this reply
+        if inner.state is JobState.SUCCEEDED:
+            self.succeed(inner.result)
+        elif inner.state is JobState.FAILED:
+            self.fail(inner.error)             # type: ignore[arg-type]
+        else:
+            self._finish(inner.state, error=inner.error)
+
+    def _on_cancel(self) -> None:
+        self.inner.cancel()
+
+
+class FaultyRobot(_Tracking):
     """The robot with arm power and the Adept link: motions fail at once while either is
-    off; ``recover()`` turns the power back on."""
+    off; ``recover()`` turns the power back on. Every command's reply comes through a
+    ``ReplyJob``, which a dropped link fails while the motion goes on."""
 
     def _refuse(self, name: str, motion: bool = True) -> Job | None:
         refused = self._inj.refused("adept", name)
@@ -366,23 +410,47 @@ class FaultyRobot(_Wrapper):
             refused = DoneJob(name, error=ServoTimeout(POWER_OFF))
         return refused
 
+    def _reply(self, inner: Job, phase: str | None = None) -> Job:
+        if inner.done:
+            return inner
+        cut = None
+        if phase is not None:
+            def cut(job: Job) -> None:
+                if job.ok:
+                    self._inj.cut(phase, self._inj.world.t)
+        return self._track(ReplyJob(inner, cut))
+
+    def lose_replies(self, err: HalError) -> bool:
+        """The link dropped: every reply in flight is lost (the motions go on)."""
+        return self._fail_jobs(err)
+
     def pick(self, target: PickTarget) -> Job:
+        self._inj.cut("before_pick", self._inj.world.now())
         refused = self._refuse("robot.pick")
         if refused is not None:
             return refused
         job = self._inner.pick(target)
         if isinstance(job, TimedJob) and not job.done:
             self._inj.on_pick(job, target)
-        return job
+        return self._reply(job, "after_grip")
 
     def place(self, pose: Pose) -> Job:
-        return self._refuse("robot.place") or self._inner.place(pose)
+        refused = self._refuse("robot.place")
+        if refused is not None:
+            return refused
+        job = self._inner.place(pose)
+        w = self._inj.world
+        t_end = _event_time(w, job.seq) if isinstance(job, TimedJob) else None
+        if t_end is not None and any(c.phase == "during_place" for c in self._inj._cuts):
+            t_mid = w.t + 0.5 * (t_end - w.t)
+            w.schedule(t_mid, lambda t: self._inj.cut("during_place", t))
+        return self._reply(job, "after_release")
 
     def move_to(self, pose: Pose) -> Job:
-        return self._refuse("robot.move") or self._inner.move_to(pose)
+        return self._refuse("robot.move") or self._reply(self._inner.move_to(pose))
 
     def move_safe(self) -> Job:
-        return self._refuse("robot.move") or self._inner.move_safe()
+        return self._refuse("robot.move") or self._reply(self._inner.move_safe())
 
     def set_speed(self, pct: float) -> Job:
         return self._refuse("robot.set_speed", motion=False) or self._inner.set_speed(pct)
@@ -393,10 +461,13 @@ class FaultyRobot(_Wrapper):
             return refused
         job = self._inner.recover()
         job.add_done_callback(self._inj.on_recovered)
-        return job
+        return self._reply(job)
 
     def holding(self) -> bool:
         return self._inner.holding()
+
+    def held(self) -> Job:
+        return self._refuse("robot.held", motion=False) or self._reply(self._inner.held())
 
 
 class FaultyRobotPosition(_Wrapper):

@@ -6,7 +6,16 @@ happens at an exact virtual time that does not depend on how often the world is 
 
 Honesty: the world knows where every part truly is; it hands the camera outlines to
 render into pixels and judges each grip against the truth. Nothing here is shown to the
-locator. Every part is always in exactly one place, checked on every step.
+locator.
+
+Accounting by identity: every part is always in exactly one place. Each part carries its
+own record (``SimPart.where``); every move between places checks that record against the
+place it leaves and keeps a tally of the records by place. Every step compares the tally
+with the containers' sizes (six integers), and a full audit matches each part's record
+against the containers one by one whenever they disagree, every ``AUDIT_EVERY`` steps and
+at every census. A part found nowhere is *lost*, one found in two places *duplicated*:
+each is named with its id and last known place (``problems``), counted, and told to the
+``listeners`` — the run then ends with its own exit code (docs/faults.md).
 """
 
 from __future__ import annotations
@@ -23,12 +32,12 @@ import numpy as np
 
 from ...clock import EPS, SimClock
 from ...encoder import diff, wrap
-from ...errors import AccountingError, EnvelopeError, HalError, MissedGrab
+from ...errors import EnvelopeError, HalError, MissedGrab
 from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
 from ...jobs import Job
 from ...robot_model import RobotModel
 from ...scenario.model import CellSpec, Scenario
-from ..interfaces import PickResult, PickTarget, Pose
+from ..interfaces import Held, PickResult, PickTarget, Pose
 from .axis import Axis
 
 PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed")
@@ -36,6 +45,9 @@ LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off t
 EDGE_MARGIN_MM = 28.0           # side rails keep parts this far from the belt edges
 TOUCH_GAP_MM = 1.0              # closer than this, two parts count as touching
 RECYCLE_S = 20.0                # placed parts go back to the hopper after this long
+PLACE_TOL_MM = 10.0             # a part released farther than this from its own type's
+                                # place pose is misplaced (another type's station, say)
+AUDIT_EVERY = 32                # steps between full audits when the tallies agree
 
 
 @dataclass
@@ -111,10 +123,23 @@ class World:
         self.robot_pose = Pose(*cell.robot.safe_mm)
         self.robot_speed_pct = 100.0
         self.robot_busy: Job | None = None
+        # the controller's own record (what a V+ program keeps): the commanded id of the
+        # part it gripped, and of the last part it released at a place pose
+        self.held_cmd: int | None = None
+        self.last_placed_cmd: int | None = None
 
         # ground-truth statistics
         self.counts: Counter[str] = Counter()
         self.placed_by_type: Counter[str] = Counter()
+        self.misplaced_by_type: Counter[str] = Counter()
+
+        # accounting by identity
+        self.tally: Counter[str] = Counter({"hopper": self.total})
+        self.problems: list[dict] = []          # every part lost or duplicated, named
+        self.reported: set[tuple[str, int]] = set()
+        self.listeners: list[Callable[[dict], None]] = []
+        self._steps = 0
+        self._audit_due = False
 
     # ------------------------------------------------------------------ time
     def schedule(self, t: float, fn: Callable[[float], None]) -> int:
@@ -203,7 +228,8 @@ class World:
     def _release(self, t: float) -> None:
         pid = self.hopper.popleft()
         part = self.parts[pid]
-        part.where, part.p_release = "incline", self.next_release
+        self._relocate(part, "hopper", "incline")
+        part.p_release = self.next_release
         spec = self.scenario.parts[part.type]
         names, cdf = self._pose_table(part.type)
         # what rng.choice(len(names), p=...) does, draw for draw, without its checks
@@ -239,40 +265,45 @@ class World:
         part.radius = circumradius(part.outline)
         land_x = part.x0
         part.x0 = land_x - self.horizontal.pos(t)
-        part.where = "horizontal"
-        belt = self.horizontal.pos(t)
-        ax, ay = part.x0 + belt, part.y             # part_xy(part, t)
-        for other in self.on_horizontal.values():
-            # _touch's own first test, here without a call per part on the belt
-            if math.hypot(ax - (other.x0 + belt), ay - other.y) > \
-                    part.radius + other.radius + TOUCH_GAP_MM:
-                continue
-            if self._touch(part, other, t):
-                part.touching.add(other.id)
-                other.touching.add(part.id)
+        self._relocate(part, "incline", "horizontal")
+        self._settle(part, t)
         self.on_horizontal[pid] = part
         self.counts["landed"] += 1
         if part.touching:
             self.counts["landed_touching"] += 1
 
+    def _settle(self, part: SimPart, t: float) -> None:
+        """A part comes to rest on the horizontal belt (landing, or dropped by the robot):
+        which parts does it touch?"""
+        belt = self.horizontal.pos(t)
+        ax, ay = part.x0 + belt, part.y             # part_xy(part, t)
+        for other in self.on_horizontal.values():
+            # _touch's own first test, here without a call per part on the belt
+            if other is part or math.hypot(ax - (other.x0 + belt), ay - other.y) > \
+                    part.radius + other.radius + TOUCH_GAP_MM:
+                continue
+            if self._touch(part, other, t):
+                part.touching.add(other.id)
+                other.touching.add(part.id)
+
     def _fall(self, t: float, pid: int) -> None:
         part = self.on_horizontal.pop(pid)
         self._untouch(part)
-        part.where = "return"
+        self._relocate(part, "horizontal", "return")
         heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))
         self.counts["recirculated"] += 1
 
     def _arrive_hopper(self, t: float) -> None:
         _, pid = heapq.heappop(self.returning)
-        self._to_hopper(pid)
+        self._to_hopper(pid, "return")
 
     def _recycle(self, t: float) -> None:
         _, pid = heapq.heappop(self.placed)
-        self._to_hopper(pid)
+        self._to_hopper(pid, "placed")
 
-    def _to_hopper(self, pid: int) -> None:
+    def _to_hopper(self, pid: int, src: str) -> None:
         was_empty = not self.hopper
-        self.parts[pid].where = "hopper"
+        self._relocate(self.parts[pid], src, "hopper")
         self.parts[pid].touching.clear()
         self.hopper.append(pid)
         if was_empty:
@@ -426,9 +457,10 @@ class World:
             raise MissedGrab(f"part under the gripper is {why}")
         self.on_horizontal.pop(best.id)
         self._untouch(best)
-        best.where = "gripper"
+        self._relocate(best, "horizontal", "gripper")
         best.held_error_deg = wrap_deg(best.angle - target.angle_deg)
         self.gripper = best.id
+        self.held_cmd = target.part_id
         self.counts["gripped"] += 1
         return PickResult(part_id=best.id, t=t, belt_x_mm=cx)
 
@@ -439,31 +471,55 @@ class World:
         if pid is None:
             return None
         part = self.parts[pid]
-        part.where = "placed"
+        self._relocate(part, "gripper", "placed")
         heapq.heappush(self.placed, (t + RECYCLE_S, pid))
+        self.last_placed_cmd, self.held_cmd = self.held_cmd, None
         self.placed_by_type[part.type] += 1
         spec = self.scenario.parts[part.type]
+        if math.hypot(pose.x - spec.place.x, pose.y - spec.place.y) > PLACE_TOL_MM:
+            self.misplaced_by_type[part.type] += 1     # another type's station, say
         if spec.place.orient and abs(part.held_error_deg) > spec.orientation_tolerance_deg:
             self.counts["misoriented"] += 1
         return pid
+
+    def held_now(self) -> Held:
+        """The controller's word on its gripper (``Robot.held``): the commanded id it
+        recorded at the grip, ``unknown`` for a part no pick of ours gripped."""
+        if self.gripper is None:
+            return Held(None, False, self.last_placed_cmd)
+        return Held(self.held_cmd, self.held_cmd is None, self.last_placed_cmd)
 
     def drop_held(self, t: float) -> None:
         """A held part falls back onto the belt (or the return chute) where the robot is."""
         if self.gripper is None:
             return
         pid, self.gripper = self.gripper, None
+        self.held_cmd = None
         part = self.parts[pid]
         x, y = self.robot_pose.x, self.robot_pose.y
         if 0.0 <= x < self.h_len and 0.0 <= y <= self.h_width:
-            part.where, part.x0, part.y = "horizontal", x - self.horizontal.pos(t), y
+            self._relocate(part, "gripper", "horizontal")
+            part.x0, part.y = x - self.horizontal.pos(t), y
+            self._settle(part, t)               # it may land on or against another
             self.on_horizontal[pid] = part
         else:
-            part.where = "return"
+            self._relocate(part, "gripper", "return")
             heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))
         self.counts["dropped"] += 1
 
     # ------------------------------------------------------------------ accounting
-    def census(self) -> dict[str, int]:
+    def _relocate(self, part: SimPart, src: str, dst: str) -> None:
+        """Move a part's own record from ``src`` to ``dst``. A record that does not say
+        ``src`` means the containers and the records disagree: audit at once."""
+        if part.where != src:
+            self._report([{"kind": "misrecorded", "id": part.id, "type": part.type,
+                           "last_place": part.where, "places": [src]}])
+            self._audit_due = True
+        self.tally[part.where] -= 1
+        self.tally[dst] += 1
+        part.where = dst
+
+    def _sizes(self) -> dict[str, int]:
         return {
             "hopper": len(self.hopper),
             "incline": len(self.on_incline),
@@ -473,16 +529,85 @@ class World:
             "placed": len(self.placed),
         }
 
+    def census(self) -> dict[str, int]:
+        self.audit()
+        return self._sizes()
+
     def check_accounting(self) -> None:
-        # the census's sum, without building it (this runs on every step)
-        n = (len(self.hopper) + len(self.on_incline) + len(self.on_horizontal)
-             + len(self.returning) + (self.gripper is not None) + len(self.placed))
-        if n != self.total:
-            raise AccountingError(f"simulated cell holds {n} parts, expected {self.total}: "
-                                  f"{self.census()}")
+        """Every step: the records' tally against the containers' sizes (cheap); a full
+        audit, part by part, when they disagree and every ``AUDIT_EVERY`` steps."""
+        self._steps += 1
+        t = self.tally
+        if (self._audit_due or self._steps % AUDIT_EVERY == 0
+                or len(self.hopper) != t["hopper"] or len(self.on_incline) != t["incline"]
+                or len(self.on_horizontal) != t["horizontal"]
+                or len(self.returning) != t["return"] or len(self.placed) != t["placed"]
+                or (self.gripper is not None) != t["gripper"]):
+            self.audit()
+
+    def _containers(self):
+        yield "hopper", self.hopper
+        yield "incline", self.on_incline
+        yield "horizontal", self.on_horizontal.keys()
+        yield "return", (pid for _, pid in self.returning)
+        yield "gripper", () if self.gripper is None else (self.gripper,)
+        yield "placed", (pid for _, pid in self.placed)
+
+    def audit(self) -> list[dict]:
+        """Match every part against the containers by identity; name each part that is
+        in no place (lost) or in more than one (duplicated, or an id nobody made). Returns
+        the problems found for the first time; the tallies are then taken from the
+        containers so that one problem is reported once."""
+        self._audit_due = False
+        found: dict[int, list[str]] = {}
+        for place, ids in self._containers():
+            for pid in ids:
+                found.setdefault(pid, []).append(place)
+        new: list[dict] = []
+        for pid, part in self.parts.items():
+            places = found.get(pid)
+            if not places:
+                new.append({"kind": "lost", "id": pid, "type": part.type,
+                            "last_place": part.where})
+            elif len(places) > 1:
+                new.append({"kind": "duplicated", "id": pid, "type": part.type,
+                            "places": places})
+            elif places[0] != part.where:       # one place, but its record says another
+                new.append({"kind": "misrecorded", "id": pid, "type": part.type,
+                            "last_place": part.where, "places": places})
+                part.where = places[0]
+        for pid in found.keys() - self.parts.keys():
+            new.append({"kind": "duplicated", "id": pid, "type": None, "places": found[pid]})
+        new = self._report(new)
+        if new or self._tally_off():
+            self.tally = Counter(self._sizes())
+        return new
+
+    def _report(self, problems: list[dict]) -> list[dict]:
+        """Record and tell each problem not reported before; returns those."""
+        new = [p for p in problems if (p["kind"], p["id"]) not in self.reported]
+        for p in new:
+            p["t"] = round(self.t, 3)
+            self.reported.add((p["kind"], p["id"]))
+            self.problems.append(p)
+            for fn in self.listeners:
+                fn(p)
+        return new
+
+    def _tally_off(self) -> bool:
+        sizes = self._sizes()
+        return any(self.tally[k] != v for k, v in sizes.items())
 
     def lost(self) -> int:
-        return self.total - sum(self.census().values())
+        return sum(1 for p in self.problems if p["kind"] == "lost")
+
+    def duplicated(self) -> int:
+        return sum(1 for p in self.problems if p["kind"] == "duplicated")
+
+    @property
+    def broken(self) -> bool:
+        """A part was lost or duplicated: the world can no longer be trusted."""
+        return bool(self.problems)
 
 
 def _grown(poly: np.ndarray, centre: tuple[float, float], by: float) -> np.ndarray:
