@@ -286,6 +286,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     report["speeds"] = final_speeds()
     if injector is not None:
         report["injected"] = dict(injector.injected)
+        report["unseen"] = dict(injector.unseen)     # injected, but met by nobody
         report["fault_plan"] = str(opts.faults)
     if ui:
         report["operator"] = ui.report()
