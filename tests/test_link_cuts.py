@@ -108,6 +108,28 @@ def test_cut_during_or_after_the_place(released):
     assert bb_get("/retrieve/phase") is None and bb_get("/faults/escalate") is None
 
 
+def test_a_link_cut_during_the_servo_recoverys_place_goes_to_the_link_branch():
+    from feeder_bt.errors import ServoTimeout
+    ctx, root, p = _picking()
+    finish(ctx.hal, "robot", "pick")
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "place", ServoTimeout("motor stalled"))
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "recover")
+    tick(root, ctx)
+    finish(ctx.hal, "robot", "move_safe")
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "place", LOST)          # the part is still held
+    tick(root, ctx)
+    assert not ctx.hal.pending("robot", "pick")     # no pick into a full gripper
+    _back(ctx, root)
+    finish(ctx.hal, "robot", "place")
+    tick(root, ctx)
+    assert ctx.stats.retrieved["lens"] == 1
+    assert ctx.stats.recoveries == {"servo_timeout": 1, "comms_lost": 1}
+    assert bb_get("/faults/escalate") is None
+
+
 def test_a_part_the_cell_never_commanded_goes_to_the_operator():
     ctx, root, p = _picking()
     ctx.hal.robot.grip(p.id + 1000)                 # another part, not ours

@@ -77,7 +77,10 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         MoveSafe("move to safe", ctx),
         Selector("finish the part once", memory=True, children=[
             _place_held(ctx),
+            # (only with the hands free: a place that failed for another reason, a link
+            # dropping, goes on to that fault's own branch)
             Sequence("retry", memory=True, children=[
+                Inverter("hands free?", Holding("holding a part?", ctx)),
                 pick("retry pick", ctx), Place("place", ctx)]),
             # the part moved on during the recovery: a miss, not a robot failure
             Sequence("missed on retry", memory=True, children=[
