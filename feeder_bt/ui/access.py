@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import math
 import re
 import sys
 import time
@@ -136,7 +137,10 @@ def _number(text: str, convert: Callable[[str], Any]) -> Any:
     if len(text) > MAX_NUMBER_CHARS:         # bounded before conversion, not after
         raise BadBody(f"a number in the body is too long (at most {MAX_NUMBER_CHARS} "
                       "characters)")
-    return convert(text)
+    value = convert(text)
+    if isinstance(value, float) and not math.isfinite(value):      # 1e999 is infinity
+        raise BadBody("a number in the body is out of range")
+    return value
 
 
 def _constant(text: str) -> Any:

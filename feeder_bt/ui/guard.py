@@ -149,10 +149,14 @@ class LoginGuard:
         return [(why, s) for why, s in locks if s > 0]
 
     def success(self, a: Attempt, trusted: bool) -> None:
-        """A good password: clear its counts and remember the address as known-good."""
-        self.pairs.success(a.keys(False)[1:])
-        self.addrs.success(a.keys(False)[:1])
-        self.devices.success(a.keys(True))
+        """A good password: clear its counts and remember the address as known-good. A
+        known browser clears only its own count: a guesser at the same address stays
+        locked."""
+        if trusted:
+            self.devices.success(a.keys(True))
+        else:
+            self.pairs.success(a.keys(False)[1:])
+            self.addrs.success(a.keys(False)[:1])
         self._names.pop(a.name, None)
         self._good[(a.name, a.ip)] = self.clock()
         if len(self._good) > 10000:

@@ -31,10 +31,9 @@ from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 from starlette.middleware import Middleware
 from starlette.requests import HTTPConnection, Request
-from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from .access import (
@@ -50,6 +49,7 @@ from .bridge import Bridge, Outcome
 from .control import Control, Session, Sessions, retry_after
 from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
 from .operate import COMMANDS
+from .responses import SecurityHeaders, client_ip, json_response, refuse, same_origin
 from .serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
 from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
 
@@ -58,47 +58,6 @@ COMMAND_TIMEOUT_S = 5.0       # the tick thread answers within a tick or two; el
 SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
 STATIC = Path(__file__).parent / "static"
-
-SECURITY_HEADERS = [
-    (b"content-security-policy",
-     b"default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
-     b"connect-src 'self'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'"),
-    (b"x-content-type-options", b"nosniff"),
-    (b"referrer-policy", b"no-referrer"),
-    (b"x-frame-options", b"DENY"),
-]
-
-
-class _SecurityHeaders:
-    """Adds ``SECURITY_HEADERS`` to every HTTP response, and answers a bug with one line
-    (500, no traceback, one line on standard error) instead of Starlette's error page."""
-
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        started = False
-
-        async def send_with_headers(message: Message) -> None:
-            nonlocal started
-            if message["type"] == "http.response.start":
-                started = True
-                message = {**message, "headers": [*message.get("headers", []),
-                                                  *SECURITY_HEADERS]}
-            await send(message)
-
-        try:
-            await self.app(scope, receive, send_with_headers)
-        except Exception as e:                 # a bug: one line, never a traceback
-            print(f"feeder: operator UI: {scope.get('method')} {scope.get('path')}: "
-                  f"internal error: {type(e).__name__}", file=sys.stderr)
-            if not started:
-                await _refuse("internal error; nothing was changed", 500)(
-                    scope, receive, send_with_headers)
-
 
 class _Client:
     """One open websocket: what it has been sent so far."""
@@ -110,30 +69,6 @@ class _Client:
         self.msg_seq = 0
         self.pub_seq = -1                # the snapshot and session view last sent
         self.session = ""
-
-
-def _same_origin(conn: HTTPConnection) -> bool:
-    """A browser always sends ``Origin`` on POSTs and websockets; it must be this server,
-    scheme included. (A client without one, such as curl, is not a browser that a third
-    site can drive.)"""
-    origin = conn.headers.get("origin")
-    if origin is None:
-        return True
-    scheme = "https" if conn.url.scheme in ("https", "wss") else "http"
-    return origin.lower() == f"{scheme}://{conn.headers.get('host', '').lower()}"
-
-
-def _json(data: Any, status: int = 200, headers: dict[str, str] | None = None) -> Response:
-    return JSONResponse(data, status_code=status,
-                        headers={"cache-control": "no-store", **(headers or {})})
-
-
-def _refuse(message: str, status: int, headers: dict[str, str] | None = None) -> Response:
-    return _json({"ok": False, "error": message}, status, headers)
-
-
-def _ip(conn: HTTPConnection) -> str:
-    return conn.client.host if conn.client else "?"
 
 
 class UiApp:
@@ -176,7 +111,7 @@ class UiApp:
             Route("/api/command", self.command, methods=["POST"]),
             WebSocketRoute("/ws", self.websocket),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
-        ], middleware=[Middleware(_SecurityHeaders),
+        ], middleware=[Middleware(SecurityHeaders),
                        Middleware(Gate, hosts=self.hosts, proxies=self.proxies,
                                   refused=self._host_refused)])
 
@@ -270,20 +205,20 @@ class UiApp:
 
     async def _body(self, request: Request) -> dict[str, Any] | Response:
         """The JSON object of a state-changing request, or the refusal to send back."""
-        if not _same_origin(request):
-            self.record("request_refused", "-", ip=_ip(request), why="another site's Origin")
-            return _refuse("refused: request from another site", 403)
+        if not same_origin(request):
+            self.record("request_refused", "-", ip=client_ip(request), why="another site's Origin")
+            return refuse("refused: request from another site", 403)
         if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
-            return _refuse("expected a JSON body (Content-Type: application/json)", 415)
+            return refuse("expected a JSON body (Content-Type: application/json)", 415)
         raw = b""
         async for chunk in request.stream():
             raw += chunk
             if len(raw) > MAX_BODY:
-                return _refuse("request too large", 413)
+                return refuse("request too large", 413)
         try:
             return parse_body(raw)
         except BadBody as e:
-            return _refuse(str(e), 400)
+            return refuse(str(e), 400)
 
     async def _signed_in_body(self, request: Request
                               ) -> tuple[dict[str, Any], Session] | Response:
@@ -293,7 +228,7 @@ class UiApp:
             return body
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
+            return refuse("not logged in", 401)
         return body, s
 
     # ------------------------------------------------------------------ login
@@ -303,20 +238,20 @@ class UiApp:
             return body
         name, password = body.get("user"), body.get("password")
         if not isinstance(name, str) or not isinstance(password, str) or not name:
-            return _refuse("give a user name and a password", 400)
+            return refuse("give a user name and a password", 400)
         real = NAME_RE.fullmatch(name) is not None
         known = request.cookies.get(KNOWN_COOKIE + name) if real else None
-        attempt = Attempt(name[:64], _ip(request), known)
+        attempt = Attempt(name[:64], client_ip(request), known)
         shown = name if real and self.users.exists(name) else "(unknown name)"
         verdict = self.guard.check(attempt)
         if verdict.wait_s > 0:
             secs = retry_after(verdict.wait_s)
             self.record("login_refused", shown, ip=attempt.ip, locked_by=verdict.why,
                         wait_s=secs)
-            return _refuse(f"too many failed logins: try again in {secs} s", 429,
+            return refuse(f"too many failed logins: try again in {secs} s", 429,
                            {"retry-after": str(secs)})
         if not self.guard.begin(attempt, verdict.trusted):
-            return _refuse("another login for this user is being checked: try again", 429,
+            return refuse("another login for this user is being checked: try again", 429,
                            {"retry-after": "1"})
         try:
             entry = self.users.load_or_empty().get(name) if real else None
@@ -334,12 +269,12 @@ class UiApp:
                             seconds=round(secs, 1))
             lock = self.guard.check(attempt).wait_s
             more = f"; next attempt in {retry_after(lock)} s" if lock > 0 else ""
-            return _refuse(f"wrong user name or password{more}", 401)
+            return refuse(f"wrong user name or password{more}", 401)
         self.guard.success(attempt, verdict.trusted)
         s = self.sessions.create(name, attempt.ip, str(entry["hash"]))
         self.note(name, "logged in")
         self.wake_all()
-        resp = _json({"ok": True, **self.session_info(s)})
+        resp = json_response({"ok": True, **self.session_info(s)})
         secure = request.url.scheme == "https"
         resp.set_cookie(COOKIE, s.token, httponly=True, samesite="strict", path="/",
                         secure=secure)
@@ -348,8 +283,8 @@ class UiApp:
         return resp
 
     async def logout(self, request: Request) -> Response:
-        if not _same_origin(request):
-            return _refuse("refused: request from another site", 403)
+        if not same_origin(request):
+            return refuse("refused: request from another site", 403)
         s = self.session_of(request)
         if s is not None:
             if self.control.drop(s.token):
@@ -357,21 +292,21 @@ class UiApp:
             self.sessions.end(s.token)
             self.note(s.user, "logged out")
             self.wake_all()
-        resp = _json({"ok": True})
+        resp = json_response({"ok": True})
         resp.delete_cookie(COOKIE, path="/", httponly=True, samesite="strict")
         return resp
 
     async def me(self, request: Request) -> Response:
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
-        return _json({"ok": True, **self.session_info(s)})
+            return refuse("not logged in", 401)
+        return json_response({"ok": True, **self.session_info(s)})
 
     async def status(self, request: Request) -> Response:
         """The latest snapshot as JSON (the page uses the websocket; this is for scripts)."""
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
+            return refuse("not logged in", 401)
         pub = self.bridge.latest()
         text = ('{"ok":true,"status":' + (pub.status_json if pub else "null")
                 + ',"session":' + json.dumps(self.session_info(s)) + "}")
@@ -395,21 +330,21 @@ class UiApp:
         elif action == "force-release":
             if self.users.role(s.user) != "admin":
                 self._refused(s, "force-release", "not an admin")
-                return _refuse("refused: only an admin may force control free", 403)
+                return refuse("refused: only an admin may force control free", 403)
             if self.control.holder is None:
                 ok, msg = False, "nobody has control"
             else:
                 holder = self.force_release(f"admin {s.user}")
                 ok, msg = True, f"control taken from {holder.user if holder else '-'}"
         else:
-            return _refuse("action must be \"take\", \"release\" or \"force-release\"", 400)
+            return refuse("action must be \"take\", \"release\" or \"force-release\"", 400)
         if ok:
             if action != "force-release":
                 self.note(s.user, "took control" if action == "take" else "released control")
             self.wake_all()
         else:
             self._refused(s, f"{action} control", msg)
-        return _json({"ok": ok, "message" if ok else "error": msg,
+        return json_response({"ok": ok, "message" if ok else "error": msg,
                       **self.session_info(s)}, 200 if ok else 409)
 
     async def command(self, request: Request) -> Response:
@@ -421,16 +356,16 @@ class UiApp:
         name = body.pop("command", None)
         if name not in COMMANDS:
             self._refused(s, repr(name), "unknown command")
-            return _refuse(f"unknown command {str(name)[:40]!r} (one of: "
+            return refuse(f"unknown command {str(name)[:40]!r} (one of: "
                            f"{', '.join(COMMANDS)})", 400)
         if not self.control.is_holder(s):
             msg = self.control.refusal(s)
             self._refused(s, name, msg)
-            return _refuse(msg, 403)
+            return refuse(msg, 403)
         out = await self.call(name, body, s.user)
         if not out.ok:
             self._refused(s, name, out.message)
-        return _json({"ok": out.ok, "message" if out.ok else "error": out.message}, out.status)
+        return json_response({"ok": out.ok, "message" if out.ok else "error": out.message}, out.status)
 
     async def call(self, name: str, args: dict[str, Any], user: str) -> Outcome:
         """Submit to the tick thread and wait; a command not started in time is withdrawn
@@ -447,8 +382,8 @@ class UiApp:
 
     # ------------------------------------------------------------------ websocket
     async def websocket(self, ws: WebSocket) -> None:
-        if not _same_origin(ws):
-            self.record("request_refused", "-", ip=_ip(ws), why="another site's Origin")
+        if not same_origin(ws):
+            self.record("request_refused", "-", ip=client_ip(ws), why="another site's Origin")
             await ws.close(code=1008)
             return
         s = self.session_of(ws)
