@@ -125,7 +125,7 @@ def cmd_users(args: argparse.Namespace) -> int:
     if args.action == "list":
         names = users.names()
         for name in names:
-            print(name)
+            print(name + (" (admin)" if users.role(name) == "admin" else ""))
         if not names:
             print(f"no users in {users.path}", file=sys.stderr)
         return 0

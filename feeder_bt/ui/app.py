@@ -19,6 +19,8 @@ from .server import UiApp, UiServer, make_notice
 from .status import CellPanel
 from .users import UsersError, UsersFile, group_or_world_readable
 
+_WARNED: set[Path] = set()
+
 
 def check_users(path: str | Path | None) -> UsersFile:
     """The users file for ``--ui``: it must exist, name somebody who can log in, hold
@@ -34,7 +36,9 @@ def check_users(path: str | Path | None) -> UsersFile:
                 f"hashes can be guessed offline): chmod 600 {users.path}")
         if settings.readable_users_file == "refuse":
             raise UsersError(f"refused: {what}")
-        print(f"feeder: warning: {what}", file=sys.stderr)
+        if users.path not in _WARNED:          # run.py checks first, then the UI again
+            _WARNED.add(users.path)
+            print(f"feeder: warning: {what}", file=sys.stderr)
     return users
 
 

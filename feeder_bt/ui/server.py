@@ -97,7 +97,7 @@ class UiApp:
             clock=clock)
         self.fixed_settings = settings is not None
         self.clients: set[_Client] = set()
-        self._stamp = users._stamp
+        self._stamp = users.stamp
         self._release_seq = users.section("release_control").get("seq")
         self._allowed = allowed_hosts(host, st.hosts)
         _dummy_hash()                    # computed now, not on the loop at the first login
@@ -159,8 +159,8 @@ class UiApp:
         expired or whose user was removed or given a new password, free control whose
         holder has left, and obey a changed users file. Cheap: one stat when unchanged."""
         self.users.load_or_empty()
-        if self.users._stamp != self._stamp:
-            self._stamp = self.users._stamp
+        if self.users.stamp != self._stamp:
+            self._stamp = self.users.stamp
             self._reread()
         for s in self.sessions.prune():
             self._end(s, "expired", ended=True)
@@ -284,6 +284,8 @@ class UiApp:
 
     async def logout(self, request: Request) -> Response:
         if not same_origin(request):
+            self.record("request_refused", "-", ip=client_ip(request),
+                        why="another site's Origin")
             return refuse("refused: request from another site", 403)
         s = self.session_of(request)
         if s is not None:

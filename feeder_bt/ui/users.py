@@ -144,7 +144,7 @@ class UsersFile:
     def __init__(self, path: str | Path | None = None) -> None:
         self.path = Path(path).expanduser() if path else default_path()
         self._users: dict[str, dict[str, Any]] = {}
-        self._stamp: tuple[int, int] | None = None
+        self._stamp: tuple[int, ...] | None = None
         self._warned: str | None = None
         self._doc: dict[str, Any] = {}
 
@@ -183,8 +183,8 @@ class UsersFile:
     def load(self) -> dict[str, dict[str, Any]]:
         """The users, re-read only when the file's size or modification time changed."""
         try:
-            st = self.path.stat()
-            stamp: tuple[int, int] | None = (st.st_mtime_ns, st.st_size)
+            st = self.path.stat()      # a new inode at every atomic write: never missed
+            stamp: tuple[int, ...] | None = (st.st_ino, st.st_mtime_ns, st.st_size)
         except FileNotFoundError:
             stamp = None
         except OSError as e:
@@ -211,6 +211,11 @@ class UsersFile:
 
     def names(self) -> list[str]:
         return sorted(self.load())
+
+    @property
+    def stamp(self) -> tuple[int, ...] | None:
+        """Changes whenever the file was re-read with new contents (or went missing)."""
+        return self._stamp
 
     def section(self, key: str) -> dict[str, Any]:
         """``settings`` or ``release_control`` as last read (empty if absent or damaged)."""
