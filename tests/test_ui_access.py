@@ -483,7 +483,20 @@ COMMAND_BODIES = st.fixed_dictionaries(
     optional={"horizontal_mm_s": JSON_VALUES, "incline_pct": JSON_VALUES,
               "robot_speed_pct": JSON_VALUES, "scenario": JSON_VALUES, "engaged": JSON_VALUES,
               "action": JSON_VALUES, "user": JSON_VALUES, "password": JSON_VALUES})
-RAW = (st.binary(max_size=200)
+NUMBERS = (st.integers() | st.floats(allow_nan=False) | st.integers(10 ** 30, 10 ** 400)
+           | st.text(alphabet="0123456789.e-+", max_size=40) | st.booleans() | st.none())
+SCALAR_COMMANDS = st.one_of(
+    st.fixed_dictionaries({"command": st.just("speeds")},
+                          optional={"horizontal_mm_s": NUMBERS, "incline_pct": NUMBERS,
+                                    "robot_speed_pct": NUMBERS}),
+    st.fixed_dictionaries({"command": st.just("load"),
+                           "scenario": st.text(max_size=30) | st.sampled_from(
+                               ["lenses", "squares", "../lenses", "/etc/passwd"])}),
+    st.fixed_dictionaries({"command": st.sampled_from(["start", "pause", "resume", "stop",
+                                                       "reset", "adjust"])},
+                          optional={"engaged": NUMBERS}))
+RAW = (SCALAR_COMMANDS.map(lambda d: json.dumps(d).encode())
+       | st.binary(max_size=200)
        | st.text(alphabet=string.printable, max_size=200).map(str.encode)
        | COMMAND_BODIES.map(lambda d: json.dumps(d).encode())
        | st.builds(lambda n, c: (c * n).encode(), st.integers(1, 20_000),
