@@ -158,14 +158,15 @@ class UiApp:
         """Housekeeping before every request and after every publish: end sessions that
         expired or whose user was removed or given a new password, free control whose
         holder has left, and obey a changed users file. Cheap: one stat when unchanged."""
-        self.users.load_or_empty()
+        users = self.users.load_or_empty()
         if self.users.stamp != self._stamp:
             self._stamp = self.users.stamp
             self._reread()
         for s in self.sessions.prune():
             self._end(s, "expired", ended=True)
         for s in self.sessions.all():
-            secret = self.users.secret_of(s.user)
+            entry = users.get(s.user)
+            secret = str(entry["hash"]) if entry else None
             if secret != s.secret:
                 self._end(s, "user removed" if secret is None else "password changed")
         gone = self.control.expire()
@@ -440,8 +441,7 @@ class UiApp:
         ws = client.ws
         while True:
             await client.wake.wait()
-            client.wake.clear()
-            self.tidy()
+            client.wake.clear()              # wake_all() has tidied the sessions
             s = self.sessions.peek(client.token)     # a push is not a request: no refresh
             if s is None:
                 await _bounded(ws.send_text('{"type":"logout"}'))
