@@ -116,21 +116,17 @@ class BadBody(ValueError):
     """A request body that is not what the page sends: a 400 with this one line."""
 
 
-_TOKENS = re.compile(rb'"(?:[^"\\]|\\.)*"|[\[\]{}]')
-
-
-def _depth(raw: bytes) -> int:
-    """The deepest nesting of ``raw``'s arrays and objects (strings skipped), without
-    parsing it: a body nested 30,000 deep is refused before the parser recurses."""
-    depth = deepest = 0
-    for m in _TOKENS.finditer(raw):
-        tok = m.group()
-        if tok in (b"[", b"{"):
-            depth += 1
-            deepest = max(deepest, depth)
-        elif tok in (b"]", b"}"):
-            depth -= 1
-    return deepest
+def _too_deep(doc: Any, limit: int) -> bool:
+    """True if ``doc`` nests arrays and objects more than ``limit`` deep (no recursion)."""
+    stack = [(doc, 1)]
+    while stack:
+        value, depth = stack.pop()
+        if isinstance(value, dict | list):
+            if depth > limit:
+                return True
+            items = value.values() if isinstance(value, dict) else value
+            stack.extend((v, depth + 1) for v in items if isinstance(v, dict | list))
+    return False
 
 
 def _number(text: str, convert: Callable[[str], Any]) -> Any:
@@ -149,20 +145,20 @@ def _constant(text: str) -> Any:
 
 def parse_body(raw: bytes) -> dict[str, Any]:
     """The JSON object in ``raw``; ``BadBody`` with one line for anything else."""
-    if _depth(raw) > MAX_DEPTH:
-        raise BadBody("the body is nested too deeply")
     try:
         text = raw.decode("utf-8")
         doc = json.loads(text or "{}", parse_int=lambda s: _number(s, int),
                          parse_float=lambda s: _number(s, float), parse_constant=_constant)
     except BadBody:
         raise
-    except RecursionError:
+    except RecursionError:                    # the C parser stops itself, cleanly
         raise BadBody("the body is nested too deeply") from None
     except (ValueError, TypeError, OverflowError):   # JSONDecodeError, UnicodeDecodeError
         raise BadBody("the body is not valid JSON") from None
     if not isinstance(doc, dict):
         raise BadBody("the body must be a JSON object")
+    if _too_deep(doc, MAX_DEPTH):
+        raise BadBody("the body is nested too deeply")
     return doc
 
 
