@@ -57,6 +57,7 @@ COOKIE = "feeder_session"
 COMMAND_TIMEOUT_S = 5.0       # the tick thread answers within a tick or two; else 503
 SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
+MAX_CHECKS = 4                # password checks at once (16 MiB and ~50 ms of a core each)
 STATIC = Path(__file__).parent / "static"
 
 class _Client:
@@ -97,6 +98,7 @@ class UiApp:
             clock=clock)
         self.fixed_settings = settings is not None
         self.clients: set[_Client] = set()
+        self._checking = 0               # password checks in flight
         self._stamp = users.stamp
         self._release_seq = users.section("release_control").get("seq")
         self._allowed = allowed_hosts(host, st.hosts)
@@ -250,10 +252,14 @@ class UiApp:
             self.record("login_refused", shown, ip=attempt.ip, locked_by=verdict.why,
                         wait_s=secs)
             return refuse(f"too many failed logins: try again in {secs} s", 429,
-                           {"retry-after": str(secs)})
+                          {"retry-after": str(secs)})
+        if self._checking >= MAX_CHECKS:
+            return refuse("the controller is busy checking other logins: try again", 429,
+                          {"retry-after": "1"})
         if not self.guard.begin(attempt, verdict.trusted):
             return refuse("another login for this user is being checked: try again", 429,
-                           {"retry-after": "1"})
+                          {"retry-after": "1"})
+        self._checking += 1
         try:
             entry = self.users.load_or_empty().get(name) if real else None
             stored = str(entry["hash"]) if entry else _dummy_hash()
@@ -261,6 +267,7 @@ class UiApp:
                                            stored)
             good = good and entry is not None
         finally:
+            self._checking -= 1
             self.guard.end(attempt, verdict.trusted)
         if not good:
             locks = self.guard.failure(attempt, verdict.trusted)
