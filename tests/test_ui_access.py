@@ -623,3 +623,32 @@ def test_unknown_access_event_kinds_are_refused():
     rig = SimRig()
     out = rig.ops.execute(Command("access", {"kind": "state"}, "mallory", Future()))
     assert out.status == 400 and rig.ops.report()["access"] == {}
+
+
+def test_password_checks_at_once_are_bounded(tmp_path):
+    ui, rec, clock = make_ui(tmp_path)
+    ui._checking = 4                                        # four scrypt checks running
+    code, body = Browser(ui).login("alice")
+    assert code == 429 and "busy checking other logins" in body["error"]
+    ui._checking = 0
+    assert Browser(ui).login("alice")[0] == 200
+
+
+def test_feeder_users_roles_and_settings(tmp_path, capsys):
+    path = str(write_users(tmp_path / "users.json").path)
+    assert main(["users", "role", "carol", "admin", "--users", path]) == 0
+    assert main(["users", "role", "nobody", "admin", "--users", path]) == 2
+    capsys.readouterr()
+    assert main(["users", "list", "--users", path]) == 0
+    assert capsys.readouterr().out.splitlines() == ["alice", "bob", "carol (admin)"]
+    assert main(["users", "set", "control_grace_s", "90", "--users", path]) == 0
+    assert main(["users", "set", "proxies", "not-an-address", "--users", path]) == 2
+    capsys.readouterr()
+    assert main(["users", "settings", "--users", path]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["control_grace_s"] == 90.0 and shown["proxies"] == []
+    assert main(["users", "set", "control_grace_s", "--users", path]) == 0   # reset
+    assert Settings.of(UsersFile(path).section("settings")).control_grace_s == 60.0
+    monkey = UsersFile(path)
+    monkey.add("alice", "alice-new-secret-7", replace=True)
+    assert monkey.role("carol") == "admin"                  # roles survive other changes
