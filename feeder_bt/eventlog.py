@@ -24,6 +24,20 @@ SCHEMA_VERSION = 1
 FLUSH_EVERY = 5000          # buffered events that force a flush
 FLUSH_WALL_S = 2.0          # wall seconds between flushes otherwise
 
+# Operator access events (issue 19), recorded by the operator UI: the kind, and the words
+# `feeder report` counts them under. ``user`` is who (``-`` for nobody, ``(unknown name)``
+# for a name that is not a user); ``ip`` where from; ``why`` the reason.
+ACCESS_KINDS = {
+    "login_failed": "failed logins",
+    "login_locked": "lock-outs",
+    "login_refused": "logins refused while locked",
+    "command_refused": "refused commands",
+    "request_refused": "refused requests",
+    "control_released": "control released",
+    "session_ended": "sessions ended",
+    "access_suppressed": "not recorded (flood)",
+}
+
 SAMPLE_COLUMNS = ("t", "queue", "horizontal_mm_s", "incline_pct", "robot_speed_pct",
                   "retrieved")
 

@@ -168,6 +168,21 @@ def test_dashboard_screenshot(alice, bob, server):
     assert SHOT.stat().st_size > 20_000
 
 
+def test_a_closed_page_shows_the_others_when_control_will_be_free(alice, bob, server):
+    """Issue 19: alice's page goes away while she holds control, and bob is shown the
+    count-down to control being free; her page back within that time, she keeps it."""
+    feeding(alice)
+    bob_logs_in(bob, server)
+    alice.goto("about:blank")                       # her tab closed (the websocket with it)
+    expect(bob.locator("#control-state")).to_have_text(re.compile(
+        r"^Control: someone else has control \(alice\) \u2014 control free in [1-6]?\d s$"),
+        timeout=5_000)
+    alice.goto(server.url)                          # back: a reload does not lose control
+    expect(alice.locator("#control-state")).to_have_text("Control: you have control")
+    expect(bob.locator("#control-state")).to_have_text(
+        "Control: someone else has control (alice)")
+
+
 def test_speed_set_in_the_page_reaches_the_cell_and_the_report(alice, bob, server):
     feeding(alice)
     bob_logs_in(bob, server)

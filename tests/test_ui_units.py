@@ -200,6 +200,7 @@ def test_sessions_expire_when_idle():
 def test_one_holder_of_control_at_a_time():
     s, c = Sessions(), Control()
     alice, bob, alice2 = s.create("alice"), s.create("bob"), s.create("alice")
+    alice.conns = bob.conns = 1                     # their pages are open
     assert c.state_for(bob) == {"state": "available", "holder": None}
     assert c.refusal(bob) == "refused: take control first (nobody has it)"
     assert c.take(alice) == (True, "you have control")
@@ -292,7 +293,8 @@ def test_bridge_refusals_and_withdrawn_commands():
     assert withdrawn.cancel()                       # the web side timed out first
     b.pump()
     assert bad.result(0) == Outcome.refused("refused: cannot start while RUNNING", 409)
-    assert boom.result(0).status == 500 and "bug" in boom.result(0).message
+    assert boom.result(0).status == 500 and "internal error" in boom.result(0).message
+    assert "bug" not in boom.result(0).message      # its text (paths...) stays on stderr
     assert [x[0] for x in log] == ["bad", "boom"]   # the withdrawn stop never ran
     queued = b.submit("start", {}, "a")
     b.close()
@@ -396,6 +398,9 @@ def test_limits_come_from_the_cell():
         ({"horizontal_mm_s": "fast"}, "must be a number"),
         ({"horizontal_mm_s": True}, "must be a number"),
         ({"horizontal_mm_s": float("nan")}, "finite"),
+        ({"horizontal_mm_s": int("9" * 401)}, "finite"),        # issue 19: not a 500
+        ({"horizontal_mm_s": "9" * 401}, "at most 32 characters"),
+        ({"horizontal_mm_s": "1e999"}, "finite"),
         ({"incline_pct": 201}, "0-200 %"),
         ({"incline_pct": -1}, "0-200 %"),
         ({"robot_speed_pct": 0}, "robot speed"),
@@ -526,7 +531,7 @@ def _ui_with_session(tmp_path: Path):
     log: list = []
     bridge = make_bridge(log)
     ui = ui_server.UiApp(bridge, users)
-    return ui, bridge, ui.sessions.create("alice", "127.0.0.1")
+    return ui, bridge, ui.sessions.create("alice", "127.0.0.1", users.secret_of("alice"))
 
 
 def test_a_slow_client_gets_only_the_latest_snapshot(tmp_path):

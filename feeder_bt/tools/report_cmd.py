@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..eventlog import EventLogError, open_readonly
+from ..eventlog import ACCESS_KINDS, EventLogError, open_readonly
 from .runs_db import run_ids, summary
 
 COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
@@ -26,6 +26,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="draw speed, queue and parts/min against time (the chosen run, "
                         "else the latest)")
     p.add_argument("--json", action="store_true", help="print the summaries as JSON")
+    p.add_argument("--access", action="store_true",
+                   help="list every operator access event (failed logins, lock-outs, "
+                        "refusals, control released), not only their counts")
     p.set_defaults(handler=cmd_report)
     return p
 
@@ -36,16 +39,55 @@ def cmd_report(args: argparse.Namespace) -> int:
     try:
         ids = run_ids(conn, args.run, args.last)
         rows = [summary(conn, i) for i in ids]
+        for row in rows:
+            row["access"] = access_counts(conn, row["run"])
         if args.json:
             print(json.dumps(rows if len(rows) > 1 else rows[0], indent=2))
         else:
             print(format_table(rows))
+            for line in access_lines(conn, rows, getattr(args, "access", False)):
+                print(line)
         if args.plot:
             write_plot(conn, ids[-1], args.plot)
             print(f"plot: {args.plot} (run {ids[-1]})")
     finally:
         conn.close()
     return 0
+
+
+def access_counts(conn: Any, run_id: int) -> dict[str, int]:
+    """How many of each operator access event (issue 19) a run recorded."""
+    kinds = tuple(ACCESS_KINDS)
+    marks = ",".join("?" * len(kinds))
+    try:
+        rows = conn.execute(f"SELECT kind, count(*), sum(coalesce(json_extract(data, "
+                            f"'$.count'), 1)) FROM events WHERE run_id=? AND kind IN "
+                            f"({marks}) GROUP BY kind", (run_id, *kinds)).fetchall()
+    except Exception as e:                    # sqlite3.Error: a damaged log
+        raise EventLogError(f"run {run_id}: damaged record ({e})") from None
+    return {kind: int(total if kind == "access_suppressed" else n)
+            for kind, n, total in sorted(rows, key=lambda r: kinds.index(r[0]))}
+
+
+def access_lines(conn: Any, rows: list[dict[str, Any]], every: bool) -> list[str]:
+    """Below the table: per run, its access events counted (and, with ``every``, listed)."""
+    out: list[str] = []
+    for row in rows:
+        counts = row["access"]
+        if not counts:
+            continue
+        words = ", ".join(f"{n} {ACCESS_KINDS[k]}" for k, n in counts.items())
+        out.append(f"run {row['run']} operator access: {words}")
+        if every:
+            for t, kind, data in conn.execute(
+                    "SELECT t, kind, data FROM events WHERE run_id=? AND kind IN "
+                    f"({','.join('?' * len(ACCESS_KINDS))}) ORDER BY rowid",
+                    (row["run"], *ACCESS_KINDS)):
+                fields = json.loads(data or "{}")
+                who = fields.pop("user", "-")
+                rest = " ".join(f"{k}={v}" for k, v in fields.items())
+                out.append(f"  {t:10.2f}  {kind:16}  {who}  {rest}".rstrip())
+    return out
 
 
 def write_plot(conn: Any, run_id: int, out: str | Path) -> None:

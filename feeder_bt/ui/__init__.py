@@ -2,13 +2,18 @@
 
 Many logged-in users watch; one at a time holds control and operates the cell. The pieces:
 
-- ``users``: the users file (salted scrypt hashes) behind ``feeder users``;
+- ``users``: the users file (salted scrypt hashes, roles, access settings) behind
+  ``feeder users``;
 - ``control``: sessions, the control token and the failed-login limiter (web thread only);
+- ``guard``: judging login attempts so that guessing never locks the rightful user out;
+- ``access``: what every operator surface shares: settings, defensive body parsing, the
+  Host allow-list and forwarded headers, and the record of refusals (issue 19);
 - ``bridge``: the only way between the web thread and the cell: commands queued to the tick
   thread, immutable status snapshots published back;
 - ``operate`` and ``status``: what the tick thread does with a command, and what it puts
   in a snapshot;
-- ``server``: the Starlette app and the uvicorn thread; ``static/``: the page;
+- ``server``: the Starlette app (``responses``: its stateless HTTP pieces), ``serve``: the
+  uvicorn thread; ``static/``: the page;
 - ``app``: all of it put together for ``feeder run --ui`` (run.py).
 
 This module stays import-light (no web framework) so that the command line can parse

@@ -12,20 +12,33 @@ from pathlib import Path
 from typing import Any
 
 from ..cell import Cell
+from .access import Settings
 from .bridge import Bridge
 from .operate import CellOps
 from .server import UiApp, UiServer, make_notice
 from .status import CellPanel
-from .users import UsersError, UsersFile
+from .users import UsersError, UsersFile, group_or_world_readable
+
+_WARNED: set[Path] = set()
 
 
 def check_users(path: str | Path | None) -> UsersFile:
-    """The users file for ``--ui``: it must exist and name somebody who can log in."""
+    """The users file for ``--ui``: it must exist, name somebody who can log in, hold
+    valid settings, and (if the settings say so) be private to its owner."""
     users = UsersFile(path)
     if not users.names():               # a damaged file is a one-line UsersError here
         hint = f" --users {path}" if path else ""
         raise UsersError(f"no users in {users.path}: nobody could log in; add one with "
                          f"`feeder users add NAME{hint}`")
+    settings = Settings.of(users.section("settings"), f"{users.path}: settings")
+    if group_or_world_readable(users.path):
+        what = (f"{users.path} may be read by other users of this machine (its password "
+                f"hashes can be guessed offline): chmod 600 {users.path}")
+        if settings.readable_users_file == "refuse":
+            raise UsersError(f"refused: {what}")
+        if users.path not in _WARNED:          # run.py checks first, then the UI again
+            _WARNED.add(users.path)
+            print(f"feeder: warning: {what}", file=sys.stderr)
     return users
 
 
@@ -39,7 +52,7 @@ class OperatorUi:
         self.ops = CellOps(cell, Path(scenario_path).resolve().parent, Path(cell_file))
         self.panel = CellPanel(cell, self.ops.limits, lambda: sorted(self.ops.scenarios), t0)
         self.bridge = Bridge(self.ops.execute, self.panel.snapshot)
-        self.web = UiApp(self.bridge, users)
+        self.web = UiApp(self.bridge, users, host=host)
         self.server = UiServer(self.web, host, port)
         self.url = ""
 

@@ -165,7 +165,8 @@ class Bridge:
         except Exception as e:          # a bug must not take the cell down with it
             print(f"feeder: operator UI: command {cmd.name} failed: "
                   f"{type(e).__name__}: {e}", file=sys.stderr)
-            return Outcome.refused(f"failed: {type(e).__name__}: {e}", 500)
+            return Outcome.refused(f"failed: internal error ({type(e).__name__}); see the "
+                                   "controller's output", 500)
 
     def publish(self) -> Published:
         status, history, messages = self._snapshot()

@@ -13,46 +13,65 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-SESSION_IDLE_S = 8 * 3600.0     # a session unused this long ends (and gives up control)
+SESSION_IDLE_S = 8 * 3600.0     # a session without a request this long ends
+SESSION_LIFETIME_S = 12 * 3600.0  # and every session ends this long after its login
+CONTROL_GRACE_S = 60.0          # control outlives its holder's last open page this long
 
 
-@dataclass
+@dataclass(eq=False)
 class Session:
     token: str
     user: str
     ip: str
     created: float
-    seen: float
+    seen: float                     # the last request (websocket pushes do not count)
+    secret: str = ""                # the user's password hash at login (see UsersFile)
+    conns: int = 0                  # open websockets (pages showing the dashboard)
+    left: float = 0.0               # when the last of them closed
 
 
 class Sessions:
     """Session tokens (random, 256 bits) handed out at login and kept only in memory:
-    restarting the controller logs everybody out."""
+    restarting the controller logs everybody out. A session ends ``idle_s`` after its last
+    request and ``lifetime_s`` after its login, whichever comes first."""
 
     def __init__(self, idle_s: float = SESSION_IDLE_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.idle_s, self.clock = idle_s, clock
+                 clock: Callable[[], float] = time.monotonic,
+                 lifetime_s: float = SESSION_LIFETIME_S) -> None:
+        self.idle_s, self.clock, self.lifetime_s = idle_s, clock, lifetime_s
         self._by_token: dict[str, Session] = {}
 
-    def create(self, user: str, ip: str = "") -> Session:
+    def create(self, user: str, ip: str = "", secret: str = "") -> Session:
         now = self.clock()
-        s = Session(secrets.token_urlsafe(32), user, ip, now, now)
+        s = Session(secrets.token_urlsafe(32), user, ip, now, now, secret, 0, now)
         self._by_token[s.token] = s
         return s
 
-    def get(self, token: str | None) -> Session | None:
-        """The live session for ``token`` (marked as seen now), or None."""
+    def _expired(self, s: Session, now: float) -> bool:
+        return now - s.seen > self.idle_s or now - s.created > self.lifetime_s
+
+    def peek(self, token: str | None) -> Session | None:
+        """The live session for ``token`` without marking it as used (a push, not a
+        request), or None."""
         if not token:
             return None
         s = self._by_token.get(token)
         if s is None:
             return None
-        now = self.clock()
-        if now - s.seen > self.idle_s:
+        if self._expired(s, self.clock()):
             del self._by_token[token]
             return None
-        s.seen = now
         return s
+
+    def get(self, token: str | None) -> Session | None:
+        """The live session for ``token`` (marked as seen now: a request), or None."""
+        s = self.peek(token)
+        if s is not None:
+            s.seen = self.clock()
+        return s
+
+    def all(self) -> list[Session]:
+        return list(self._by_token.values())
 
     def end(self, token: str | None) -> Session | None:
         return self._by_token.pop(token, None) if token else None
@@ -64,9 +83,9 @@ class Sessions:
         return gone
 
     def prune(self) -> list[Session]:
-        """Remove and return the sessions idle for longer than ``idle_s``."""
+        """Remove and return the sessions idle too long or past their lifetime."""
         now = self.clock()
-        gone = [s for s in self._by_token.values() if now - s.seen > self.idle_s]
+        gone = [s for s in self._by_token.values() if self._expired(s, now)]
         for s in gone:
             del self._by_token[s.token]
         return gone
@@ -83,10 +102,30 @@ class Control:
     """The control token (thesis Figures 4-2, 4-4): held by at most one session at a time.
 
     Bound to a session, not to a name: the same user in a second browser only observes.
+    When the holder has no page open (every websocket closed) and makes no request for
+    ``grace_s``, control is free again (``expire``); the others are shown the count-down.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, grace_s: float = CONTROL_GRACE_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.holder: Session | None = None
+        self.grace_s, self.clock = grace_s, clock
+
+    def free_in(self) -> float | None:
+        """Seconds until control is free because its holder left; None while they are
+        here (a page open) or nobody holds it."""
+        h = self.holder
+        if h is None or h.conns > 0:
+            return None
+        return max(0.0, max(h.left, h.seen) + self.grace_s - self.clock())
+
+    def expire(self) -> Session | None:
+        """Free control if its holder has been gone ``grace_s``; returns that holder."""
+        left = self.free_in()
+        if left is not None and left <= 0:
+            gone, self.holder = self.holder, None
+            return gone
+        return None
 
     def take(self, session: Session) -> tuple[bool, str]:
         if self.holder is None or self.holder.token == session.token:
@@ -119,13 +158,16 @@ class Control:
                     "log out of it first")
         return f"refused: {self.holder.user} has control"
 
-    def state_for(self, session: Session) -> dict[str, str | None]:
-        """The indicator: ``available``, ``you``, or ``other`` with the holder's name."""
+    def state_for(self, session: Session) -> dict[str, str | int | None]:
+        """The indicator: ``available``, ``you``, or ``other`` with the holder's name, and
+        ``free_in`` (whole seconds) when the holder has left."""
         if self.holder is None:
             return {"state": "available", "holder": None}
+        left = self.free_in()
+        extra = {} if left is None else {"free_in": math.ceil(left)}
         if self.holder.token == session.token:
-            return {"state": "you", "holder": session.user}
-        return {"state": "other", "holder": self.holder.user}
+            return {"state": "you", "holder": session.user, **extra}
+        return {"state": "other", "holder": self.holder.user, **extra}
 
 
 @dataclass

@@ -17,6 +17,7 @@ import py_trees
 
 from ..cell import Cell, CellCommandError, CellState
 from ..errors import FeederError
+from ..eventlog import ACCESS_KINDS
 from ..scenario import load_scenario
 from ..scenario.model import CellSpec
 from .bridge import Command, Outcome
@@ -27,6 +28,7 @@ SIMPLE = {"start": "start", "stop": "stop", "pause": "pause", "resume": "resume"
           "reset": "reset"}
 COMMANDS = (*SIMPLE, "load", "speeds", "adjust")
 MAX_AUDIT = 1000
+MAX_NUMBER_CHARS = 32          # a speed given as text: longer is refused before conversion
 
 
 @dataclass(frozen=True)
@@ -66,11 +68,16 @@ def parse_speeds(args: Mapping[str, Any], limits: Limits, current: Mapping[str, 
     out: dict[str, float] = {}
     for key, raw in args.items():
         if isinstance(raw, bool) or not isinstance(raw, int | float | str):
-            raise FeederError(f"{key}: must be a number, got {raw!r}")
+            raise FeederError(f"{key}: must be a number, got {str(raw)[:40]!r}")
+        if isinstance(raw, str) and len(raw) > MAX_NUMBER_CHARS:
+            raise FeederError(f"{key}: must be a number of at most {MAX_NUMBER_CHARS} "
+                              "characters")
         try:
             v = float(raw)
         except ValueError:
-            raise FeederError(f"{key}: must be a number, got {raw!r}") from None
+            raise FeederError(f"{key}: must be a number, got {str(raw)[:40]!r}") from None
+        except OverflowError:                 # an integer of 400 digits
+            raise FeederError(f"{key}: must be a finite number") from None
         if not math.isfinite(v):
             raise FeederError(f"{key}: must be a finite number, got {raw!r}")
         out[key] = v
@@ -129,6 +136,7 @@ class CellOps:
         self.scenarios = scenario_files(self.scenarios_dir)
         self.audit: list[dict[str, Any]] = []       # accepted commands, for the report
         self.dropped = 0
+        self.access: dict[str, int] = {}            # access events by kind, for the report
 
     def execute(self, cmd: Command) -> Outcome:
         """Run one command; every refusal says why and changes nothing."""
@@ -136,6 +144,13 @@ class CellOps:
         if name == "note":                          # login, logout, control: audit only
             self._log(cmd.user, str(args.get("action", "?")), {})
             return Outcome.done("noted")
+        if name == "access":                        # a refusal or lock-out: the event log
+            kind = args.pop("kind", None)
+            if kind not in ACCESS_KINDS:
+                return Outcome.refused(f"unknown access event {kind!r}", 400)
+            self.cell.stats.emit(self.cell.clock.now(), kind, user=cmd.user, **args)
+            self.access[kind] = self.access.get(kind, 0) + 1
+            return Outcome.done("recorded")
         if name in SIMPLE:
             if args:
                 return Outcome.refused(f"{name} takes no arguments", 400)
@@ -173,16 +188,16 @@ class CellOps:
                                    f"{self.cell.state.value})")
         self.scenarios = scenario_files(self.scenarios_dir)
         path = self.scenarios.get(name)
-        if path is None:
-            return Outcome.refused(f"no scenario {name!r} in {self.scenarios_dir} (one of: "
+        if path is None:                      # no server path in what a client is told
+            return Outcome.refused(f"no scenario {name[:64]!r} (one of: "
                                    f"{', '.join(self.scenarios) or 'none'})", 400)
         try:
             scenario, _ = load_scenario(path, self.cell_file)
             self.cell.load(scenario)
         except CellCommandError as e:
-            return Outcome.refused(f"refused: {e}")
+            return Outcome.refused(f"refused: {self._no_paths(str(e))}")
         except FeederError as e:              # a YAML mistake: FILE:LINE: key: what
-            return Outcome.refused(f"cannot load: {e}", 400)
+            return Outcome.refused(f"cannot load: {self._no_paths(str(e))}", 400)
         self._log(user, "load", {"scenario": name})
         return Outcome.done(f"scenario {scenario.name} loaded")
 
@@ -214,6 +229,15 @@ class CellOps:
                                                 "speeds stay where the operator puts them"))
 
     # ------------------------------------------------------------------ helpers
+    def _no_paths(self, text: str) -> str:
+        """A message for a client: the controller's folders replaced by file names."""
+        for folder in sorted({str(self.scenarios_dir.resolve()), str(self.scenarios_dir),
+                              str(self.cell_file.resolve().parent),
+                              str(self.cell_file.parent)}, key=len, reverse=True):
+            if folder not in ("", "."):
+                text = text.replace(folder + "/", "").replace(folder, "")
+        return text
+
     def _adjuster_max(self) -> float | None:
         ctx = self.cell.ctx
         if not getattr(self.cell, "auto_adjust", False) or ctx is None or ctx.adjuster is None:
@@ -232,4 +256,5 @@ class CellOps:
 
     def report(self) -> dict[str, Any]:
         """The report's ``operator`` section: what operators did, in order."""
-        return {"commands": list(self.audit), "commands_not_listed": self.dropped}
+        return {"commands": list(self.audit), "commands_not_listed": self.dropped,
+                "access": dict(sorted(self.access.items()))}

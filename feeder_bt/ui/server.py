@@ -1,4 +1,4 @@
-"""The operator UI's web server: a Starlette app run by uvicorn in a background thread.
+"""The operator UI's web app (Starlette); ``serve.UiServer`` runs it in a background thread.
 
 Threading: the app runs on its own asyncio loop in the ``feeder-ui`` thread and never
 touches the cell. It reads the bridge's latest published snapshot and submits commands
@@ -7,77 +7,58 @@ publish. Each websocket client has a sender task that always sends the *latest* 
 (updates published while it was busy are coalesced), and a client that cannot take one
 within ``SEND_TIMEOUT_S`` is dropped; the cell never waits on any of this.
 
-Security: passwords are checked against the users file's scrypt hashes off the loop;
-failed logins are rate-limited; the session token lives only in an HTTP-only,
-``SameSite=Strict`` cookie; state-changing requests must be JSON from the page's own
-origin (a cross-site form or script cannot send them); the page is served with a strict
-Content-Security-Policy (no inline script, nothing from elsewhere).
+Security (docs/operator-ui.md, issues 6 and 19): a request with a Host that is not ours is
+refused before anything else (``access.Gate``); passwords are checked against the users
+file's scrypt hashes off the loop, and failed logins are slowed per address and browser
+(``guard``) without locking the rightful user out; a session lives in an HTTP-only,
+``SameSite=Strict`` cookie, ends after an idle time and an absolute lifetime, and is bound to
+the password it was opened with; control is freed when its holder has left; state-changing
+requests must be JSON from the page's own origin (scheme included), parsed defensively; every
+refusal is recorded (``access.AccessRecorder``); the page has a strict CSP.
 """
 
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import json
-import socket
-import threading
+import sys
 import time
-from collections.abc import Awaitable
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlsplit
 
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 from starlette.middleware import Middleware
 from starlette.requests import HTTPConnection, Request
-from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from ..errors import FeederError
+from .access import (
+    MAX_HOST_CHARS,
+    AccessRecorder,
+    BadBody,
+    Gate,
+    Settings,
+    allowed_hosts,
+    parse_body,
+)
 from .bridge import Bridge, Outcome
-from .control import Control, LoginLimiter, Session, Sessions, retry_after
+from .control import Control, Session, Sessions, retry_after
+from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
 from .operate import COMMANDS
-from .users import MAX_PASSWORD, NAME_RE, UsersFile, _dummy_hash, verify_password
+from .responses import SecurityHeaders, client_ip, json_response, refuse, same_origin
+from .serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
+from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
 
 COOKIE = "feeder_session"
 COMMAND_TIMEOUT_S = 5.0       # the tick thread answers within a tick or two; else 503
 SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
+MAX_CHECKS = 4                # password checks at once (16 MiB and ~50 ms of a core each)
 STATIC = Path(__file__).parent / "static"
-
-SECURITY_HEADERS = [
-    (b"content-security-policy",
-     b"default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
-     b"connect-src 'self'; base-uri 'none'; form-action 'self'; frame-ancestors 'none'"),
-    (b"x-content-type-options", b"nosniff"),
-    (b"referrer-policy", b"no-referrer"),
-    (b"x-frame-options", b"DENY"),
-]
-
-
-class _SecurityHeaders:
-    """Adds ``SECURITY_HEADERS`` to every HTTP response (pages, assets and the API)."""
-
-    def __init__(self, app: ASGIApp) -> None:
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-
-        async def send_with_headers(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                message = {**message, "headers": [*message.get("headers", []),
-                                                  *SECURITY_HEADERS]}
-            await send(message)
-
-        await self.app(scope, receive, send_with_headers)
-
 
 class _Client:
     """One open websocket: what it has been sent so far."""
@@ -91,34 +72,36 @@ class _Client:
         self.session = ""
 
 
-def _same_origin(conn: HTTPConnection) -> bool:
-    """A browser always sends ``Origin`` on POSTs and websockets; it must be this server.
-    (A client without one, such as curl, is not a browser that a third site can drive.)"""
-    origin = conn.headers.get("origin")
-    if origin is None:
-        return True
-    return urlsplit(origin).netloc.lower() == conn.headers.get("host", "").lower()
-
-
-def _json(data: Any, status: int = 200, headers: dict[str, str] | None = None) -> Response:
-    return JSONResponse(data, status_code=status,
-                        headers={"cache-control": "no-store", **(headers or {})})
-
-
-def _refuse(message: str, status: int, headers: dict[str, str] | None = None) -> Response:
-    return _json({"ok": False, "error": message}, status, headers)
-
-
 class UiApp:
-    """The web side's state (sessions, control, limiter, websocket clients) and routes."""
+    """The web side's state (sessions, control, login guard, websocket clients) and routes.
+
+    ``host`` is the bound address (for the Host allow-list); ``settings`` default to the
+    users file's; ``clock`` drives sessions, control and the guard unless they are given.
+    """
 
     def __init__(self, bridge: Bridge, users: UsersFile, *, sessions: Sessions | None = None,
-                 control: Control | None = None, limiter: LoginLimiter | None = None) -> None:
-        self.bridge, self.users = bridge, users
-        self.sessions = sessions or Sessions()
-        self.control = control or Control()
-        self.limiter = limiter or LoginLimiter()
+                 control: Control | None = None, guard: LoginGuard | None = None,
+                 settings: Settings | None = None, host: str = "127.0.0.1",
+                 clock: Callable[[], float] = time.monotonic,
+                 record: AccessRecorder | None = None) -> None:
+        self.bridge, self.users, self.host = bridge, users, host
+        self.settings = settings if settings is not None else \
+            Settings.of(users.section("settings"))
+        st = self.settings
+        # `is not None`, not `or`: an empty Sessions is falsy (it has a length)
+        self.sessions = sessions if sessions is not None else \
+            Sessions(st.session_idle_s, clock, st.session_lifetime_s)
+        self.control = control if control is not None else Control(st.control_grace_s, clock)
+        self.guard = guard if guard is not None else LoginGuard(users.secret_of, clock=clock)
+        self.record = record if record is not None else AccessRecorder(
+            lambda kind, user, data: bridge.submit("access", {"kind": kind, **data}, user),
+            clock=clock)
+        self.fixed_settings = settings is not None
         self.clients: set[_Client] = set()
+        self._checking = 0               # password checks in flight
+        self._stamp = users.stamp
+        self._release_seq = users.section("release_control").get("seq")
+        self._allowed = allowed_hosts(host, st.hosts)
         _dummy_hash()                    # computed now, not on the loop at the first login
         self.app = Starlette(routes=[
             Route("/", self.index),
@@ -130,22 +113,80 @@ class UiApp:
             Route("/api/command", self.command, methods=["POST"]),
             WebSocketRoute("/ws", self.websocket),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
-        ], middleware=[Middleware(_SecurityHeaders)])
+        ], middleware=[Middleware(SecurityHeaders),
+                       Middleware(Gate, hosts=self.hosts, proxies=self.proxies,
+                                  refused=self._host_refused)])
+
+    # ------------------------------------------------------------------ the users file
+    def hosts(self) -> frozenset[str]:
+        self.tidy()
+        return self._allowed
+
+    def proxies(self) -> tuple[str, ...]:
+        return self.settings.proxies
+
+    def _host_refused(self, ip: str, why: str) -> None:
+        self.record("request_refused", "-", ip=ip, why=why[:MAX_HOST_CHARS])
+
+    def _reread(self) -> None:
+        """The users file changed: new settings apply now; a release request is obeyed."""
+        if not self.fixed_settings:
+            try:
+                st = Settings.of(self.users.section("settings"))
+            except UsersError as e:
+                print(f"feeder: operator UI: {e}; keeping the settings in force",
+                      file=sys.stderr)
+                st = self.settings
+            self.settings = st
+            self.sessions.idle_s, self.sessions.lifetime_s = st.session_idle_s, \
+                st.session_lifetime_s
+            self.control.grace_s = st.control_grace_s
+            self._allowed = allowed_hosts(self.host, st.hosts)
+        req = self.users.section("release_control")
+        if req.get("seq") != self._release_seq:
+            self._release_seq = req.get("seq")
+            by = str(req.get("by", "?"))[:64]
+            self.force_release(f"`feeder users release-control` by {by}")
+
+    def force_release(self, by: str) -> Session | None:
+        """An administrator frees control, whoever holds it; recorded either way."""
+        holder, self.control.holder = self.control.holder, None
+        self.record("control_released", holder.user if holder else "-", why=f"forced by {by}",
+                    held=holder is not None)
+        return holder
 
     # ------------------------------------------------------------------ sessions
-    def session_of(self, conn: HTTPConnection) -> Session | None:
-        """The caller's live session; a session whose user was removed ends here."""
-        s = self.sessions.get(conn.cookies.get(COOKIE))
-        if s is not None and not self.users.exists(s.user):
-            self._end(s)
-            return None
-        return s
+    def tidy(self) -> None:
+        """Housekeeping before every request and after every publish: end sessions that
+        expired or whose user was removed or given a new password, free control whose
+        holder has left, and obey a changed users file. Cheap: one stat when unchanged."""
+        users = self.users.load_or_empty()
+        if self.users.stamp != self._stamp:
+            self._stamp = self.users.stamp
+            self._reread()
+        for s in self.sessions.prune():
+            self._end(s, "expired", ended=True)
+        for s in self.sessions.all():
+            entry = users.get(s.user)
+            secret = str(entry["hash"]) if entry else None
+            if secret != s.secret:
+                self._end(s, "user removed" if secret is None else "password changed")
+        gone = self.control.expire()
+        if gone is not None:
+            self.record("control_released", gone.user,
+                        why=f"no page open for {self.control.grace_s:g} s")
 
-    def _end(self, s: Session) -> None:
-        self.sessions.end(s.token)
+    def session_of(self, conn: HTTPConnection) -> Session | None:
+        """The caller's live session (this request counts as use), or None."""
+        self.tidy()
+        return self.sessions.get(conn.cookies.get(COOKIE))
+
+    def _end(self, s: Session, why: str, ended: bool = False) -> None:
+        if not ended:
+            self.sessions.end(s.token)
+        self.record("session_ended", s.user, why=why)
         if self.control.drop(s.token):
-            self.note(s.user, "lost control (session ended)")
-        self.wake_all()
+            self.record("control_released", s.user, why=f"session ended ({why})")
 
     def note(self, user: str, action: str) -> None:
         """Log a login, logout or control change as an operator event (fire and forget)."""
@@ -153,13 +194,11 @@ class UiApp:
 
     def session_info(self, s: Session) -> dict[str, Any]:
         return {"user": s.user, "control": self.control.state_for(s),
-                "users": self.sessions.users()}
+                "users": self.sessions.users(), "admin": self.users.role(s.user) == "admin"}
 
     def wake_all(self) -> None:
         """Called on the loop (after a publish, or a login/control change)."""
-        for s in self.sessions.prune():
-            if self.control.drop(s.token):
-                self.note(s.user, "lost control (session expired)")
+        self.tidy()
         for c in self.clients:
             c.wake.set()
 
@@ -169,22 +208,20 @@ class UiApp:
 
     async def _body(self, request: Request) -> dict[str, Any] | Response:
         """The JSON object of a state-changing request, or the refusal to send back."""
-        if not _same_origin(request):
-            return _refuse("refused: request from another site", 403)
+        if not same_origin(request):
+            self.record("request_refused", "-", ip=client_ip(request), why="another site's Origin")
+            return refuse("refused: request from another site", 403)
         if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
-            return _refuse("expected a JSON body (Content-Type: application/json)", 415)
+            return refuse("expected a JSON body (Content-Type: application/json)", 415)
         raw = b""
         async for chunk in request.stream():
             raw += chunk
             if len(raw) > MAX_BODY:
-                return _refuse("request too large", 413)
+                return refuse("request too large", 413)
         try:
-            body = json.loads(raw or b"{}")
-        except (json.JSONDecodeError, UnicodeDecodeError):
-            return _refuse("the body is not valid JSON", 400)
-        if not isinstance(body, dict):
-            return _refuse("the body must be a JSON object", 400)
-        return body
+            return parse_body(raw)
+        except BadBody as e:
+            return refuse(str(e), 400)
 
     async def _signed_in_body(self, request: Request
                               ) -> tuple[dict[str, Any], Session] | Response:
@@ -194,7 +231,7 @@ class UiApp:
             return body
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
+            return refuse("not logged in", 401)
         return body, s
 
     # ------------------------------------------------------------------ login
@@ -204,41 +241,60 @@ class UiApp:
             return body
         name, password = body.get("user"), body.get("password")
         if not isinstance(name, str) or not isinstance(password, str) or not name:
-            return _refuse("give a user name and a password", 400)
-        ip = request.client.host if request.client else "?"
-        keys = (f"user:{name.lower()[:64]}", f"ip:{ip}")
-        wait = self.limiter.locked_for(keys)
-        if wait > 0:
-            secs = retry_after(wait)
-            return _refuse(f"too many failed logins: try again in {secs} s", 429,
-                           {"retry-after": str(secs)})
-        if not self.limiter.begin(keys):
-            return _refuse("another login for this user is being checked: try again", 429,
-                           {"retry-after": "1"})
+            return refuse("give a user name and a password", 400)
+        real = NAME_RE.fullmatch(name) is not None
+        known = request.cookies.get(KNOWN_COOKIE + name) if real else None
+        attempt = Attempt(name[:64], client_ip(request), known)
+        shown = name if real and self.users.exists(name) else "(unknown name)"
+        verdict = self.guard.check(attempt)
+        if verdict.wait_s > 0:
+            secs = retry_after(verdict.wait_s)
+            self.record("login_refused", shown, ip=attempt.ip, locked_by=verdict.why,
+                        wait_s=secs)
+            return refuse(f"too many failed logins: try again in {secs} s", 429,
+                          {"retry-after": str(secs)})
+        if self._checking >= MAX_CHECKS:
+            return refuse("the controller is busy checking other logins: try again", 429,
+                          {"retry-after": "1"})
+        if not self.guard.begin(attempt, verdict.trusted):
+            return refuse("another login for this user is being checked: try again", 429,
+                          {"retry-after": "1"})
+        self._checking += 1
         try:
-            entry = self.users.load_or_empty().get(name) if NAME_RE.fullmatch(name) else None
+            entry = self.users.load_or_empty().get(name) if real else None
             stored = str(entry["hash"]) if entry else _dummy_hash()
             good = await run_in_threadpool(verify_password, password[:MAX_PASSWORD + 1],
                                            stored)
             good = good and entry is not None
         finally:
-            self.limiter.end(keys)
+            self._checking -= 1
+            self.guard.end(attempt, verdict.trusted)
         if not good:
-            lock = self.limiter.failure(keys)
-            more = (f"; next attempt in {retry_after(lock)} s" if lock > 0 else "")
-            return _refuse(f"wrong user name or password{more}", 401)
-        self.limiter.success(keys)
-        s = self.sessions.create(name, ip)
+            locks = self.guard.failure(attempt, verdict.trusted)
+            self.record("login_failed", shown, ip=attempt.ip, known_browser=verdict.trusted)
+            for why, secs in locks:
+                self.record("login_locked", shown, ip=attempt.ip, by=why,
+                            seconds=round(secs, 1))
+            lock = self.guard.check(attempt).wait_s
+            more = f"; next attempt in {retry_after(lock)} s" if lock > 0 else ""
+            return refuse(f"wrong user name or password{more}", 401)
+        self.guard.success(attempt, verdict.trusted)
+        s = self.sessions.create(name, attempt.ip, str(entry["hash"]))
         self.note(name, "logged in")
         self.wake_all()
-        resp = _json({"ok": True, **self.session_info(s)})
+        resp = json_response({"ok": True, **self.session_info(s)})
+        secure = request.url.scheme == "https"
         resp.set_cookie(COOKIE, s.token, httponly=True, samesite="strict", path="/",
-                        secure=request.url.scheme == "https")
+                        secure=secure)
+        resp.set_cookie(KNOWN_COOKIE + name, self.guard.issue(name), max_age=KNOWN_MAX_AGE_S,
+                        httponly=True, samesite="strict", path="/api/login", secure=secure)
         return resp
 
     async def logout(self, request: Request) -> Response:
-        if not _same_origin(request):
-            return _refuse("refused: request from another site", 403)
+        if not same_origin(request):
+            self.record("request_refused", "-", ip=client_ip(request),
+                        why="another site's Origin")
+            return refuse("refused: request from another site", 403)
         s = self.session_of(request)
         if s is not None:
             if self.control.drop(s.token):
@@ -246,21 +302,21 @@ class UiApp:
             self.sessions.end(s.token)
             self.note(s.user, "logged out")
             self.wake_all()
-        resp = _json({"ok": True})
+        resp = json_response({"ok": True})
         resp.delete_cookie(COOKIE, path="/", httponly=True, samesite="strict")
         return resp
 
     async def me(self, request: Request) -> Response:
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
-        return _json({"ok": True, **self.session_info(s)})
+            return refuse("not logged in", 401)
+        return json_response({"ok": True, **self.session_info(s)})
 
     async def status(self, request: Request) -> Response:
         """The latest snapshot as JSON (the page uses the websocket; this is for scripts)."""
         s = self.session_of(request)
         if s is None:
-            return _refuse("not logged in", 401)
+            return refuse("not logged in", 401)
         pub = self.bridge.latest()
         text = ('{"ok":true,"status":' + (pub.status_json if pub else "null")
                 + ',"session":' + json.dumps(self.session_info(s)) + "}")
@@ -268,6 +324,9 @@ class UiApp:
                         headers={"cache-control": "no-store"})
 
     # ------------------------------------------------------------------ control
+    def _refused(self, s: Session, what: str, why: str) -> None:
+        self.record("command_refused", s.user, command=what[:40], why=why[:200])
+
     async def control_action(self, request: Request) -> Response:
         got = await self._signed_in_body(request)
         if isinstance(got, Response):
@@ -278,12 +337,24 @@ class UiApp:
             ok, msg = self.control.take(s)
         elif action == "release":
             ok, msg = self.control.release(s)
+        elif action == "force-release":
+            if self.users.role(s.user) != "admin":
+                self._refused(s, "force-release", "not an admin")
+                return refuse("refused: only an admin may force control free", 403)
+            if self.control.holder is None:
+                ok, msg = False, "nobody has control"
+            else:
+                holder = self.force_release(f"admin {s.user}")
+                ok, msg = True, f"control taken from {holder.user if holder else '-'}"
         else:
-            return _refuse("action must be \"take\" or \"release\"", 400)
+            return refuse("action must be \"take\", \"release\" or \"force-release\"", 400)
         if ok:
-            self.note(s.user, "took control" if action == "take" else "released control")
+            if action != "force-release":
+                self.note(s.user, "took control" if action == "take" else "released control")
             self.wake_all()
-        return _json({"ok": ok, "message" if ok else "error": msg,
+        else:
+            self._refused(s, f"{action} control", msg)
+        return json_response({"ok": ok, "message" if ok else "error": msg,
                       **self.session_info(s)}, 200 if ok else 409)
 
     async def command(self, request: Request) -> Response:
@@ -294,11 +365,17 @@ class UiApp:
         body, s = got
         name = body.pop("command", None)
         if name not in COMMANDS:
-            return _refuse(f"unknown command {name!r} (one of: {', '.join(COMMANDS)})", 400)
+            self._refused(s, repr(name), "unknown command")
+            return refuse(f"unknown command {str(name)[:40]!r} (one of: "
+                           f"{', '.join(COMMANDS)})", 400)
         if not self.control.is_holder(s):
-            return _refuse(self.control.refusal(s), 403)
+            msg = self.control.refusal(s)
+            self._refused(s, name, msg)
+            return refuse(msg, 403)
         out = await self.call(name, body, s.user)
-        return _json({"ok": out.ok, "message" if out.ok else "error": out.message}, out.status)
+        if not out.ok:
+            self._refused(s, name, out.message)
+        return json_response({"ok": out.ok, "message" if out.ok else "error": out.message}, out.status)
 
     async def call(self, name: str, args: dict[str, Any], user: str) -> Outcome:
         """Submit to the tick thread and wait; a command not started in time is withdrawn
@@ -315,7 +392,8 @@ class UiApp:
 
     # ------------------------------------------------------------------ websocket
     async def websocket(self, ws: WebSocket) -> None:
-        if not _same_origin(ws):
+        if not same_origin(ws):
+            self.record("request_refused", "-", ip=client_ip(ws), why="another site's Origin")
             await ws.close(code=1008)
             return
         s = self.session_of(ws)
@@ -325,6 +403,7 @@ class UiApp:
         await ws.accept()
         client = _Client(ws, s.token)
         self.clients.add(client)
+        s.conns += 1                         # the holder is here: control stays
         client.wake.set()
         sender = asyncio.create_task(self._send_loop(client))
         try:
@@ -337,6 +416,9 @@ class UiApp:
         finally:
             self.clients.discard(client)
             sender.cancel()
+            s.conns -= 1
+            s.left = self.sessions.clock()
+            self.wake_all()                  # the others see "control free in N s"
 
     def update_for(self, client: _Client, s: Session) -> str | None:
         """The next message for one client: the latest status, the chart points and
@@ -366,11 +448,9 @@ class UiApp:
         ws = client.ws
         while True:
             await client.wake.wait()
-            client.wake.clear()
-            s = self.sessions.get(client.token)
-            if s is None or not self.users.exists(s.user):
-                if s is not None:
-                    self._end(s)
+            client.wake.clear()              # wake_all() has tidied the sessions
+            s = self.sessions.peek(client.token)     # a push is not a request: no refresh
+            if s is None:
                 await _bounded(ws.send_text('{"type":"logout"}'))
                 await _bounded(ws.close(code=4401))
                 return
@@ -390,113 +470,3 @@ async def _bounded(aw: Awaitable[Any], timeout: float = 1.0) -> bool:
         return True
     except Exception:
         return False
-
-
-# ---------------------------------------------------------------------------- the thread
-
-
-def _bind(host: str, port: int) -> socket.socket:
-    """Bind in the caller's thread, so a bad address or a busy port is a one-line error
-    before the cell starts (and port 0 can be resolved to the port the system chose)."""
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-        family, _, _, _, addr = infos[0]
-        sock = socket.socket(family, socket.SOCK_STREAM)
-    except (OSError, IndexError) as e:
-        raise FeederError(f"--ui {host}:{port}: cannot use this address: {e}") from None
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        sock.bind(addr)
-        sock.listen(64)
-    except OSError as e:
-        sock.close()
-        raise FeederError(f"--ui {host}:{port}: cannot listen: {e.strerror}") from None
-    sock.setblocking(False)
-    return sock
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-class UiServer:
-    """uvicorn serving a ``UiApp`` in a daemon thread with its own event loop."""
-
-    def __init__(self, ui: UiApp, host: str, port: int) -> None:
-        self.ui, self.host, self.port = ui, host, port
-        self._sock: socket.socket | None = None
-        self._server: Any = None
-        self._thread: threading.Thread | None = None
-        self._error: BaseException | None = None
-
-    @property
-    def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
-
-    def start(self, timeout: float = 10.0) -> str:
-        """Bind, start the thread, wait until it serves; returns the URL."""
-        import uvicorn
-
-        self._sock = _bind(self.host, self.port)
-        self.port = self._sock.getsockname()[1]
-        config = uvicorn.Config(self.ui.app, log_level="warning", access_log=False,
-                                lifespan="off", timeout_graceful_shutdown=2,
-                                ws_ping_interval=10.0, ws_ping_timeout=10.0,
-                                ws_max_size=64 * 1024)
-        self._server = uvicorn.Server(config)
-        self._thread = threading.Thread(target=self._run, name="feeder-ui", daemon=True)
-        self._thread.start()
-        end = time.monotonic() + timeout
-        while not self._server.started:
-            if not self._thread.is_alive() or time.monotonic() > end:
-                self.close()
-                raise FeederError(f"operator UI on {self.url} did not start"
-                                  + (f": {self._error}" if self._error else ""))
-            time.sleep(0.01)
-        return self.url
-
-    def _run(self) -> None:
-        try:
-            asyncio.run(self._main())
-        except BaseException as e:       # reported by start(), or lost at shutdown
-            self._error = e
-
-    async def _main(self) -> None:
-        loop = asyncio.get_running_loop()
-
-        def notify() -> None:            # tick thread: hop onto our loop, never block
-            loop.call_soon_threadsafe(self.ui.wake_all)
-
-        self.ui.bridge.subscribe(notify)
-        try:
-            await self._server.serve(sockets=[self._sock])
-        finally:
-            self.ui.bridge.unsubscribe(notify)
-
-    def close(self, timeout: float = 5.0) -> None:
-        """Ask uvicorn to stop (websockets are closed) and wait for the thread."""
-        if self._server is not None:
-            self._server.should_exit = True
-        if self._thread is not None:
-            self._thread.join(timeout)
-            if self._thread.is_alive():
-                self._server.force_exit = True
-                self._thread.join(1.0)
-        if self._sock is not None:
-            self._sock.close()
-
-
-def make_notice(host: str) -> str | None:
-    """A warning when the UI is reachable from other machines over plain HTTP."""
-    if is_loopback(host):
-        return None
-    return (f"feeder: warning: the operator UI on {host} is reachable from the network over "
-            "plain HTTP: passwords and session cookies travel unencrypted (serve it on "
-            "127.0.0.1 behind a TLS proxy instead)")
-

@@ -14,6 +14,7 @@ from typing import Any
 
 from ..behaviours.common import Event, Stats
 from ..cell import Cell, CellState
+from ..eventlog import ACCESS_KINDS
 from ..view import figures, tree_text
 from .bridge import Message, Snapshot
 from .operate import Limits, blackboard_speeds
@@ -49,6 +50,9 @@ def message_text(ev: Event) -> str:
                                               for k, v in rest.items())
         args = " ".join(f"{k}={_fmt(v)}" for k, v in rest.items())
         return f"{who}: {action}{' ' + args if args else ''}"
+    if ev.kind in ACCESS_KINDS:
+        rest = " ".join(f"{k}={_fmt(v)}" for k, v in d.items() if k != "user")
+        return f"{ev.kind.replace('_', ' ')}: {d.get('user', '-')} {rest}".rstrip()
     if ev.kind == "golden_image":
         return f"golden image taken (frame {d.get('frame')})"
     return f"{ev.kind}: " + " ".join(f"{k}={_fmt(v)}" for k, v in d.items())

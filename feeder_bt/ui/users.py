@@ -4,7 +4,11 @@ The thesis's GUI sent and kept passwords in plain text. Here a password is never
 each user has a random salt and an scrypt hash (memory-hard, ~50 ms to check), so a stolen
 file costs an attacker that much per guess per user. The file is JSON, written atomically
 with mode 0600; it is re-read when it changes, so ``feeder users add/remove`` takes effect
-on a running UI (a removed user's sessions end at their next request).
+on a running UI at once (a removed user's, or a changed password's, sessions end).
+
+The same file holds the UI's access settings (``settings``: Host names, proxies, session
+times; see ``access.Settings``) and the last ``feeder users release-control`` request: it is
+the one private file an administrator edits, and a running UI already watches it.
 """
 
 from __future__ import annotations
@@ -28,6 +32,17 @@ FORMAT = "feeder_bt users 1"
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,31}")
 MIN_PASSWORD = 8
 MAX_PASSWORD = 1024            # scrypt of a megabyte "password" is a cheap denial of service
+ROLES = ("operator", "admin")  # an admin may also force control free from the dashboard
+# Refused whatever their length: the first guesses of anyone who tries (compared without
+# case, and after stripping spaces); a password made of one repeated character, or equal
+# to the user name, is refused too.
+WEAK_PASSWORDS = frozenset({
+    "password", "password1", "password12", "password123", "passw0rd", "12345678",
+    "123456789", "1234567890", "87654321", "11111111", "qwertyui", "qwerty123", "qwertyuiop",
+    "iloveyou", "letmein1", "letmein!", "changeme", "changeit", "welcome1", "abcdefgh",
+    "abcd1234", "1q2w3e4r", "administrator", "admin123", "operator", "feeder_bt",
+    "feederbt", "feeder123", "trustno1", "sunshine", "football", "baseball", "monkey123",
+})
 
 # scrypt cost: n=2**14, r=8 is 16 MiB and about 50 ms per check on one core.
 SCRYPT_N, SCRYPT_R, SCRYPT_P, SCRYPT_DKLEN, SALT_BYTES = 2 ** 14, 8, 1, 32, 16
@@ -54,12 +69,26 @@ def check_name(name: str) -> str:
     return name
 
 
-def check_password(password: str) -> str:
+def check_password(password: str, name: str = "") -> str:
+    """A new password: long enough, not too long, and not one anybody would guess first."""
     if len(password) < MIN_PASSWORD:
         raise UsersError(f"password too short: at least {MIN_PASSWORD} characters")
     if len(password) > MAX_PASSWORD:
         raise UsersError(f"password too long: at most {MAX_PASSWORD} characters")
+    folded = password.strip().casefold()
+    if not folded:
+        raise UsersError("password refused: it is all blanks")
+    if folded in WEAK_PASSWORDS or len(set(folded)) == 1 or folded == name.casefold():
+        raise UsersError("password refused: it is among the first an attacker would try")
     return password
+
+
+def group_or_world_readable(path: Path) -> bool:
+    """True if users other than the file's owner may read (or write) the users file."""
+    try:
+        return bool(path.stat().st_mode & 0o077)
+    except OSError:
+        return False
 
 
 def _b64(data: bytes) -> str:
@@ -115,14 +144,16 @@ class UsersFile:
     def __init__(self, path: str | Path | None = None) -> None:
         self.path = Path(path).expanduser() if path else default_path()
         self._users: dict[str, dict[str, Any]] = {}
-        self._stamp: tuple[int, int] | None = None
+        self._stamp: tuple[int, ...] | None = None
         self._warned: str | None = None
+        self._doc: dict[str, Any] = {}
 
     # ------------------------------------------------------------------ reading
     def _read(self) -> dict[str, dict[str, Any]]:
         try:
             text = self.path.read_text(encoding="utf-8")
         except FileNotFoundError:
+            self._doc = {}
             return {}
         except OSError as e:
             raise UsersError(f"{self.path}: cannot read the users file: {e.strerror}") from None
@@ -141,13 +172,19 @@ class UsersFile:
                     or not str(entry.get("hash", "")).startswith("scrypt$"):
                 raise UsersError(f"{self.path}: users.{name}: not a user entry with an "
                                  "scrypt hash")
+            if entry.get("role", "operator") not in ROLES:
+                raise UsersError(f"{self.path}: users.{name}.role: one of {', '.join(ROLES)}")
+        for key in ("settings", "release_control"):
+            if not isinstance(doc.get(key, {}), dict):
+                raise UsersError(f"{self.path}: {key}: must be an object")
+        self._doc = doc
         return users
 
     def load(self) -> dict[str, dict[str, Any]]:
         """The users, re-read only when the file's size or modification time changed."""
         try:
-            st = self.path.stat()
-            stamp: tuple[int, int] | None = (st.st_mtime_ns, st.st_size)
+            st = self.path.stat()      # a new inode at every atomic write: never missed
+            stamp: tuple[int, ...] | None = (st.st_ino, st.st_mtime_ns, st.st_size)
         except FileNotFoundError:
             stamp = None
         except OSError as e:
@@ -167,13 +204,34 @@ class UsersFile:
                 print(f"feeder: operator UI: {e}; nobody can log in until it is fixed",
                       file=sys.stderr)
                 self._warned = str(e)
-            self._users, self._stamp = {}, None
+            self._users, self._stamp, self._doc = {}, None, {}
             return {}
         self._warned = None
         return users
 
     def names(self) -> list[str]:
         return sorted(self.load())
+
+    @property
+    def stamp(self) -> tuple[int, ...] | None:
+        """Changes whenever the file was re-read with new contents (or went missing)."""
+        return self._stamp
+
+    def section(self, key: str) -> dict[str, Any]:
+        """``settings`` or ``release_control`` as last read (empty if absent or damaged)."""
+        self.load_or_empty()
+        value = self._doc.get(key)
+        return dict(value) if isinstance(value, dict) else {}
+
+    def role(self, name: str) -> str:
+        entry = self.load_or_empty().get(name)
+        return str(entry.get("role", "operator")) if entry else ""
+
+    def secret_of(self, name: str) -> str | None:
+        """The user's stored hash: a session is bound to it, so a new password (or the
+        user removed and added again) ends the sessions opened with the old one."""
+        entry = self.load_or_empty().get(name)
+        return str(entry["hash"]) if entry else None
 
     def exists(self, name: str) -> bool:
         return name in self.load_or_empty()
@@ -189,13 +247,19 @@ class UsersFile:
     # ------------------------------------------------------------------ writing
     def add(self, name: str, password: str, replace: bool = False) -> None:
         check_name(name)
-        check_password(password)
+        check_password(password, name)
         users = dict(self.load())
         if name in users and not replace:
             raise UsersError(f"user {name!r} already exists in {self.path} (use --replace to "
                              "set a new password)")
+        twin = [n for n in users if n != name and n.casefold() == name.casefold()]
+        if twin:
+            raise UsersError(f"user {twin[0]!r} already exists in {self.path}: names that "
+                             "differ only in case would be confused")
+        role = users.get(name, {}).get("role")
         users[name] = {"hash": hash_password(password),
-                       "added": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")}
+                       "added": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+                       **({"role": role} if role else {})}
         self._write(users)
 
     def remove(self, name: str) -> None:
@@ -205,9 +269,26 @@ class UsersFile:
         del users[name]
         self._write(users)
 
-    def _write(self, users: dict[str, dict[str, Any]]) -> None:
+    def set_role(self, name: str, role: str) -> None:
+        if role not in ROLES:
+            raise UsersError(f"role must be one of {', '.join(ROLES)}, got {role!r}")
+        users = dict(self.load())
+        if name not in users:
+            raise UsersError(f"no user {name!r} in {self.path}")
+        users[name] = {**users[name], "role": role}
+        self._write(users)
+
+    def set_section(self, key: str, value: dict[str, Any]) -> None:
+        """Replace ``settings`` or ``release_control`` (the users are kept as they are)."""
+        users = dict(self.load())
+        self._write(users, {**self._doc, key: value})
+
+    def _write(self, users: dict[str, dict[str, Any]],
+               doc_extra: dict[str, Any] | None = None) -> None:
         """Atomic replace with mode 0600: a reader sees the old file or the new one."""
-        doc = {"format": FORMAT, "users": dict(sorted(users.items()))}
+        extra = self._doc if doc_extra is None else doc_extra
+        doc = {"format": FORMAT, "users": dict(sorted(users.items())),
+               **{k: v for k, v in extra.items() if k in ("settings", "release_control")}}
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
             fd, tmp = tempfile.mkstemp(prefix=".users-", dir=self.path.parent)

@@ -133,9 +133,12 @@ function renderSession(s) {
   const c = s.control || {};
   const el = $("control-state");
   el.dataset.state = c.state || "";
+  const leaving = (c.free_in !== undefined && c.free_in !== null)
+    ? ` \u2014 control free in ${c.free_in} s` : "";   // the holder has no page open
   el.textContent = c.state === "you" ? "Control: you have control"
-    : c.state === "other" ? `Control: someone else has control (${c.holder})`
+    : c.state === "other" ? `Control: someone else has control (${c.holder})${leaving}`
     : "Control: available";
+  $("force").hidden = !(s.admin && c.state === "other");
   $("st-users").textContent = (s.users || []).join(", ") || "-";
   document.body.dataset.control = c.state || "";
 }
@@ -266,6 +269,7 @@ async function controlAction(action) {
 
 $("take").addEventListener("click", () => controlAction("take"));
 $("release").addEventListener("click", () => controlAction("release"));
+$("force").addEventListener("click", () => controlAction("force-release"));
 for (const b of document.querySelectorAll("button[data-command]")) {
   b.addEventListener("click", () => command(b.dataset.command));
 }
