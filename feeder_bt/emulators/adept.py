@@ -38,6 +38,7 @@ from ..errors import EnvelopeError, HalError, MissedGrab
 from ..hal.adept import protocol as P
 from ..hal.interfaces import PickTarget, Pose
 from ..jobs import Job
+from .adept_io import BadArgument, IoServers, _as_flag, _as_int, _cut, _err, _num
 from .faults import FaultPlan
 from .plant import Plant
 from .vplus_check import VPLUS_DIR, require_loadable
@@ -45,46 +46,13 @@ from .vplus_check import VPLUS_DIR, require_loadable
 SERVERS = ("motion", "position", "io", "notify")
 SERVO_FAULT_S = 0.25         # the arm runs into something this long after the command
 MOTION_LIMIT_S = 60.0        # a simulated motion that has not ended by then: plant stopped
-NOTIFY_PERIOD_S = 0.01       # io_notify polls the inputs every major cycle (16 ms on V+)
 POLL_S = 0.1                 # how often blocked server threads look at the stop flag
 
 MOTIONS = ("PICK", "PLACE", "MOVE", "SAFE")
 ESTOP = "estop"              # the cell's e-stop input (the V+ programs' estop.in)
 
 
-def _cut(conn: socket.socket) -> None:
-    """The cable is pulled: both directions go (the client sees the connection drop)."""
-    try:
-        conn.shutdown(socket.SHUT_RDWR)
-    except OSError:
-        pass
-
-
-class BadArgument(Exception):
-    """A request argument the V+ program would refuse (reply ERR -9002)."""
-
-
-def _err(code: int) -> str:
-    return f"ERR {code} {P.error_text(code)}"
-
-
-def _num(v: float) -> str:
-    return f"{v:.3f}"
-
-
-def _as_int(v: float) -> int:
-    if v != int(v):
-        raise BadArgument(f"{v} is not an integer")
-    return int(v)
-
-
-def _as_flag(v: float) -> bool:
-    if v not in (0.0, 1.0):
-        raise BadArgument(f"{v} is not 0 or 1")
-    return v == 1.0
-
-
-class AdeptEmulator:
+class AdeptEmulator(IoServers):
     """The V+ servers over ``plant``. ``start()`` returns self; ``.ports`` maps each server
     (motion, position, io, notify) to its port; ``stop()`` closes everything."""
 
@@ -432,73 +400,6 @@ class AdeptEmulator:
             if job is not None and not job.done and job.name != "robot.place":
                 job.cancel()
         return "OK"
-
-    # ------------------------------------------------------------------ I/O server
-    def _signal_name(self, signal: int) -> str | None:
-        """The cell's name of a V+ signal on this controller (None: nothing wired)."""
-        bit, is_input = P.bit_of(signal)
-        for name, sig in self.plant.cell.io.items():
-            if sig.controller != "adept" or (sig.dir == "in") != is_input:
-                continue
-            if sig.bit in (bit, signal):
-                return name
-        return None
-
-    @staticmethod
-    def _check_signal(signal: int) -> None:
-        if not (1 <= signal < P.INPUT_BASE or P.INPUT_BASE < signal < P.SOFT_BASE
-                or P.SOFT_BASE < signal < P.SOFT_BASE + 1000):
-            raise BadArgument(f"no V+ signal {signal}")
-
-    def _read_signal(self, signal: int) -> bool:
-        if signal > P.SOFT_BASE:
-            return self.soft.get(signal, False)
-        name = self._signal_name(signal)
-        return self.plant.signal(name) if name is not None else False
-
-    def _sig(self, s: float) -> str:
-        signal = _as_int(s)
-        self._check_signal(signal)
-        return f"OK {int(self._read_signal(signal))}"
-
-    def _set(self, s: float, v: float) -> str:
-        signal, value = _as_int(s), _as_flag(v)
-        self._check_signal(signal)
-        if P.INPUT_BASE < signal < P.SOFT_BASE:
-            raise BadArgument("an input cannot be set")
-        if signal > P.SOFT_BASE:
-            self.soft[signal] = value
-        else:
-            name = self._signal_name(signal)
-            if name is not None:
-                self.plant.set_signal(name, value)
-        return "OK"
-
-    # ------------------------------------------------------------------ io_notify
-    def _inputs(self) -> list[tuple[int, str]]:
-        return [(P.signal_of(sig.bit, True), name) for name, sig in self.plant.cell.io.items()
-                if sig.controller == "adept" and sig.dir == "in"]
-
-    def _notify_session(self, conn: socket.socket) -> None:
-        """io_notify: on connection send every input's state, then a line per change."""
-        inputs = self._inputs()
-        last: dict[int, bool] = {}
-        for signal, name in inputs:
-            last[signal] = self.plant.signal(name)
-            conn.sendall(f"IN {signal} {int(last[signal])}\r\n".encode("ascii"))
-        conn.settimeout(NOTIFY_PERIOD_S)
-        while not self._stop.is_set():
-            try:
-                if not conn.recv(4096):
-                    return                      # the PC closed the socket: reset
-            except TimeoutError:
-                pass                            # nothing from the PC: the usual case
-            for signal, name in inputs:
-                value = self.plant.signal(name)
-                if value != last[signal]:
-                    last[signal] = value
-                    conn.sendall(f"IN {signal} {int(value)}\r\n".encode("ascii"))
-
 
 def serve(plant: Plant, host: str = "127.0.0.1", ports: dict[str, int] | int | None = None,
           faults: FaultPlan | None = None, **kw) -> AdeptEmulator:
