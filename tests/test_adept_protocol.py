@@ -330,3 +330,30 @@ def test_backoff_doubles_to_two_seconds_and_resets():
     assert b.delay == 0.1 and b.next_try == 0.0
     b.dropped(10.0)
     assert b.next_try == pytest.approx(10.1)
+
+
+# ---------------------------------------------------------------------------- cell settings
+def _cell_with(tmp_path, adept: str):
+    from pathlib import Path
+
+    from feeder_bt.scenario import load_scenario
+    root = Path(__file__).resolve().parents[1]
+    cell = tmp_path / "cell.yaml"
+    cell.write_text((root / "cells" / "sim.yaml").read_text() + "\nadept:\n" + adept)
+    return load_scenario(str(root / "scenarios" / "lenses.yaml"), str(cell))[1].adept
+
+
+def test_adept_safety_and_polling_settings_have_safe_defaults_and_are_checked(tmp_path):
+    from feeder_bt.errors import ConfigError
+    from feeder_bt.scenario.model import AdeptSpec
+
+    spec = AdeptSpec()
+    assert spec.recover_power_on is False            # the operator turns arm power on
+    assert spec.belt_direction == "forward" and spec.poll_hz == 50.0
+    got = _cell_with(tmp_path, "  recover_power_on: true\n  belt_direction: reverse\n"
+                               "  poll_hz: 20\n")
+    assert (got.recover_power_on, got.belt_direction, got.poll_hz) == (True, "reverse", 20)
+    with pytest.raises(ConfigError, match="belt_direction: must be one of forward, reverse"):
+        _cell_with(tmp_path, "  belt_direction: backwards\n")
+    with pytest.raises(ConfigError, match="poll_hz"):
+        _cell_with(tmp_path, "  poll_hz: 0\n")

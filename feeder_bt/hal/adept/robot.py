@@ -204,6 +204,7 @@ class AdeptRobotPosition:
 
     def start(self) -> AdeptRobotPosition:
         if self._thread is None:
+            self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="vplus-position-poll",
                                             daemon=True)
             self._thread.start()
