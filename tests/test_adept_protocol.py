@@ -357,3 +357,17 @@ def test_adept_safety_and_polling_settings_have_safe_defaults_and_are_checked(tm
         _cell_with(tmp_path, "  belt_direction: backwards\n")
     with pytest.raises(ConfigError, match="poll_hz"):
         _cell_with(tmp_path, "  poll_hz: 0\n")
+
+
+def test_a_pick_needs_a_positive_part_id():
+    from feeder_bt.clock import RealClock
+    from feeder_bt.hal.adept.robot import AdeptRobot
+    from feeder_bt.hal.interfaces import PickTarget
+
+    client = ServerClient("motion", "127.0.0.1", 9, timeout_s=0.2)   # never connected
+    try:
+        job = AdeptRobot(client, RealClock(), 1.0, 1.0).pick(PickTarget(0, 1.0, 2.0, 0.0, 0))
+        assert job.done and "positive id" in str(job.error)
+        assert client.link.connects == 0
+    finally:
+        client.close()

@@ -112,6 +112,9 @@ class AdeptRobot:
         return self._submit("robot.held", self._held)
 
     def pick(self, target: PickTarget) -> Job:
+        if int(target.part_id) <= 0:        # HELD's 0 and -1 mean "nothing", "not ours"
+            return DoneJob("robot.pick", error=HalError(
+                f"part id {target.part_id}: the controller needs a positive id"))
         ox, oy, oz = target.tool_offset
 
         def run() -> PickResult:
