@@ -103,8 +103,8 @@ def test_vplus_python_and_docs_have_the_same_command_sets():
 def test_the_sets_are_the_expected_ones():
     cmds = vplus_commands(VPLUS)
     assert cmds["motion"] == {"HELLO", "PICK", "PLACE", "MOVE", "SAFE", "SPEED", "RECOVER",
-                              "HOLDING"}
-    assert cmds["position"] == {"HELLO", "WHERE", "BELT"}
+                              "HOLDING", "HELD"}
+    assert cmds["position"] == {"HELLO", "WHERE", "BELT", "POLL", "STOP"}
     assert cmds["io"] == {"HELLO", "SIG", "SET"}
     assert cmds["notify"] == {"IN"}
 
@@ -204,5 +204,5 @@ def test_vplus_programs_are_well_formed_and_every_called_program_exists():
     missing = sorted(f"{where}: {name}" for name, where in used if name not in defined)
     assert not missing, missing
     for server in ("a_server", "motion_server", "position_server", "io_server", "io_notify",
-                   "reacte", "recover", "decode_and_do"):
+                   "err.trap", "arm.recover", "decode_and_do"):
         assert server in defined

@@ -1,6 +1,13 @@
 """Fault plans for the emulators: which command to reject, when to drop a connection,
 stall a reply or time out a robot servo.
 
+Link cuts at each phase of a command (the Adept emulator; the Galil's knows ``drop``):
+``drop`` cuts the link when the command arrives, before anything is done (for a PICK: the
+cell sent it, the robot never moved); ``drop_during`` cuts it ``after_s`` into the motion,
+which the controller finishes anyway (a V+ task does not read its socket while it moves);
+``drop_after`` lets the command finish and cuts the link instead of sending the reply
+(after the grip, after the release).
+
 A plan is a list of rules; each emulator asks ``plan.check(controller, command)`` before
 it carries out a command and acts on the answer. Rules fire on the n-th matching command
 (``nth``), on every n-th (``every``) or with a probability (``rate``, from the plan's own
@@ -14,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-FAULT_KINDS = ("reject", "drop", "stall", "servo_timeout")
+FAULT_KINDS = ("reject", "drop", "drop_during", "drop_after", "stall", "servo_timeout")
 
 
 @dataclass
@@ -26,6 +33,7 @@ class FaultRule:
     every: int | None = None      # fire on every n-th matching command
     rate: float | None = None     # fire with this probability per matching command
     stall_s: float = 5.0          # for ``stall``: how long the reply is held back
+    after_s: float = 0.2          # for ``drop_during``: when the link goes, into the motion
     seen: int = 0
     fired: int = 0
 

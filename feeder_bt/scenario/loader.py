@@ -207,6 +207,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (AdeptSpec, "notify_port"): Range(1, 65535),
     (AdeptSpec, "timeout_s"): POSITIVE,
     (AdeptSpec, "motion_timeout_s"): POSITIVE,
+    (AdeptSpec, "poll_hz"): Range(1, 200),
     # fault plans (feeder_bt.scenario.faults)
     (FaultRate, "per_pick"): Range(0, 1),
     (FaultRate, "per_frame"): Range(0, 1),
@@ -220,6 +221,7 @@ ENUMS[(FaultRate, "device")] = COMMS_DEVICES
 ENUMS[(ScriptedFault, "device")] = COMMS_DEVICES
 ENUMS[(ScriptedFault, "kind")] = FAULT_KINDS
 ENUMS[(ScriptedFault, "phase")] = PHASES
+ENUMS[(AdeptSpec, "belt_direction")] = ("forward", "reverse")
 
 #: Adjuster algorithms and the ``adjust.params`` keys each accepts (all optional; an
 #: adjuster supplies its own defaults). Keys ending in ``_mm_s`` are horizontal belt speeds

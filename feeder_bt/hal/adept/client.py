@@ -160,10 +160,12 @@ class LineSocket:
             self.drop()
             raise CommsLost(f"{self.where}: send failed: {e}") from None
 
-    def read_line(self, deadline: float, what: str, idle_ok: bool = False) -> str | None:
+    def read_line(self, deadline: float, what: str, idle_ok: bool = False,
+                  on_timeout: Callable[[], object] | None = None) -> str | None:
         """One line (without its end), waiting until ``deadline``. At the deadline: None if
-        ``idle_ok`` (a notify socket may be quiet), else the link is dropped (a reply that
-        comes late would answer the wrong request) and ``CommsLost`` raised."""
+        ``idle_ok`` (a notify socket may be quiet), else ``on_timeout()`` runs (the robot:
+        STOP it), the link is dropped (a reply that comes late would answer the wrong
+        request) and ``CommsLost`` raised."""
         sock = self._sock
         if sock is None:
             raise CommsLost(f"{self.where}: not connected")
@@ -176,6 +178,8 @@ class LineSocket:
             if remaining <= 0:
                 if idle_ok:
                     return None
+                if on_timeout is not None:
+                    on_timeout()
                 self.drop()
                 raise CommsLost(f"{self.where}: no {what} within the time-out")
             try:
@@ -199,14 +203,15 @@ class LineSocket:
             raise ProtocolError(f"{self.where}: {what}: not ASCII: {raw[:60]!r}") from None
 
     def request(self, socket_name: str, verb: str, *args: object,
-                timeout: float | None = None) -> list[str]:
+                timeout: float | None = None,
+                on_timeout: Callable[[], object] | None = None) -> list[str]:
         """Send one request and return the values of its ``OK`` reply (blocking)."""
         cmd: Command = protocol.command(socket_name, verb)
         line = protocol.encode_request(socket_name, verb, *args)
         deadline = time.monotonic() + (self.timeout_s if timeout is None else timeout)
         with self._lock:
             self.send(line, deadline)
-            reply = self.read_line(deadline, f"reply to {verb}")
+            reply = self.read_line(deadline, f"reply to {verb}", on_timeout=on_timeout)
             assert reply is not None
             try:
                 return protocol.parse_reply(reply, cmd)
@@ -223,9 +228,10 @@ class ServerClient:
         self.link = LineSocket(name, host, port, timeout_s)
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"vplus-{name}")
 
-    def call(self, verb: str, *args: object, timeout: float | None = None) -> list[str]:
+    def call(self, verb: str, *args: object, timeout: float | None = None,
+             on_timeout: Callable[[], object] | None = None) -> list[str]:
         """Blocking request on the caller's thread (start-up, pollers: never the tick)."""
-        return self.link.request(self.name, verb, *args, timeout=timeout)
+        return self.link.request(self.name, verb, *args, timeout=timeout, on_timeout=on_timeout)
 
     def submit(self, verb: str, *args: object, timeout: float | None = None,
                then: Callable[[list[str]], object] | None = None) -> Future:

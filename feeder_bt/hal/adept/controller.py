@@ -32,8 +32,12 @@ class AdeptController:
             "io": ServerClient("io", host, spec.io_port, t),
         }
         self.notify_link = LineSocket("notify", host, spec.notify_port, t)
-        self.robot = AdeptRobot(self.clients["motion"], clock, spec.motion_timeout_s, t)
-        self.position = AdeptRobotPosition(self.clients["position"])
+        sign = -1 if spec.belt_direction == "reverse" else 1
+        self.robot = AdeptRobot(self.clients["motion"], clock, spec.motion_timeout_s, t,
+                                stopper=self.clients["position"],
+                                recover_power_on=spec.recover_power_on, belt_sign=sign)
+        self.position = AdeptRobotPosition(self.clients["position"], 1.0 / spec.poll_hz,
+                                           belt_sign=sign)
         self.io = AdeptIO(self.clients["io"], self.notify_link, clock, inputs)
         try:
             for name, client in self.clients.items():

@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 
 from ...errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
-from ..interfaces import Pose
+from ..interfaces import Held, Pose
 
 PROTOCOL_VERSION = 1
 MAX_LINE = 256                       # longest line either side sends (V+ READ buffer)
@@ -68,13 +68,16 @@ COMMANDS: dict[str, tuple[Command, ...]] = {
         Command("MOVE", ("x", "y", "z", "rz"), (), motion=True),
         Command("SAFE", (), (), motion=True),
         Command("SPEED", ("pct",), ()),
-        Command("RECOVER", (), (), motion=True),
+        Command("RECOVER", ("power",), (), motion=True),
         Command("HOLDING", (), ("held",)),
+        Command("HELD", (), ("held", "placed"), motion=True),
     ),
     "position": (
         Command("HELLO", (), ("version", "server")),
         Command("WHERE", (), ("x", "y", "z", "rz")),
         Command("BELT", (), ("count",)),
+        Command("POLL", (), ("x", "y", "z", "rz", "count")),
+        Command("STOP", (), ()),
     ),
     "io": (
         Command("HELLO", (), ("version", "server")),
@@ -113,6 +116,8 @@ CODE_BAD_ARGUMENT = -9002
 CODE_NOTHING_GRIPPED = -9003
 CODE_OUTSIDE_WINDOW = -9004
 CODE_REJECTED = -9005
+CODE_STOPPED = -9006
+CODE_ESTOP = -9007
 
 VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
     CODE_POWER_OFF: ("*Robot power off*", ServoTimeout),
@@ -126,6 +131,8 @@ VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
     CODE_NOTHING_GRIPPED: ("*Nothing gripped*", MissedGrab),
     CODE_OUTSIDE_WINDOW: ("*Outside belt window*", EnvelopeError),
     CODE_REJECTED: ("*Request rejected*", VplusError),
+    CODE_STOPPED: ("*Stopped by request*", VplusError),
+    CODE_ESTOP: ("*E-stop input active*", ServoTimeout),
 }
 
 # A controller release that numbers its messages differently still says the same words:
@@ -281,12 +288,34 @@ def decode_where(values: list[str]) -> Pose:
     return Pose(x, y, z, rz)
 
 
+def wrap_robot(count: int) -> int:
+    """Fold a count into the robot controller's 24-bit signed belt counter."""
+    half = ROBOT_COUNT_MAX + 1
+    return ((count + half) % (2 * half)) - half
+
+
 def decode_belt(values: list[str]) -> int:
     """BELT → the robot controller's 24-bit signed count of the belt encoder."""
     count = _int(values[0], "count", "reply to BELT")
     if not ROBOT_COUNT_MIN <= count <= ROBOT_COUNT_MAX:
         raise ProtocolError(f"reply to BELT: count {count} outside the 24-bit range")
     return count
+
+
+def decode_poll(values: list[str]) -> tuple[Pose, int]:
+    """POLL → (the robot's pose, the belt count): WHERE and BELT in one round trip."""
+    return decode_where(values[:4]), decode_belt(values[4:])
+
+
+def decode_held(values: list[str]) -> Held:
+    """HELD → ``Held``: the commanded id in the gripper (0 none, -1 something no pick of
+    ours gripped) and the id of the last part released at a place pose (0 none)."""
+    what = "reply to HELD"
+    held, placed = _int(values[0], "held", what), _int(values[1], "placed", what)
+    if held < -1 or placed < 0:
+        raise ProtocolError(f"{what}: held must be >= -1 and placed >= 0, got {held} {placed}")
+    return Held(part_id=held if held > 0 else None, unknown=held == -1,
+                last_placed=placed or None)
 
 
 def decode_flag(values: list[str], verb: str) -> bool:

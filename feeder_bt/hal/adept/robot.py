@@ -15,11 +15,11 @@ from collections.abc import Iterable
 from ...clock import Clock
 from ...errors import CommsLost, HalError, MissedGrab
 from ...jobs import DoneJob, FutureJob, Job
-from ..interfaces import PickResult, PickTarget, Pose
+from ..interfaces import Held, PickResult, PickTarget, Pose
 from . import protocol
 from .client import LineSocket, ServerClient
 
-POLL_S = 0.01                # position poller period: ~100 Hz
+POLL_S = 0.02                # position poller period: 50 Hz (adept.poll_hz), one POLL each
 
 
 class PlaceJob(FutureJob):
@@ -31,13 +31,23 @@ class PlaceJob(FutureJob):
 
 
 class AdeptRobot:
-    """``Robot`` over the motion server. ``holding()`` is local state set by the replies."""
+    """``Robot`` over the motion server. ``holding()`` is local state set by the replies;
+    ``held()`` asks the controller (after a lost reply).
+
+    ``stopper``: the position server, which answers while a motion runs: a motion request
+    that times out first STOPs the robot there, then drops the motion socket, so the arm
+    does not keep moving unwatched. ``recover_power_on``: the cell description's rule
+    whether RECOVER may turn arm power on (else the operator does). ``belt_sign``: -1 when
+    the robot's belt channel counts down as the belt runs forward."""
 
     def __init__(self, motion: ServerClient, clock: Clock, motion_timeout_s: float,
-                 timeout_s: float) -> None:
+                 timeout_s: float, stopper: ServerClient | None = None,
+                 recover_power_on: bool = False, belt_sign: int = 1) -> None:
         self.motion, self.clock = motion, clock
         self.motion_timeout_s, self.timeout_s = motion_timeout_s, timeout_s
+        self.stopper, self.recover_power_on, self.belt_sign = stopper, recover_power_on, belt_sign
         self._holding = False
+        self.stops = 0                          # STOPs sent on time-outs (tests, logs)
 
     def refresh_holding(self) -> bool:
         """Ask the controller whether the gripper holds a part (blocking: start-up only)."""
@@ -54,8 +64,9 @@ class AdeptRobot:
 
     def _call(self, verb: str, *args: object, motion: bool = True) -> list[str]:
         timeout = self.motion_timeout_s if motion else self.timeout_s
+        stop = self._stop_now if motion and verb != "HELD" else None
         try:
-            return self.motion.call(verb, *args, timeout=timeout)
+            return self.motion.call(verb, *args, timeout=timeout, on_timeout=stop)
         except CommsLost:
             if verb in ("PICK", "PLACE"):
                 # the motion may have finished without us hearing: ask the controller
@@ -65,18 +76,53 @@ class AdeptRobot:
 
     def _refresh_after_link_loss(self) -> None:
         try:
-            self.refresh_holding()
+            self._held()
         except HalError:
             pass                # still down: the next PICK/PLACE failure asks again
 
+    def _stop_now(self) -> None:
+        """STOP on the position socket (blocking; a motion request timed out)."""
+        if self.stopper is None:
+            return
+        self.stops += 1
+        try:
+            self.stopper.call("STOP", timeout=self.timeout_s)
+        except HalError:
+            pass                # the controller is unreachable: the link loss is reported
+
+    def stop(self) -> Job:
+        """Halt the robot now (the cell's stop): STOP on the position socket, which answers
+        while the motion socket waits for the motion's end."""
+        if self.stopper is None:
+            return DoneJob("robot.stop", error=HalError("no position socket to send STOP on"))
+        try:
+            future = self.stopper.submit("STOP", timeout=self.timeout_s)
+        except RuntimeError as e:
+            return DoneJob("robot.stop", error=CommsLost(f"robot.stop: {e}"))
+        return FutureJob("robot.stop", future, self.clock)
+
+    def _held(self) -> Held:
+        held = protocol.decode_held(self._call("HELD"))
+        self._holding = not held.empty
+        return held
+
+    def held(self) -> Job:
+        """HELD: what the gripper holds, as the controller knows it (result ``Held``). Queued
+        behind any request in flight; the controller answers after a motion still running."""
+        return self._submit("robot.held", self._held)
+
     def pick(self, target: PickTarget) -> Job:
+        if int(target.part_id) <= 0:        # HELD's 0 and -1 mean "nothing", "not ours"
+            return DoneJob("robot.pick", error=HalError(
+                f"part id {target.part_id}: the controller needs a positive id"))
         ox, oy, oz = target.tool_offset
 
         def run() -> PickResult:
+            latch = protocol.wrap_robot(int(target.latch) * self.belt_sign)  # its own count
             try:
                 values = self._call("PICK", int(target.part_id), float(target.x_mm),
                                     float(target.y_mm), float(target.angle_deg),
-                                    int(target.latch), bool(target.tracking),
+                                    latch, bool(target.tracking),
                                     float(ox), float(oy), float(oz))
             except MissedGrab:
                 self._holding = False
@@ -114,9 +160,11 @@ class AdeptRobot:
         return self._submit("robot.set_speed", run)
 
     def recover(self) -> Job:
-        """RECOVER runs the V+ recovery (reacte.v2); then re-read what the gripper holds."""
+        """RECOVER runs the V+ recovery (reacte.v2 arm.recover); arm power comes on again
+        only if the cell description allows it (``recover_power_on``), else the job fails
+        with -604 until the operator has turned it on. Then re-read what is held."""
         def run() -> None:
-            self._call("RECOVER")
+            self._call("RECOVER", self.recover_power_on)
             self.refresh_holding()
 
         return self._submit("robot.recover", run)
@@ -130,12 +178,18 @@ def _pose_args(pose: Pose) -> tuple[float, float, float, float]:
 
 
 class AdeptRobotPosition:
-    """``RobotPosition`` over the position server: a poller refreshes a cache at ~100 Hz
-    (its own socket, so it reads on while the robot moves); reads return the cache."""
+    """``RobotPosition`` over the position server: a poller refreshes a cache with one POLL
+    (pose and belt count in one round trip) ``1/period_s`` times a second (its own socket,
+    so it reads on while the robot moves); reads return the cache. ``belt_sign`` -1: the
+    robot's belt channel counts down as the belt runs forward; the cache holds the count
+    turned forward, and PICK turns a latch back into the channel's own count."""
 
-    def __init__(self, position: ServerClient, period_s: float = POLL_S) -> None:
+    def __init__(self, position: ServerClient, period_s: float = POLL_S,
+                 belt_sign: int = 1) -> None:
         self.position = position
         self.period_s = period_s
+        self.belt_sign = belt_sign
+        self.polls = 0                            # POLL round trips (tests, load figures)
         self._pose = Pose(0.0, 0.0)
         self._count = 0
         self.updated_at: float | None = None      # monotonic time of the last good read
@@ -144,15 +198,16 @@ class AdeptRobotPosition:
         self._thread: threading.Thread | None = None
 
     def read_once(self) -> None:
-        """One WHERE and one BELT (blocking; the poller thread, or start-up)."""
-        pose = protocol.decode_where(self.position.call("WHERE"))
-        count = protocol.decode_belt(self.position.call("BELT"))
-        self._pose, self._count = pose, count
+        """One POLL (blocking; the poller thread, or start-up)."""
+        pose, count = protocol.decode_poll(self.position.call("POLL"))
+        self.polls += 1
+        self._pose, self._count = pose, protocol.wrap_robot(count * self.belt_sign)
         self.updated_at = time.monotonic()
         self.error = None
 
     def start(self) -> AdeptRobotPosition:
         if self._thread is None:
+            self._stop.clear()
             self._thread = threading.Thread(target=self._run, name="vplus-position-poll",
                                             daemon=True)
             self._thread.start()
