@@ -182,3 +182,40 @@ def test_a_whole_run_survives_a_cut_at_each_step(tmp_path, phase, device):
                   "during_place": "placed (its reply was lost)",
                   "after_release": "placed (its reply was lost)"}[phase]
         assert found == [expect]
+
+
+# ------------------------------------------------------------- the emulated cell (robot)
+
+
+def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monkeypatch):
+    """The real Adept driver against the V+ emulator (real time, ~40 s): the motion
+    server's link cut before a PICK is carried out, after the grip, during a PLACE and
+    after the release. Each lost reply is settled with HELD and feeding goes on."""
+    from feeder_bt import run as run_mod
+    from feeder_bt.emulators.faults import FaultPlan
+    from feeder_bt.hal.factory import start_emulated
+
+    plan = FaultPlan()
+    plan.add("drop", "adept", "PICK", nth=2)
+    plan.add("drop_after", "adept", "PICK", nth=5)
+    plan.add("drop_during", "adept", "PLACE", nth=8, after_s=0.15)
+    plan.add("drop_after", "adept", "PLACE", nth=11)
+    monkeypatch.setattr(run_mod, "make_hal",
+                        lambda kind, scenario, cell, seed: start_emulated(scenario, cell, seed,
+                                                                          faults=plan))
+    db = tmp_path / "run.db"
+    r = run_job(RunOptions(scenario="scenarios/lenses.yaml", hal="emulated", duration=40.0,
+                           seed=1, view="none", db=str(db)))
+    assert [kind for _, kind, _ in plan.log] == ["drop", "drop_after", "drop_during",
+                                                 "drop_after"]
+    assert r["state"] == "STOPPED", r["fault"]
+    assert r["parts"]["lost"] == 0 and r["parts"]["duplicated"] == 0
+    assert r["parts"]["misplaced"] == {}
+    assert r["faults"].get("comms_lost") == 4 and r["recoveries"].get("comms_lost") == 4
+    found = [e[2]["found"] for e in _events(db) if e[1] == "reconciled"]
+    assert found == ["on the belt (never gripped)", "in the gripper",
+                     "placed (its reply was lost)", "placed (its reply was lost)"]
+    # every part the world placed, the cell counted (none counted twice, none missed)
+    assert r["world"]["placed"].get("lens", 0) == r["parts"]["retrieved"]["lens"]
+    retrieved = [e for e in _events(db) if e[1] == "retrieved"]
+    assert retrieved[-1][0] > max(e[0] for e in _events(db) if e[1] == "reconciled")
