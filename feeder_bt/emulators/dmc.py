@@ -9,7 +9,9 @@ return from ``JS``), ``IF``/``ELSE``/``ENDIF`` (nestable), variables and assignm
 (``_TPB``, ``_BGB``, ``_TI0``, ``_ALB``, ``_RLB``, ``_TP~a`` ... answered by the host),
 functions (``@IN[n]``, ``@OUT[n]`` from the host; ``@ABS``, ``@INT``, ``@FRAC``, ``@RND``,
 ``@COM``, ``@SQR`` here), ``MG`` with strings, expressions and ``{Fm.n}``/``{Zm.n}``/
-``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), ``NO`` and
+``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), automatic
+subroutines (``#POSERR``, ``#LIMSWI``, ``#AMPERR`` entered on the host's event, ``#CMDERR``
+on a program error, each ended by ``RE``/``EN``), ``NO`` and
 ``'`` comments. Anything else in a program is handed to the host as a command (``SB 1``,
 ``JG ,100``, ``BGB``...).
 
@@ -33,6 +35,7 @@ from typing import Protocol
 
 from ..hal.galil.protocol import (
     ERROR_TEXT,
+    MAX_LABELS,
     MAX_LINE_CHARS,
     MAX_PROGRAM_LINES,
     MAX_VARIABLE_CHARS,
@@ -47,7 +50,12 @@ SLICE = 200            # statements a thread runs before yielding for a moment
 # Two-letter commands the interpreter hands to the host rather than reading ``XYB=...`` as
 # an assignment to a variable ``XYB``.
 HOST_COMMANDS = frozenset(
-    "AB AC AL BG CB CN CW DC DL EO HX JG MO OB PR RL SB SH SP ST TC TI TP TV XQ".split())
+    "AB AC AL BG CB CF CN CW DC DL EO ER HX IH JG MO OB OE PR RL SB SH SP ST TC TH TI TP TV WH "
+    "XQ".split())
+
+#: Automatic subroutines (Galil command reference, "#POSERR", "#LIMSWI", "#AMPERR", "#CMDERR"):
+#: the card jumps to them on the event if the downloaded program has the label.
+AUTO_LABELS = ("#POSERR", "#LIMSWI", "#AMPERR", "#CMDERR")
 
 
 class DmcError(Exception):
@@ -75,8 +83,10 @@ class DmcHost(Protocol):
     def output(self, text: str) -> None:
         """Program output (``MG``), with its CR/LF, for the unsolicited channel."""
 
-    def thread_error(self, thread: int, error: DmcError, line: int, text: str) -> None:
-        """A thread stopped on an error at program line ``line``."""
+    def thread_error(self, thread: int, error: DmcError, line: int, text: str,
+                     trapped: bool = False) -> None:
+        """A thread stopped on an error at program line ``line`` (``trapped``: it went on
+        in the program's ``#CMDERR`` instead)."""
 
 
 # ---------------------------------------------------------------------------- lexer
@@ -356,6 +366,8 @@ def compile_statement(text: str, line: int) -> Stmt:
                     toks=tokenize(cond) if cond else None)
     if s == "EN" or (head == "EN" and s[2:3] in (" ", ",")):
         return Stmt("en", s, line)
+    if head in ("RE", "RI") and (len(s) == 2 or s[2:3] in " 01"):
+        return Stmt("re", s, line)             # return from an automatic subroutine
     if head == "WT" and not s[2:3].isalpha():
         return Stmt("wt", s, line, expr=s[2:].strip(), toks=tokenize(s[2:]))
     if head == "MG" and not s[2:3].isalnum():
@@ -405,6 +417,8 @@ class Program:
                     name = part.upper()
                     if name in prog.labels:
                         raise DmcError(61, f"line {n}: duplicate label {name}")
+                    if len(prog.labels) >= MAX_LABELS:
+                        raise DmcError(60, f"line {n}: more than {MAX_LABELS} labels")
                     prog.labels[name] = len(prog.stmts)
                     prog.stmts.append(Stmt("label", part, n))
                     continue
@@ -476,6 +490,8 @@ class _Thread:
     stop: threading.Event
     thread: threading.Thread | None = None
     line: int = 0
+    pending: list[str] = field(default_factory=list)    # automatic subroutines to enter
+    in_cmderr: bool = False
 
 
 class DmcInterpreter:
@@ -490,6 +506,8 @@ class DmcInterpreter:
         self.lock = threading.RLock()
         self._threads: dict[int, _Thread] = {}
         self._env = _Env(self)
+        self.error_line = 0            # _ED: program line of the last error a #CMDERR caught
+        self.error_thread = 0          # _ED1: its thread
 
     # ------------------------------------------------------------------ program memory
     def load(self, program: Program) -> None:
@@ -578,6 +596,32 @@ class DmcInterpreter:
             return sorted(n for n, t in self._threads.items()
                           if t.thread is not None and t.thread.is_alive())
 
+    def thread_line(self, thread: int) -> int:
+        """``_XQn``: the program line thread ``n`` is at, or -1 when it does not run."""
+        with self.lock:
+            t = self._threads.get(thread)
+            if t is None or t.thread is None or not t.thread.is_alive():
+                return -1
+            return t.line
+
+    def interrupt(self, label: str, thread: int = 0) -> bool:
+        """An automatic subroutine: enter ``label`` on ``thread`` (started if it does not
+        run), as the card does on an event. False when the program has no such label."""
+        prog = self.program
+        if prog is None or label.upper() not in prog.labels:
+            return False
+        with self.lock:
+            t = self._threads.get(thread)
+            if t is not None and t.thread is not None and t.thread.is_alive():
+                if label.upper() not in t.pending:
+                    t.pending.append(label.upper())
+                return True
+        try:
+            self.execute(label, thread)
+        except DmcError:
+            return False
+        return True
+
     def execute(self, label: str, thread: int = 0) -> None:
         """``XQ #LABEL,n``: start program thread ``n`` at ``label``."""
         if not 0 <= thread < self.max_threads:
@@ -609,59 +653,82 @@ class DmcInterpreter:
 
     def _run(self, prog: Program, pc: int, t: _Thread) -> None:
         stack: list[int] = []
-        stmts = prog.stmts
         count = 0
-        try:
-            while not t.stop.is_set():
-                if pc >= len(stmts):
+        while not t.stop.is_set():
+            try:
+                if t.pending:
+                    with self.lock:
+                        label = t.pending.pop(0)
+                    if len(stack) >= MAX_STACK:
+                        raise DmcError(12)
+                    stack.append(pc)
+                    pc = prog.labels[label]
+                if pc >= len(prog.stmts):
                     return                           # ran off the end: the thread ends
-                st = stmts[pc]
+                st = prog.stmts[pc]
                 t.line = st.line
-                pc += 1
-                kind = st.kind
-                if kind in ("label", "nop", "endif"):
-                    pass
-                elif kind == "if":
-                    if not self.evaluate(st.toks or []):
-                        pc = st.jump
-                elif kind == "else":
-                    pc = st.jump
-                elif kind in ("jp", "js"):
-                    if st.toks is None or self.evaluate(st.toks):
-                        if kind == "js":
-                            if len(stack) >= MAX_STACK:
-                                raise DmcError(12)
-                            stack.append(pc)
-                        pc = prog.labels[st.target]
-                elif kind == "en":
-                    if not stack:
-                        return
-                    pc = stack.pop()
-                elif kind == "wt":
-                    ms = self.evaluate(st.toks or [])
-                    if ms < 0:
-                        raise DmcError(6, "WT < 0")
-                    t.stop.wait(ms / 1000.0)
+                pc, wait = self._step(prog, st, pc + 1, stack, t)
+                if pc < 0:
+                    return
+                if wait is not None:
+                    t.stop.wait(wait)
                     count = 0
                     continue
-                elif kind == "mg":
-                    self.host.output(self.message(st.expr))
-                elif kind == "assign":
-                    self.assign(st.target, st.toks or [])
-                elif kind == "axis":
-                    self.set_axis_var(st.target, st.toks or [])
-                else:
-                    self.host.command(st.text, t.number)
                 count += 1
-                if count >= SLICE:              # a loop without WT must not hog the CPU
+                if count >= SLICE:                  # a loop without WT must not hog the CPU
                     count = 0
                     t.stop.wait(0.0005)
-        except DmcError as e:
-            self.host.thread_error(t.number, e, t.line, prog.lines[t.line - 1]
-                                   if 0 < t.line <= len(prog.lines) else "")
-        except Exception as e:                 # noqa: BLE001 - a host fault stops the thread
-            self.host.thread_error(t.number, DmcError(1, f"{type(e).__name__}: {e}"), t.line,
-                                   prog.lines[t.line - 1] if 0 < t.line <= len(prog.lines) else "")
+            except Exception as e:                  # noqa: BLE001 - a fault stops the thread
+                err = e if isinstance(e, DmcError) else DmcError(1, f"{type(e).__name__}: {e}")
+                text = prog.lines[t.line - 1] if 0 < t.line <= len(prog.lines) else ""
+                handler = prog.labels.get("#CMDERR")
+                if handler is not None and not t.in_cmderr:
+                    with self.lock:
+                        self.error_line, self.error_thread = t.line, t.number
+                    self.host.thread_error(t.number, err, t.line, text, trapped=True)
+                    t.in_cmderr = True
+                    stack.clear()
+                    pc = handler
+                    continue
+                self.host.thread_error(t.number, err, t.line, text)
+                return
+
+    def _step(self, prog: Program, st: Stmt, pc: int, stack: list[int], t: _Thread
+              ) -> tuple[int, float | None]:
+        """Run one statement; returns the next pc (-1: the thread ends) and a wait (s)."""
+        kind = st.kind
+        if kind in ("label", "nop", "endif"):
+            pass
+        elif kind == "if":
+            if not self.evaluate(st.toks or []):
+                pc = st.jump
+        elif kind == "else":
+            pc = st.jump
+        elif kind in ("jp", "js"):
+            if st.toks is None or self.evaluate(st.toks):
+                if kind == "js":
+                    if len(stack) >= MAX_STACK:
+                        raise DmcError(12)
+                    stack.append(pc)
+                pc = prog.labels[st.target]
+        elif kind in ("en", "re"):
+            if not stack:
+                return -1, None
+            pc = stack.pop()
+        elif kind == "wt":
+            ms = self.evaluate(st.toks or [])
+            if ms < 0:
+                raise DmcError(6, "WT < 0")
+            return pc, ms / 1000.0
+        elif kind == "mg":
+            self.host.output(self.message(st.expr))
+        elif kind == "assign":
+            self.assign(st.target, st.toks or [])
+        elif kind == "axis":
+            self.set_axis_var(st.target, st.toks or [])
+        else:
+            self.host.command(st.text, t.number)
+        return pc, None
 
 
 __all__ = ["DmcError", "DmcHost", "DmcInterpreter", "Program", "format_number", "tokenize"]

@@ -17,8 +17,23 @@ A rejected command (``?``) is followed by ``TC1`` and raises ``GalilError(code, 
 A dropped link, or no reply within ``spec.timeout_s``, raises ``CommsLost`` for the
 command in flight and closes the link; the next command reconnects, after a back-off
 (0.1 s doubling to 2 s) once an attempt has failed. Every connect re-runs the start-up
-sequence: ``CW 1``, ``EO 0``, ``HX``, ``DL`` of ``spec.programs``, program variables,
-``XQ`` of the input monitor and the distance notifier, servo on, initial reads.
+sequence (docs/real-cell.md has the source of each step):
+
+1. ``EO 0`` first (a serial port echoes until then), then ``CW 1``;
+2. ``WH``: which Ethernet handle we are; ``CF`` that handle, so program messages come to
+   us; ``IH h=>-2`` frees the handles of our earlier, dropped connections (``free_handles``);
+3. ``HXn`` of *our* threads only (a program on another thread is never killed: the
+   connect fails with a clear error instead, as ``DL`` would be refused);
+4. ``DL`` of ``spec.programs``, program variables, ``XQ`` of the input monitor (0), the
+   distance notifier (1) and the host watchdog (2); ``OE 1`` on our axes;
+5. ``SH`` only as ``spec.servo_on`` allows: at the first connect of a job (``start``),
+   never on a reconnect (an amplifier that is off was turned off by an off-on-error, the
+   e-stop or an operator, and stays off until an operator's reset: ``servo(True)``);
+6. initial reads.
+
+A *health poll* (every ``HEALTH_S``) pets the card's watchdog, reads ``_XQ0``-``_XQ2``
+(a dead thread is reported in ``program_errors`` and started again) and each axis's
+``_MO``, ``_SC``, ``_TE``, ``_LF``, ``_LR`` into ``status(axis)``.
 """
 
 from __future__ import annotations
@@ -43,6 +58,8 @@ from ...errors import CommsLost, ConfigError, ConveyorFault, HalError
 from ...scenario.model import GalilSpec
 from .protocol import (
     AXES,
+    THREADS,
+    CardEvent,
     DistanceEvent,
     Event,
     GalilError,
@@ -56,6 +73,7 @@ from .protocol import (
     parse_int,
     parse_tell_code,
     parse_unsolicited,
+    positional,
     read_programs,
 )
 
@@ -64,6 +82,10 @@ log = logging.getLogger(__name__)
 PROGRAMS_DIR = Path(__file__).resolve().parents[3] / "galil_programs"
 INPUT_MONITOR = "#INMON"        # galil_programs/monitor.dmc, thread 0
 DIST_NOTIFIER = "#DIST"         # galil_programs/monitor.dmc, thread 1
+WATCHDOG = "#WDOG"              # galil_programs/monitor.dmc, thread 2
+OUR_THREADS = {0: INPUT_MONITOR, 1: DIST_NOTIFIER, 2: WATCHDOG}
+HEALTH_S = 0.2                  # health poll period (watchdog pets, thread and axis status)
+MAX_RESTARTS = 5                # a program thread restarted more often: left stopped
 READ_TIMEOUT_S = 0.05           # reader's read(1) timeout: how fast it notices a close
 BACKOFF_FIRST_S = 0.1
 BACKOFF_MAX_S = 2.0
@@ -72,6 +94,18 @@ POSITION_POLL_S = 0.1           # TP refreshes: at most 10 Hz per axis
 COUNTER_BITS = 32
 
 EventCallback = Callable[[Event, float], None]
+
+
+@dataclass(frozen=True)
+class AxisStatus:
+    """One axis as the health poll last read it (``MG _MOx`` ...)."""
+
+    motor_off: bool          # _MO: the amplifier is off
+    stop_code: int           # _SC
+    position_error: float    # _TE, counts
+    forward_limit: bool      # _LF reads 0: the forward limit switch is active
+    reverse_limit: bool      # _LR reads 0
+    t: float                 # clock time of the read
 
 
 class Retry:
@@ -228,9 +262,20 @@ class GalilController:
         self.outputs_mask: int | None = None
         self.connects = 0                   # successful connects (reconnects = connects - 1)
         self.program_errors: list[str] = []
+        self.card_events: list[tuple[str, str, float]] = []    # (kind, detail, t)
+        self.handle: str | None = None      # our Ethernet handle letter (WH), None on serial
+        self._held_handles: set[str] = set()
+        self.firmware: str | None = None    # the card's answer to ^R^V / CW (commissioning)
+        self._has_watchdog = WATCHDOG in labels and spec.watchdog_s > 0
+        self._status: dict[str, AxisStatus] = {}
+        self.thread_lines: dict[int, int] = {}
+        self.restarts: dict[int, int] = {}
+        self.servo_refused: str | None = None   # why the start-up SH was not sent or failed
         self._closed = False
         self.ready: Future = self.submit(self._first_connect) if connect else _done(False)
         self.ready.add_done_callback(_retrieve)
+        if connect:
+            self._sched.call_later(HEALTH_S, self._health_tick)
 
     # ================================================================ public API
     def command(self, text: str) -> Future:
@@ -283,6 +328,11 @@ class GalilController:
         self._connect_hooks.append(fn)
         if self._conn is not None and self._conn.alive:
             self.submit(fn).add_done_callback(_retrieve)
+
+    def status(self, axis: str) -> AxisStatus | None:
+        """The axis as the health poll last read it (None before the first read)."""
+        with self._lock:
+            return self._status.get(axis.upper())
 
     @property
     def connected(self) -> bool:
@@ -421,28 +471,36 @@ class GalilController:
     def _connect(self) -> _Connection:
         try:
             ser = serial.serial_for_url(self.spec.url, baudrate=self.spec.baud,
-                                        timeout=READ_TIMEOUT_S,
+                                        timeout=READ_TIMEOUT_S, rtscts=self.spec.rtscts,
                                         write_timeout=self.spec.timeout_s)
         except (serial.SerialException, OSError, ValueError) as e:
             raise CommsLost(f"Galil at {self.spec.url}: cannot open: {e}") from None
         conn = _Connection(ser, self._on_line, self.spec.url)
         self._conn = conn
+        first = self.connects == 0
         try:
+            self._ask_on(conn, "EO 0")            # no echo first: a serial port echoes
             self._ask_on(conn, "CW 1")            # unsolicited bytes with the top bit set
-            self._ask_on(conn, "EO 0")            # no echo (serial ports echo by default)
-            self._ask_on(conn, "HX")              # DL is refused while a program runs
+            self._claim_handle(conn)
+            self._halt_our_threads(conn)          # DL is refused while a program runs
             self._ask_on(conn, "DL", payload=download_payload(self.program))
             if self._has_notifier:
                 step = max(1, round(self.spec.notify_mm * self.cpm))
                 self._ask_on(conn, f"DSTEP={step}")
                 self._ask_on(conn, f"~a={AXES.index(self.notify_axis)}")
+            if self._has_watchdog:
+                self._ask_on(conn, f"WDMS={round(self.spec.watchdog_s * 1000)}")
             if self._has_monitor:
                 self._ask_on(conn, f"XQ {INPUT_MONITOR},0")
             if self._has_notifier:
                 self._ask_on(conn, f"XQ {DIST_NOTIFIER},1")
-            if self.servo_axes:
-                self._ask_on(conn, f"SH{self.servo_axes}")
-            self.inputs_mask = parse_int(self._ask_on(conn, "MG _TI0"))
+            if self._has_watchdog:
+                self._ask_on(conn, f"XQ {WATCHDOG},2")
+            if self.spec.off_on_error and self.servo_axes:
+                self._ask_on(conn, positional("OE", {a: 1 for a in self.servo_axes}))
+            self._servo_at_connect(conn, first)
+            self.inputs_mask = (parse_int(self._ask_on(conn, "MG _TI0"))
+                                | parse_int(self._ask_on(conn, "MG _TI1")) << 8)
             self.outputs_mask = parse_int(self._ask_on(conn, "MG _OP0"))
             for axis in self.servo_axes:
                 self._set_position(axis, parse_int(self._ask_on(conn, f"TP{axis}")))
@@ -456,6 +514,100 @@ class GalilController:
         self.connects += 1
         log.info("Galil at %s connected (%d)", self.spec.url, self.connects)
         return conn
+
+    def _claim_handle(self, conn: _Connection) -> None:
+        """``WH``, then ``CF`` our handle (program messages to us) and ``IH`` the stale
+        handles of our earlier connections (or every other one, ``free_handles: others``)."""
+        try:
+            which = self._ask_on(conn, "WH").strip().upper()
+        except GalilError:
+            which = ""
+        if not (len(which) == 3 and which.startswith("IH") and which[2] in AXES):
+            self.handle = None                 # serial: messages come to the serial port
+            return
+        self.handle = which[2]
+        self._ask_on(conn, f"CF {self.handle}")
+        mode = self.spec.free_handles
+        if mode == "others":
+            self._ask_on(conn, "IHN=>-2")
+        elif mode == "ours":
+            for h in sorted(self._held_handles - {self.handle}):
+                try:
+                    self._ask_on(conn, f"IH{h}=>-2")
+                except GalilError:             # already free: nothing to do
+                    pass
+        self._held_handles = {self.handle}
+
+    def _halt_our_threads(self, conn: _Connection) -> None:
+        """``HXn`` of our threads; a program on any other thread is not ours to kill."""
+        foreign = []
+        for n in range(THREADS):
+            line = parse_int(self._ask_on(conn, f"MG _XQ{n}"))
+            if line < 0:
+                continue
+            if n in OUR_THREADS:
+                self._ask_on(conn, f"HX{n}")
+            else:
+                foreign.append(f"thread {n} (line {line})")
+        if foreign:
+            raise GalilError(17, f"a program not ours runs on {', '.join(foreign)}: the "
+                                 f"driver will not halt it (HX) and DL is refused while it "
+                                 f"runs; stop it at the controller (docs/real-cell.md)")
+
+    def _servo_at_connect(self, conn: _Connection, first: bool) -> None:
+        """``SH`` as ``spec.servo_on`` allows; never an error (the axis reports motor off)."""
+        rule = self.spec.servo_on
+        if not self.servo_axes or rule == "never":
+            self.servo_refused = "galil.servo_on is never: an operator turns the motors on"
+            return
+        if rule == "start" and not first:
+            off = [a for a in self.servo_axes if parse_int(self._ask_on(conn, f"MG _MO{a}"))]
+            self.servo_refused = (f"motor {', '.join(off)} off after the reconnect: left off "
+                                  f"until an operator's reset") if off else None
+            return
+        try:
+            self._ask_on(conn, f"SH{self.servo_axes}")
+            self.servo_refused = None
+        except GalilError as e:                # e.g. the e-stop holds the amplifiers off
+            self.servo_refused = f"SH{self.servo_axes} refused: {e.text}"
+            log.warning("Galil: %s", self.servo_refused)
+
+    # ================================================================ health poll
+    def _health_tick(self) -> None:
+        if self._closed:
+            return
+        if self.connected:
+            self.submit(self._health).add_done_callback(_retrieve)
+        self._sched.call_later(HEALTH_S, self._health_tick)
+
+    def _health(self) -> None:
+        """Pet the watchdog; check our threads run; read each axis's status."""
+        if self._has_watchdog:
+            self.ask("WDCNT=0")
+        wanted = {0: self._has_monitor, 1: self._has_notifier, 2: self._has_watchdog}
+        for n, label in OUR_THREADS.items():
+            if not wanted[n]:
+                continue
+            line = parse_int(self.ask(f"MG _XQ{n}"))
+            self.thread_lines[n] = line
+            if line >= 0:
+                continue
+            why = f"program thread {n} ({label}) is not running"
+            self.program_errors.append(why)
+            log.warning("Galil: %s", why)
+            if self.restarts.get(n, 0) < MAX_RESTARTS:
+                self.restarts[n] = self.restarts.get(n, 0) + 1
+                self.ask(f"XQ {label},{n}")
+        now = self.clock.now()
+        for a in self.servo_axes:
+            st = AxisStatus(
+                motor_off=bool(parse_int(self.ask(f"MG _MO{a}"))),
+                stop_code=parse_int(self.ask(f"MG _SC{a}")),
+                position_error=float(parse_int(self.ask(f"MG _TE{a}"))),
+                forward_limit=parse_int(self.ask(f"MG _LF{a}")) == 0,
+                reverse_limit=parse_int(self.ask(f"MG _LR{a}")) == 0, t=now)
+            with self._lock:
+                self._status[a] = st
 
     def _drop(self, conn: _Connection, why: str) -> CommsLost:
         if self._conn is conn:
@@ -514,6 +666,9 @@ class GalilController:
         elif isinstance(ev, ProgramError):
             self.program_errors.append(ev.text)
             log.warning("Galil program error: %s", ev.text)
+        elif isinstance(ev, CardEvent):
+            self.card_events.append((ev.kind, ev.detail, t))
+            log.warning("Galil card event: %s %s", ev.kind, ev.detail)
         with self._lock:
             subscribers = list(self._subscribers)
         for fn in subscribers:
