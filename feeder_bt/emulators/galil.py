@@ -122,12 +122,16 @@ class _TcpLink(_Link):
         self.sock.sendall(data)
 
     def read(self) -> bytes:
-        ready, _, _ = select.select([self.sock], [], [], POLL_S)
+        try:
+            ready, _, _ = select.select([self.sock], [], [], POLL_S)
+        except ValueError:                     # closed from this side meanwhile
+            raise OSError("link closed") from None
         if not ready:
             return b""
         data = self.sock.recv(4096)
         if not data:
-            self.client_closed = True
+            if not self.closed.is_set():       # not our own shutdown: the client's FIN
+                self.client_closed = True
             raise OSError("client closed the connection")
         return data
 
