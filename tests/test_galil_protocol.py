@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 from feeder_bt.errors import CommsLost, HalError
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.hal.galil.protocol import (
-    MAX_LINE_CHARS,
     MAX_LABELS,
+    MAX_LINE_CHARS,
     MAX_PROGRAM_LINES,
     CardEvent,
     DistanceEvent,

@@ -271,6 +271,7 @@ class GalilController:
         self.thread_lines: dict[int, int] = {}
         self.restarts: dict[int, int] = {}
         self.servo_refused: str | None = None   # why the start-up SH was not sent or failed
+        self._health_busy = False
         self._closed = False
         self.ready: Future = self.submit(self._first_connect) if connect else _done(False)
         self.ready.add_done_callback(_retrieve)
@@ -574,10 +575,15 @@ class GalilController:
 
     # ================================================================ health poll
     def _health_tick(self) -> None:
+        """Every ``HEALTH_S``: one health poll (it also reconnects a dropped link at once,
+        so that the card's watchdog is petted again as soon as the link is back)."""
         if self._closed:
             return
-        if self.connected:
-            self.submit(self._health).add_done_callback(_retrieve)
+        if not self._health_busy:
+            self._health_busy = True
+            fut = self.submit(self._health)
+            fut.add_done_callback(_retrieve)
+            fut.add_done_callback(lambda f: setattr(self, "_health_busy", False))
         self._sched.call_later(HEALTH_S, self._health_tick)
 
     def _health(self) -> None:
