@@ -507,6 +507,8 @@ class GalilEmulator:
         s = cmd.strip()
         if not s or s.startswith("'"):
             return ""
+        if s == "\x12\x16":                   # ^R^V: revision information
+            return f"{MODEL} Rev EMU1.0"
         if s[:2] == "IH":
             if from_program:
                 raise DmcError(6, "IH from a program is not emulated")
