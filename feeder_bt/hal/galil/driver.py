@@ -38,14 +38,12 @@ A *health poll* (every ``HEALTH_S``) pets the card's watchdog, reads ``_XQ0``-``
 
 from __future__ import annotations
 
-import heapq
-import itertools
 import logging
 import queue
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,9 +54,18 @@ from ...clock import Clock
 from ...encoder import wrap
 from ...errors import CommsLost, ConfigError, ConveyorFault, HalError
 from ...scenario.model import GalilSpec
+from .link import (
+    DEAD,
+    Connection,
+    Scheduler,
+    done,
+    failed,
+    retrieve,
+    set_exception,
+    set_result,
+)
 from .protocol import (
     AXES,
-    THREADS,
     CardEvent,
     DistanceEvent,
     Event,
@@ -66,9 +73,7 @@ from .protocol import (
     InputsEvent,
     ProgramError,
     ProgramLine,
-    ProtocolError,
     Reply,
-    ReplySplitter,
     download_payload,
     parse_int,
     parse_tell_code,
@@ -76,16 +81,18 @@ from .protocol import (
     positional,
     read_programs,
 )
+from .startup import (
+    DIST_NOTIFIER,
+    HEALTH_S,
+    INPUT_MONITOR,
+    WATCHDOG,
+    AxisStatus,
+    CardSetup,
+)
 
 log = logging.getLogger(__name__)
 
 PROGRAMS_DIR = Path(__file__).resolve().parents[3] / "galil_programs"
-INPUT_MONITOR = "#INMON"        # galil_programs/monitor.dmc, thread 0
-DIST_NOTIFIER = "#DIST"         # galil_programs/monitor.dmc, thread 1
-WATCHDOG = "#WDOG"              # galil_programs/monitor.dmc, thread 2
-OUR_THREADS = {0: INPUT_MONITOR, 1: DIST_NOTIFIER, 2: WATCHDOG}
-HEALTH_S = 0.2                  # health poll period (watchdog pets, thread and axis status)
-MAX_RESTARTS = 5                # a program thread restarted more often: left stopped
 READ_TIMEOUT_S = 0.05           # reader's read(1) timeout: how fast it notices a close
 BACKOFF_FIRST_S = 0.1
 BACKOFF_MAX_S = 2.0
@@ -94,18 +101,6 @@ POSITION_POLL_S = 0.1           # TP refreshes: at most 10 Hz per axis
 COUNTER_BITS = 32
 
 EventCallback = Callable[[Event, float], None]
-
-
-@dataclass(frozen=True)
-class AxisStatus:
-    """One axis as the health poll last read it (``MG _MOx`` ...)."""
-
-    motor_off: bool          # _MO: the amplifier is off
-    stop_code: int           # _SC
-    position_error: float    # _TE, counts
-    forward_limit: bool      # _LF reads 0: the forward limit switch is active
-    reverse_limit: bool      # _LR reads 0
-    t: float                 # clock time of the read
 
 
 class Retry:
@@ -122,102 +117,7 @@ class Delay:
     seconds: float
 
 
-_DEAD = object()            # put in the reply queue when the link dies
-
-
-class _Connection:
-    """One open link: the serial object, its reader thread and its reply queue."""
-
-    def __init__(self, ser: serial.SerialBase, on_line: Callable[[str], None], name: str) -> None:
-        self.ser = ser
-        self.on_line = on_line
-        self.splitter = ReplySplitter()
-        self.replies: queue.Queue = queue.Queue()
-        self.alive = True
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._read_loop, name=f"galil-reader-{name}",
-                                       daemon=True)
-        self.thread.start()
-
-    def _read_loop(self) -> None:
-        while self.alive:
-            try:
-                data = self.ser.read(1)
-            except Exception as e:               # noqa: BLE001 - any failure: the link is gone
-                self._die(e)
-                return
-            if not data:
-                continue
-            try:
-                items = self.splitter.feed(data)
-            except ProtocolError as e:
-                self._die(e)
-                return
-            for item in items:
-                if isinstance(item, Reply):
-                    self.replies.put(item)
-                else:
-                    try:
-                        self.on_line(item.text)
-                    except Exception:            # noqa: BLE001 - a subscriber must not kill us
-                        log.exception("Galil event handler failed on %r", item.text)
-
-    def _die(self, e: BaseException) -> None:
-        if self.alive:
-            self.error = e
-        self.alive = False
-        self.replies.put(_DEAD)
-
-    def close(self) -> None:
-        self.alive = False
-        self.replies.put(_DEAD)
-        try:
-            self.ser.close()
-        except Exception:                        # noqa: BLE001 - closing a broken link
-            pass
-        if self.thread is not threading.current_thread():
-            self.thread.join(1.0)
-
-
-class _Scheduler:
-    """Calls functions after a delay on one timer thread (continuations of operations)."""
-
-    def __init__(self) -> None:
-        self._heap: list[tuple[float, int, Callable[[], None]]] = []
-        self._seq = itertools.count()
-        self._cv = threading.Condition()
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="galil-scheduler", daemon=True)
-        self._thread.start()
-
-    def call_later(self, delay: float, fn: Callable[[], None]) -> None:
-        with self._cv:
-            heapq.heappush(self._heap, (time.monotonic() + max(0.0, delay), next(self._seq), fn))
-            self._cv.notify()
-
-    def _run(self) -> None:
-        while True:
-            with self._cv:
-                while not self._closed and (not self._heap
-                                            or self._heap[0][0] > time.monotonic()):
-                    timeout = self._heap[0][0] - time.monotonic() if self._heap else None
-                    self._cv.wait(timeout)
-                if self._closed:
-                    return
-                _, _, fn = heapq.heappop(self._heap)
-            try:
-                fn()
-            except Exception:                    # noqa: BLE001
-                log.exception("Galil scheduled call failed")
-
-    def close(self) -> None:
-        with self._cv:
-            self._closed = True
-            self._cv.notify()
-        self._thread.join(1.0)
-
-
-class GalilController:
+class GalilController(CardSetup):
     """A Galil DMC on ``spec.url``: commands, events, positions and inputs.
 
     ``counts_per_mm`` (the cell's ``encoder``) turns ``spec.notify_mm`` into the
@@ -247,8 +147,8 @@ class GalilController:
         self._has_notifier = DIST_NOTIFIER in labels and spec.notify_mm > 0
         self._worker_name = f"galil-worker-{id(self):x}"
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=self._worker_name)
-        self._sched = _Scheduler()
-        self._conn: _Connection | None = None
+        self._sched = Scheduler()
+        self._conn: Connection | None = None
         self._backoff = BACKOFF_FIRST_S
         self._next_attempt = 0.0
         self._last_error: BaseException | None = None
@@ -273,8 +173,8 @@ class GalilController:
         self.servo_refused: str | None = None   # why the start-up SH was not sent or failed
         self._health_busy = False
         self._closed = False
-        self.ready: Future = self.submit(self._first_connect) if connect else _done(False)
-        self.ready.add_done_callback(_retrieve)
+        self.ready: Future = self.submit(self._first_connect) if connect else done(False)
+        self.ready.add_done_callback(retrieve)
         if connect:
             self._sched.call_later(HEALTH_S, self._health_tick)
 
@@ -286,11 +186,11 @@ class GalilController:
     def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
         """Run ``fn`` on the device worker (where it may call ``ask``)."""
         if self._closed:
-            return _failed(CommsLost("Galil controller closed"))
+            return failed(CommsLost("Galil controller closed"))
         try:
             return self._worker.submit(fn, *args)
         except RuntimeError:
-            return _failed(CommsLost("Galil controller closed"))
+            return failed(CommsLost("Galil controller closed"))
 
     def ask(self, text: str) -> str:
         """Send one command and wait for its reply (device worker only).
@@ -328,7 +228,7 @@ class GalilController:
         """Run ``fn`` on the worker after every connect (settings the card must be told)."""
         self._connect_hooks.append(fn)
         if self._conn is not None and self._conn.alive:
-            self.submit(fn).add_done_callback(_retrieve)
+            self.submit(fn).add_done_callback(retrieve)
 
     def status(self, axis: str) -> AxisStatus | None:
         """The axis as the health poll last read it (None before the first read)."""
@@ -364,7 +264,7 @@ class GalilController:
         def done(f: Future) -> None:
             with self._lock:
                 self._polling.discard(axis)
-            _retrieve(f)
+            retrieve(f)
         self.submit(self.read_position, axis).add_done_callback(done)
 
     def read_position(self, axis: str) -> int:
@@ -391,9 +291,9 @@ class GalilController:
             if fut.done():
                 return
             if self._closed:
-                _set_exception(fut, CommsLost("Galil controller closed"))
+                set_exception(fut, CommsLost("Galil controller closed"))
                 return
-            self.submit(run).add_done_callback(_retrieve)
+            self.submit(run).add_done_callback(retrieve)
 
         def run() -> None:
             if fut.done():
@@ -413,14 +313,14 @@ class GalilController:
                         return
                     if r is not None:
                         state["result"] = r
-                _set_result(fut, state["result"])
+                set_result(fut, state["result"])
             except BaseException as e:            # noqa: BLE001 - delivered through the future
-                _set_exception(fut, e)
+                set_exception(fut, e)
 
         if self._closed:
-            _set_exception(fut, CommsLost("Galil controller closed"))
+            set_exception(fut, CommsLost("Galil controller closed"))
         else:
-            self.submit(run).add_done_callback(_retrieve)
+            self.submit(run).add_done_callback(retrieve)
         return fut
 
     def close(self) -> None:
@@ -442,7 +342,7 @@ class GalilController:
         self._ensure_connected()
         return True
 
-    def _ensure_connected(self) -> _Connection:
+    def _ensure_connected(self) -> Connection:
         conn = self._conn
         if conn is not None and conn.alive:
             return conn
@@ -469,14 +369,14 @@ class GalilController:
         self._next_attempt = 0.0
         return conn
 
-    def _connect(self) -> _Connection:
+    def _connect(self) -> Connection:
         try:
             ser = serial.serial_for_url(self.spec.url, baudrate=self.spec.baud,
                                         timeout=READ_TIMEOUT_S, rtscts=self.spec.rtscts,
                                         write_timeout=self.spec.timeout_s)
         except (serial.SerialException, OSError, ValueError) as e:
             raise CommsLost(f"Galil at {self.spec.url}: cannot open: {e}") from None
-        conn = _Connection(ser, self._on_line, self.spec.url)
+        conn = Connection(ser, self._on_line, self.spec.url)
         self._conn = conn
         first = self.connects == 0
         try:
@@ -516,113 +416,14 @@ class GalilController:
         log.info("Galil at %s connected (%d)", self.spec.url, self.connects)
         return conn
 
-    def _claim_handle(self, conn: _Connection) -> None:
-        """``WH``, then ``CF`` our handle (program messages to us) and ``IH`` the stale
-        handles of our earlier connections (or every other one, ``free_handles: others``)."""
-        try:
-            which = self._ask_on(conn, "WH").strip().upper()
-        except GalilError:
-            which = ""
-        if not (len(which) == 3 and which.startswith("IH") and which[2] in AXES):
-            self.handle = None                 # serial: messages come to the serial port
-            return
-        self.handle = which[2]
-        self._ask_on(conn, f"CF {self.handle}")
-        mode = self.spec.free_handles
-        if mode == "others":
-            self._ask_on(conn, "IHN=>-2")
-        elif mode == "ours":
-            for h in sorted(self._held_handles - {self.handle}):
-                try:
-                    self._ask_on(conn, f"IH{h}=>-2")
-                except GalilError:             # already free: nothing to do
-                    pass
-        self._held_handles = {self.handle}
-
-    def _halt_our_threads(self, conn: _Connection) -> None:
-        """``HXn`` of our threads; a program on any other thread is not ours to kill."""
-        foreign = []
-        for n in range(THREADS):
-            line = parse_int(self._ask_on(conn, f"MG _XQ{n}"))
-            if line < 0:
-                continue
-            if n in OUR_THREADS:
-                self._ask_on(conn, f"HX{n}")
-            else:
-                foreign.append(f"thread {n} (line {line})")
-        if foreign:
-            raise GalilError(17, f"a program not ours runs on {', '.join(foreign)}: the "
-                                 f"driver will not halt it (HX) and DL is refused while it "
-                                 f"runs; stop it at the controller (docs/real-cell.md)")
-
-    def _servo_at_connect(self, conn: _Connection, first: bool) -> None:
-        """``SH`` as ``spec.servo_on`` allows; never an error (the axis reports motor off)."""
-        rule = self.spec.servo_on
-        if not self.servo_axes or rule == "never":
-            self.servo_refused = "galil.servo_on is never: an operator turns the motors on"
-            return
-        if rule == "start" and not first:
-            off = [a for a in self.servo_axes if parse_int(self._ask_on(conn, f"MG _MO{a}"))]
-            self.servo_refused = (f"motor {', '.join(off)} off after the reconnect: left off "
-                                  f"until an operator's reset") if off else None
-            return
-        try:
-            self._ask_on(conn, f"SH{self.servo_axes}")
-            self.servo_refused = None
-        except GalilError as e:                # e.g. the e-stop holds the amplifiers off
-            self.servo_refused = f"SH{self.servo_axes} refused: {e.text}"
-            log.warning("Galil: %s", self.servo_refused)
-
-    # ================================================================ health poll
-    def _health_tick(self) -> None:
-        """Every ``HEALTH_S``: one health poll (it also reconnects a dropped link at once,
-        so that the card's watchdog is petted again as soon as the link is back)."""
-        if self._closed:
-            return
-        if not self._health_busy:
-            self._health_busy = True
-            fut = self.submit(self._health)
-            fut.add_done_callback(_retrieve)
-            fut.add_done_callback(lambda f: setattr(self, "_health_busy", False))
-        self._sched.call_later(HEALTH_S, self._health_tick)
-
-    def _health(self) -> None:
-        """Pet the watchdog; check our threads run; read each axis's status."""
-        if self._has_watchdog:
-            self.ask("WDCNT=0")
-        wanted = {0: self._has_monitor, 1: self._has_notifier, 2: self._has_watchdog}
-        for n, label in OUR_THREADS.items():
-            if not wanted[n]:
-                continue
-            line = parse_int(self.ask(f"MG _XQ{n}"))
-            self.thread_lines[n] = line
-            if line >= 0:
-                continue
-            why = f"program thread {n} ({label}) is not running"
-            self.program_errors.append(why)
-            log.warning("Galil: %s", why)
-            if self.restarts.get(n, 0) < MAX_RESTARTS:
-                self.restarts[n] = self.restarts.get(n, 0) + 1
-                self.ask(f"XQ {label},{n}")
-        now = self.clock.now()
-        for a in self.servo_axes:
-            st = AxisStatus(
-                motor_off=bool(parse_int(self.ask(f"MG _MO{a}"))),
-                stop_code=parse_int(self.ask(f"MG _SC{a}")),
-                position_error=float(parse_int(self.ask(f"MG _TE{a}"))),
-                forward_limit=parse_int(self.ask(f"MG _LF{a}")) == 0,
-                reverse_limit=parse_int(self.ask(f"MG _LR{a}")) == 0, t=now)
-            with self._lock:
-                self._status[a] = st
-
-    def _drop(self, conn: _Connection, why: str) -> CommsLost:
+    def _drop(self, conn: Connection, why: str) -> CommsLost:
         if self._conn is conn:
             self._conn = None
         conn.close()
         self._last_error = CommsLost(why)
         return CommsLost(why)
 
-    def _ask_on(self, conn: _Connection, text: str, payload: bytes | None = None) -> str:
+    def _ask_on(self, conn: Connection, text: str, payload: bytes | None = None) -> str:
         try:
             data = text.encode("ascii") + b"\r" + (payload or b"")
         except UnicodeEncodeError:
@@ -632,7 +433,7 @@ class GalilController:
                 stale = conn.replies.get_nowait()
             except queue.Empty:
                 break
-            if stale is _DEAD:
+            if stale is DEAD:
                 raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
         if not conn.alive:
             raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
@@ -651,13 +452,13 @@ class GalilController:
         code, why = parse_tell_code(tc.data) if tc.ok else (-1, "unknown (TC1 rejected)")
         raise GalilError(code, why, command=text)
 
-    def _wait_reply(self, conn: _Connection, text: str) -> Reply:
+    def _wait_reply(self, conn: Connection, text: str) -> Reply:
         try:
             item = conn.replies.get(timeout=self.spec.timeout_s)
         except queue.Empty:
             raise self._drop(conn, f"Galil: no reply to {text!r} within "
                                    f"{self.spec.timeout_s:g} s") from None
-        if item is _DEAD:
+        if item is DEAD:
             raise self._drop(conn, f"Galil link lost waiting for {text!r}: {conn.error}")
         return item
 
@@ -687,38 +488,3 @@ class GalilController:
         with self._lock:
             self._positions[axis] = (wrap(int(count), COUNTER_BITS),
                                      self.clock.now() if t is None else t)
-
-
-# ------------------------------------------------------------------------ futures
-
-
-def _retrieve(f: Future) -> None:
-    """Mark a fire-and-forget future's exception as seen."""
-    if not f.cancelled():
-        f.exception()
-
-
-def _done(value: Any) -> Future:
-    f: Future = Future()
-    f.set_result(value)
-    return f
-
-
-def _failed(e: BaseException) -> Future:
-    f: Future = Future()
-    f.set_exception(e)
-    return f
-
-
-def _set_result(f: Future, value: Any) -> None:
-    try:
-        f.set_result(value)
-    except InvalidStateError:
-        pass
-
-
-def _set_exception(f: Future, e: BaseException) -> None:
-    try:
-        f.set_exception(e)
-    except InvalidStateError:
-        pass
