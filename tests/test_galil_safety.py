@@ -250,3 +250,17 @@ def test_a_dithering_servo_still_trips_the_stall():
     assert "off-on-error" in str(belt.fault())
     ctl.st = AxisStatus(False, 2, 0.0, True, False, clock.now())
     assert "forward limit" in str(belt.fault())
+
+
+# ---------------------------------------------------------------------------- finding 11
+
+
+def test_a_fresh_position_read_for_anchoring_a_sync():
+    with rig() as r:
+        belt = r.conveyors["horizontal"]
+        ok(belt.set_speed(100.0))
+        ok(belt.stop())
+        age = belt.position_age()
+        assert age is not None
+        count = ok(belt.read_position())
+        assert count == r.plant.position_counts("B") and belt.position_age() < 0.1

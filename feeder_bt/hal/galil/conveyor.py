@@ -246,6 +246,15 @@ class GalilConveyor:
                              f"{self._stall_counts} counts in {now - ref[0]:.1f} s at "
                              f"{self._commanded:g} mm/s")
 
+    def position_age(self) -> float | None:
+        """Clock seconds since ``position()``'s count was read (None: never). An encoder
+        sync must anchor only on a fresh count (issue 15, finding 11)."""
+        return self.ctl.position_age(self.axis)
+
+    def read_position(self) -> Job:
+        """A fresh ``TP`` read now; the job's result is the count (for anchoring a sync)."""
+        return self._job("read_position", self.ctl.submit(self.ctl.read_position, self.axis))
+
     def travelled(self, distance_mm: float) -> Job:
         """Ends when the count has moved ``distance_mm`` on from the latest count now."""
         return _TravelJob(self, distance_mm)
