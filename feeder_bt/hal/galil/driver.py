@@ -121,10 +121,11 @@ class GalilController(CardSetup):
     """A Galil DMC on ``spec.url``: commands, events, positions and inputs.
 
     ``counts_per_mm`` (the cell's ``encoder``) turns ``spec.notify_mm`` into the
-    notifier's step in counts. ``servo_axes`` are switched on (``SH``) at every connect;
-    by default the axes of ``spec.axes``. Construction prepares the programs (so a bad
-    program fails at once, naming ``file:line``, before anything is sent) and starts
-    connecting in the background; ``ready`` is that first connect's ``Future``.
+    notifier's step in counts. ``servo_axes`` (by default the axes of ``spec.axes``) are
+    switched on (``SH``) as ``spec.servo_on`` allows: by default once, at the first connect.
+    Construction prepares the programs (so a bad program fails at once, naming
+    ``file:line``, before anything is sent) and starts connecting in the background;
+    ``ready`` is that first connect's ``Future``.
     """
 
     def __init__(self, spec: GalilSpec, clock: Clock, programs_dir: Path | str = PROGRAMS_DIR,
