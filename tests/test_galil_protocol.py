@@ -219,6 +219,7 @@ def test_an_echoed_bare_cr_does_not_leave_a_reply_incomplete():
     sp = ReplySplitter()
     assert sp.feed(b"EO 0\r:") == [Reply(True, "EO 0")]
     assert sp.feed(b"CW 1\r:") == [Reply(True, "CW 1")]
+    assert sp.feed(b"XX\r?") == [Reply(False)]              # a rejection after its echo
     assert sp.pending == b""
 
 

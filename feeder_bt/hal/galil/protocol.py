@@ -170,8 +170,9 @@ class ReplySplitter:
             if byte == 0x3A and (not self._reply or self._reply[-1] in (0x0A, 0x0D)):  # ':'
                 out.append(Reply(True, _decode(self._reply).strip("\r\n")))
                 self._reply.clear()
-            elif byte == 0x3F and not self._reply:                                  # '?'
-                out.append(Reply(False))
+            elif byte == 0x3F and (not self._reply or self._reply[-1] in (0x0A, 0x0D)):
+                out.append(Reply(False))                    # '?', maybe after an echo
+                self._reply.clear()
             else:
                 self._reply.append(byte)
                 if len(self._reply) > self._max:
