@@ -334,8 +334,13 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
             def reach(x: float = x, y: float = y) -> dict[str, Any]:
                 pose = Pose(x, y, cell.robot.approach_mm)
                 wait(robot.move_to(pose), cell.adept.motion_timeout_s + 1)
+                end = time.monotonic() + 2.0           # the position cache lags the arm
                 got = position.pose()
-                return {"target": [round(x, 1), round(y, 1)],
+                while math.dist((got.x, got.y), (x, y)) > 1.0 and time.monotonic() < end:
+                    time.sleep(0.05)
+                    got = position.pose()
+                return {"ok": math.dist((got.x, got.y), (x, y)) <= 1.0,
+                        "target": [round(x, 1), round(y, 1)],
                         "reached": [round(got.x, 1), round(got.y, 1)]}
             _try(report, f"adept.reach.corner{i + 1}", reach)
         _try(report, "adept.safe", lambda: {"ok": wait(robot.move_safe(),
