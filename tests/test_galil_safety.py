@@ -264,3 +264,33 @@ def test_a_fresh_position_read_for_anchoring_a_sync():
         assert age is not None
         count = ok(belt.read_position())
         assert count == r.plant.position_counts("B") and belt.position_age() < 0.1
+
+
+def test_a_program_on_another_thread_is_never_halted():
+    """Finding 6: no HX of every thread. An integrator's program on thread 3 keeps running;
+    since DL is refused while it runs, the reconnect fails saying so."""
+    with rig() as r:
+        prog = r.emu.interp.program
+        from feeder_bt.emulators.dmc import Program
+        r.emu.interp.program = Program.parse(prog.lines + ["#SAFETY", "WT 10", "JP #SAFETY"])
+        r.emu.interp.execute("#SAFETY", 3)
+        r.emu.drop_clients()
+        assert wait_until(lambda: "not ours runs on thread 3" in str(r.ctl._last_error),
+                          timeout=3.0)
+        assert 3 in r.emu.interp.running() and r.ctl.connects == 1
+        assert not any(c in ("HX", "HX3") for c in r.emu.commands)
+
+
+def test_limit_switch_and_amplifier_fault_run_their_card_handlers():
+    with rig() as r:
+        belt = r.conveyors["horizontal"]
+        ok(belt.set_speed(60.0))
+        r.emu.trip_limit("B")
+        assert wait_until(lambda: any(k == "LIMSWI" for k, _, _ in r.ctl.card_events))
+        assert wait_until(lambda: "forward limit" in str(belt.fault()))
+        r.emu.clear_limits()
+        ok(belt.set_speed(60.0))
+        r.emu.trip_amplifier("B")
+        assert wait_until(lambda: any(k == "AMPERR" for k, _, _ in r.ctl.card_events))
+        assert wait_until(lambda: "motor off" in str(belt.fault()))
+        assert r.emu.interp.running() == [0, 1, 2]           # RE: back to the monitor loop

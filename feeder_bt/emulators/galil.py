@@ -431,6 +431,12 @@ class GalilEmulator:
                 self.plant.jog(st.letter, 0.0, st.dc)
         self.interp.interrupt("#LIMSWI", 0)
 
+    def trip_amplifier(self, axis: str) -> None:
+        """The amplifier of ``axis`` reports a fault: it turns the motor off; ``#AMPERR``
+        runs if the program has it."""
+        self._motors_off(axis.upper(), stop_code=6)
+        self.interp.interrupt("#AMPERR", 0)
+
     def clear_limits(self) -> None:
         with self.lock:
             for st in self.axes.values():
