@@ -22,6 +22,7 @@ DIST_NOTIFIER = "#DIST"         # galil_programs/monitor.dmc, thread 1
 WATCHDOG = "#WDOG"              # galil_programs/monitor.dmc, thread 2
 OUR_THREADS = {0: INPUT_MONITOR, 1: DIST_NOTIFIER, 2: WATCHDOG}
 HEALTH_S = 0.2                  # health poll period (watchdog pets, thread and axis status)
+STATUS_EVERY = 3                # thread and axis status every 3rd poll (0.6 s)
 MAX_RESTARTS = 5                # a program thread restarted more often: left stopped
 
 
@@ -125,9 +126,13 @@ class CardSetup:
         self._sched.call_later(HEALTH_S, self._health_tick)
 
     def _health(self) -> None:
-        """Pet the watchdog; check our threads run; read each axis's status."""
+        """Pet the watchdog (every poll); check our threads run and read each axis's status
+        (every ``STATUS_EVERY`` polls, so that a serial link is not kept busy)."""
         if self._has_watchdog:
             self.ask("WDCNT=0")
+        self._health_n = getattr(self, "_health_n", -1) + 1
+        if self._health_n % STATUS_EVERY:
+            return
         wanted = {0: self._has_monitor, 1: self._has_notifier, 2: self._has_watchdog}
         for n, label in OUR_THREADS.items():
             if not wanted[n]:
