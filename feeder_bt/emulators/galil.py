@@ -35,19 +35,21 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
-import select
 import socket
 import sys
 import threading
 import time
-import tty
 from dataclasses import dataclass
 
 from ..hal.galil.protocol import ERROR_TEXT, HANDLES, MODEL
 from .dmc import AXES, DmcError, DmcInterpreter, Program, format_number, is_axis_command
 from .faults import FaultPlan
+from .galil_link import POLL_S
+from .galil_link import Link as _Link
+from .galil_link import PtyLink as _PtyLink
+from .galil_link import Session as _Session
+from .galil_link import TcpLink as _TcpLink
 from .plant import Plant
 
 COPYRIGHT = f"Galil Motion Control {MODEL} emulator (feeder_bt), firmware EMU1.0"
@@ -56,7 +58,6 @@ COPYRIGHT = f"Galil Motion Control {MODEL} emulator (feeder_bt), firmware EMU1.0
 REJECT_CODES = {"BG": 22, "JG": 6, "SP": 6, "PR": 6, "AC": 6, "DC": 6, "XQ": 19, "DL": 17,
                 "SH": 20, "AL": 7, "RL": 7, "TP": 7, "MG": 1, "SB": 6, "CB": 6}
 OUTPUT_BITS = 16
-POLL_S = 0.05                  # how often idle server threads look at the stop flag
 INPUT_BITS = 16
 
 
@@ -79,142 +80,6 @@ class _Axis:
     te: float = 0.0                # position error (counts)
     lf: int = 1                    # forward limit switch: 1 inactive, 0 tripped
     lr: int = 1
-
-
-class _Link:
-    """One client connection (TCP socket or pty master): bytes in, bytes out."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.closed = threading.Event()
-        self._wlock = threading.Lock()
-        self.handle: str | None = None         # Ethernet handle letter (TCP only)
-        self.client_closed = False             # the client closed it (the handle is free)
-
-    def write(self, data: bytes) -> None:
-        if self.closed.is_set():
-            return
-        with self._wlock:
-            try:
-                self._write(data)
-            except OSError:
-                self.close()
-
-    def _write(self, data: bytes) -> None:
-        raise NotImplementedError
-
-    def read(self) -> bytes:
-        """Some bytes (b'' on a quiet period); raises OSError when the link is gone."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        self.closed.set()
-
-
-class _TcpLink(_Link):
-    def __init__(self, sock: socket.socket, name: str) -> None:
-        super().__init__(name)
-        self.sock = sock
-        sock.settimeout(2.0)                  # a client that stops reading is dropped
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def _write(self, data: bytes) -> None:
-        self.sock.sendall(data)
-
-    def read(self) -> bytes:
-        try:
-            ready, _, _ = select.select([self.sock], [], [], POLL_S)
-        except ValueError:                     # closed from this side meanwhile
-            raise OSError("link closed") from None
-        if not ready:
-            return b""
-        data = self.sock.recv(4096)
-        if not data:
-            if not self.closed.is_set():       # not our own shutdown: the client's FIN
-                self.client_closed = True
-            raise OSError("client closed the connection")
-        return data
-
-    def close(self) -> None:
-        if not self.closed.is_set():
-            super().close()
-            try:
-                self.sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            self.sock.close()
-
-
-class _PtyLink(_Link):
-    """The master side of a pseudo-terminal; the driver opens the slave as a serial port."""
-
-    def __init__(self) -> None:
-        super().__init__("pty")
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)                # no echo, no CR/LF translation
-        os.set_blocking(self.master, False)   # nobody reading: output is lost, not stuck
-        self.path = os.ttyname(self.slave)
-
-    def _write(self, data: bytes) -> None:
-        view = memoryview(data)
-        end = time.monotonic() + 0.5
-        while view and time.monotonic() < end:
-            try:
-                view = view[os.write(self.master, view):]
-            except BlockingIOError:           # the slave's buffer is full: wait a little
-                time.sleep(0.005)
-
-    def read(self) -> bytes:
-        ready, _, _ = select.select([self.master], [], [], POLL_S)
-        if not ready:
-            return b""
-        try:
-            return os.read(self.master, 4096)
-        except OSError:                       # EIO while the slave is closed: keep serving
-            time.sleep(0.05)
-            return b""
-
-    def close(self) -> None:
-        if not self.closed.is_set():
-            super().close()
-            for fd in (self.master, self.slave):
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-
-
-class _Session:
-    """Command-line state of one link: the partial command, DL mode."""
-
-    def __init__(self, emu: GalilEmulator, link: _Link) -> None:
-        self.emu, self.link = emu, link
-        self.buf: list[str] = []
-        self.quoted = False
-        self.dl: list[str] | None = None       # program text while downloading
-
-    def feed(self, data: bytes) -> None:
-        for byte in data:
-            if self.link.closed.is_set():
-                return
-            ch = chr(byte & 0x7F)
-            if self.emu.echo and isinstance(self.link, _PtyLink):
-                self.link.write(bytes([byte & 0x7F]))     # a serial port echoes until EO 0
-            if self.dl is not None:
-                if ch == "\\":
-                    text, self.dl = "".join(self.dl), None
-                    self.emu._finish_download(self.link, text)
-                else:
-                    self.dl.append(ch)
-                continue
-            if ch == '"':
-                self.quoted = not self.quoted
-            if ch == "\r" or (ch == ";" and not self.quoted):
-                cmd, self.buf, self.quoted = "".join(self.buf), [], False
-                if self.emu._handle(self.link, cmd):
-                    self.dl = []
-            elif ch != "\n":
-                self.buf.append(ch)
 
 
 class GalilEmulator:
