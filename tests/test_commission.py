@@ -161,3 +161,13 @@ def test_commission_reports_a_bad_answers_file_in_one_line(tmp_path, capsys):
                  str(bad), "--report", str(tmp_path / "r.yaml")])
     err = capsys.readouterr().err
     assert code == 2 and "answers must be a mapping" in err and "Traceback" not in err
+
+
+def test_questions_are_answered_from_the_file_then_standard_input():
+    from feeder_bt.tools.commission import Asker
+    out = io.StringIO()
+    ask = Asker({"latch": "done"}, io.StringIO("yes\n"), out)
+    assert ask("latch", "Fire the trigger") == "done"             # from the answers file
+    assert ask.yes("direction.horizontal", "Forward?")            # from standard input
+    assert not ask.yes("direction.incline", "Forward?")           # end of input: the default
+    assert "(no answer: no)" in out.getvalue()
