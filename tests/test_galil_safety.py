@@ -254,7 +254,8 @@ def test_a_dithering_servo_still_trips_the_stall():
     ctl.st = AxisStatus(True, 8, 20000.0, False, False, clock.now())
     assert "off-on-error" in str(belt.fault())
     ctl.st = AxisStatus(False, 2, 0.0, True, False, clock.now())
-    assert "forward limit" in str(belt.fault())
+    ctl.card_events.append(("LIMSWI", "", clock.now()))
+    assert "limit switch" in str(belt.fault())
 
 
 # ---------------------------------------------------------------------------- finding 11
@@ -292,7 +293,8 @@ def test_limit_switch_and_amplifier_fault_run_their_card_handlers():
         ok(belt.set_speed(60.0))
         r.emu.trip_limit("B")
         assert wait_until(lambda: any(k == "LIMSWI" for k, _, _ in r.ctl.card_events))
-        assert wait_until(lambda: "forward limit" in str(belt.fault()))
+        assert wait_until(lambda: "limit switch" in str(belt.fault()))
+        assert wait_until(lambda: getattr(r.ctl.status("B"), "forward_limit", False))
         r.emu.clear_limits()
         ok(belt.set_speed(60.0))
         r.emu.trip_amplifier("B")

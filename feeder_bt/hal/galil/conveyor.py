@@ -224,12 +224,13 @@ class GalilConveyor:
                 return ConveyorFault(f"{self.name}: motor off on Galil axis {self.axis} "
                                      f"({stop_text(st.stop_code)}); an operator's reset "
                                      f"turns it on")
-            if st.forward_limit or st.reverse_limit:
-                side = "forward" if st.forward_limit else "reverse"
-                return ConveyorFault(f"{self.name}: {side} limit switch of Galil axis "
-                                     f"{self.axis} active")
-        if any(kind == "WATCHDOG" and t >= self._commanded_at
-               for kind, _, t in list(self.ctl.card_events)):
+        events = {kind for kind, _, t in list(self.ctl.card_events) if t >= self._commanded_at}
+        if "LIMSWI" in events:
+            # the card's #LIMSWI said so; _LF/_LR are only reported (their polarity is a
+            # wiring matter: docs/real-cell.md)
+            return ConveyorFault(f"{self.name}: a limit switch tripped on the Galil "
+                                 f"(#LIMSWI); axis {self.axis} stopped")
+        if "WATCHDOG" in events:
             return ConveyorFault(f"{self.name}: the Galil's host watchdog stopped the belts "
                                  f"(the host was silent for {self.ctl.spec.watchdog_s:g} s)")
         if self._mode != "jog" or abs(self._commanded) < 1.0:
