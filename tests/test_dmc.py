@@ -24,7 +24,8 @@ class FakeHost:
     """Operands from dicts; MG output and errors collected."""
 
     def __init__(self) -> None:
-        self.operands: dict[str, float] = {"TPB": 0.0, "TPA": 7.0, "TI0": 0.0, "BGB": 0.0}
+        self.operands: dict[str, float] = {"TPB": 0.0, "TPA": 7.0, "TI0": 0.0, "TI1": 0.0,
+                                           "BGB": 0.0, "ED": 0.0, "ED1": 0.0}
         self.inputs: dict[int, float] = {}
         self.out: list[str] = []
         self.commands: list[tuple[str, int]] = []
@@ -52,9 +53,11 @@ class FakeHost:
         with self.lock:
             self.out.append(text)
 
-    def thread_error(self, thread: int, error: DmcError, line: int, text: str) -> None:
+    def thread_error(self, thread: int, error: DmcError, line: int, text: str,
+                     trapped: bool = False) -> None:
         with self.lock:
             self.errors.append((thread, error.code, line, text))
+            self.trapped = trapped
 
     def lines(self) -> list[str]:
         with self.lock:
@@ -264,9 +267,11 @@ def test_shipped_programs_run(interp):
     host = interp.fake
     interp.execute("#INMON", 0)
     interp.execute("#DIST", 1)
-    assert wait_until(lambda: "I 000" in host.lines())
+    assert wait_until(lambda: "I 00000" in host.lines())
     host.operands["TI0"] = 5.0
-    assert wait_until(lambda: "I 005" in host.lines())
+    assert wait_until(lambda: "I 00005" in host.lines())
+    host.operands["TI1"] = 2.0                        # input 10: the second bank too
+    assert wait_until(lambda: "I 00517" in host.lines())
     host.operands["TPB"] = 99.0
     host.operands["TPB"] = 250.0
     assert wait_until(lambda: "D 0000000250" in host.lines())
@@ -274,3 +279,35 @@ def test_shipped_programs_run(interp):
     assert wait_until(lambda: "D 0000000120" in host.lines())
     assert host.errors == []
     assert interp.running() == [0, 1]
+
+
+def test_automatic_subroutines_interrupt_thread_0_and_return(interp):
+    """#POSERR (and #LIMSWI, #AMPERR) run on the event, then RE goes back to the loop."""
+    interp.load(Program.parse('#MAIN\n#LOOP\nN=N+1\nWT 5\nJP #LOOP\n'
+                              '#POSERR\nMG "E POSERR"\nRE\n'))
+    interp.assign("N", "0")
+    interp.execute("#MAIN", 0)
+    assert interp.interrupt("#POSERR", 0)
+    assert wait_until(lambda: "E POSERR" in interp.fake.lines())
+    n = interp.variables["N"]
+    assert wait_until(lambda: interp.variables["N"] > n + 2)       # the loop went on
+    assert interp.running() == [0]
+    assert not interp.interrupt("#LIMSWI", 0)                       # no such label
+
+
+def test_cmderr_catches_a_program_error_with_its_line_and_thread(interp):
+    interp.load(Program.parse('#A\nXX 1\nEN\n#CMDERR\nMG "E CMDERR", _ED1 {F1.0}, _ED {F4.0}\nEN'))
+    interp.fake.operands["ED"] = 2.0
+    interp.fake.operands["ED1"] = 3.0
+    interp.execute("#A", 3)
+    assert wait_until(lambda: "E CMDERR 3 0002" in interp.fake.lines())
+    assert interp.error_line == 2 and interp.error_thread == 3
+    assert interp.fake.trapped
+    assert wait_until(lambda: interp.thread_line(3) == -1)          # _XQ3: not running
+
+
+def test_program_memory_refuses_more_labels_than_a_dmc():
+    from feeder_bt.hal.galil.protocol import MAX_LABELS
+    with pytest.raises(DmcError) as err:
+        Program.parse("\n".join(f"#L{i}" for i in range(MAX_LABELS + 1)))
+    assert err.value.code == 60

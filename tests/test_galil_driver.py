@@ -14,7 +14,7 @@ from galil_fixtures import JAM_BIT, plant_and_emulator, rig, wait_job, wait_unti
 from feeder_bt.clock import RealClock
 from feeder_bt.emulators.faults import FaultPlan
 from feeder_bt.emulators.galil import GalilEmulator, serve
-from feeder_bt.errors import CommsLost, HalError
+from feeder_bt.errors import CommsLost, ConveyorFault, HalError
 from feeder_bt.hal.galil import DownloadError, GalilController, GalilError
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.hal.galil.protocol import DistanceEvent, InputsEvent, Message, read_programs
@@ -43,10 +43,14 @@ def drain(q) -> list:
 def test_connect_downloads_and_starts_the_programs():
     with rig() as r:
         cmds = r.emu.commands
-        assert cmds[:3] == ["CW 1", "EO 0", "HX"]
-        assert cmds[3] == "DL"
-        assert {"DSTEP=100", "~a=1", "XQ #INMON,0", "XQ #DIST,1", "SHAB"} <= set(cmds)
-        assert r.emu.cw_msb and r.emu.interp.running() == [0, 1]
+        assert cmds[:5] == ["EO 0", "CW 1", "WH", "CF A", "MG _XQ0"]   # EO 0 first (finding 8)
+        assert "HX" not in cmds                          # no HX of every thread (finding 6)
+        dl = cmds.index("DL")
+        assert all(c.startswith("MG _XQ") for c in cmds[4:dl]) and len(cmds[4:dl]) == 8
+        assert {"DSTEP=100", "~a=1", "WDMS=1000", "XQ #INMON,0", "XQ #DIST,1", "XQ #WDOG,2",
+                "OE 1,1", "SHAB"} <= set(cmds)
+        assert r.emu.cw_msb and r.emu.interp.running() == [0, 1, 2]
+        assert r.ctl.handle == "A" and r.emu.cf == "A"
         assert r.ctl.connects == 1 and r.ctl.connected
         assert r.ctl.inputs_mask == 0 and r.ctl.outputs_mask == 0
         assert r.ctl.position("B") == 0 and r.ctl.program_errors == []
@@ -182,11 +186,11 @@ def test_abort_and_servo_off():
         ok(belt.abort())
         assert "AB 1" in r.emu.commands
         assert wait_until(lambda: not r.plant.in_motion("B"))
-        assert r.emu.interp.running() == [0, 1]    # AB 1 leaves the programs running
+        assert r.emu.interp.running() == [0, 1, 2]  # AB 1 leaves the programs running
         ok(belt.servo(False))
         job = wait_job(belt.set_speed(50.0))
-        assert job.state is JobState.FAILED and isinstance(job.error, GalilError)
-        assert (job.error.code, job.error.text) == (20, "Begin not valid with motor off")
+        assert job.state is JobState.FAILED and isinstance(job.error, ConveyorFault)
+        assert "motor off" in str(job.error)            # code 20, said as an operator matter
         ok(belt.servo(True))
         ok(belt.set_speed(50.0))
 
@@ -270,7 +274,9 @@ def test_drop_fault_surfaces_as_comms_lost_and_the_driver_reconnects():
         assert isinstance(err, CommsLost) and not isinstance(err, GalilError)
         assert wait_until(lambda: r.ctl.command("TPB").exception(3) is None, timeout=3.0)
         assert r.ctl.connects == 2
-        assert r.emu.commands.count("DL") == 2 and r.emu.interp.running() == [0, 1]
+        assert r.emu.commands.count("DL") == 2 and r.emu.interp.running() == [0, 1, 2]
+        assert "IHA=>-2" in r.emu.commands           # the stale handle freed (finding 5)
+        assert r.emu.handles() == {"B": "open"} and r.emu.cf == "B"
         ok(belt.set_speed(100.0))                  # and it works again
 
 
@@ -314,7 +320,7 @@ def test_reconnect_back_off_until_the_controller_is_there():
             assert ctl._backoff == pytest.approx(0.4)
             late = serve(plant, "127.0.0.1", port)
             assert wait_until(lambda: ctl.command("TPB").exception(3) is None, timeout=4.0)
-            assert ctl.connects == 1 and late.interp.running() == [0, 1]
+            assert ctl.connects == 1 and late.interp.running() == [0, 1, 2]
         finally:
             ctl.close()
             if late is not None:
@@ -437,6 +443,8 @@ def test_emulator_wire_format():
             assert c.send(b"TC1\r") == b"60 Download error - line too long or too many lines\r\n:"
             assert c.send(b"DL\r#A\rMG \"hi\"\rEN\r\\") == b":"
             assert c.send(b"CW 1\r") == b":"
+            assert c.send(b"WH\r") == b"IHA\r\n:"
+            assert c.send(b"CF A\r") == b":"          # program output to this handle
             got = c.send(b"XQ #A,2\r", lines=1)
             assert split(got) == (b":", b"hi\r\n")         # in either order
             assert c.send(b"DL\r#B\rWT 1000\rEN\r\\") == b":"
@@ -446,19 +454,56 @@ def test_emulator_wire_format():
             assert c.send(b"HX\r") == b":"
             assert c.send(b"DL\r#C\rXX 1\rEN\r\\") == b":"
             got = c.send(b"XQ #C\r", lines=1)
-            assert split(got) == (b":", b"?002 XX 1\r\n")
+            assert split(got) == (b":", b"002 XX 1?\r\n")
             assert c.send(b"TC1\r") == b"1 Unrecognized command\r\n:"
         finally:
             c.close()
 
 
-def test_a_new_client_replaces_the_old():
+def test_handles_run_out_and_ih_frees_them():
+    """Finding 5: a DMC has a fixed number of Ethernet handles; a further connection is
+    reset. A dropped link's handle stays taken (stale) until IH frees it."""
     with plant_and_emulator() as (_plant, emu, _cell):
-        a = RawClient(emu)
-        assert a.send(b"TPB\r") == b" 0\r\n:"
-        b = RawClient(emu)
-        assert b.send(b"TPB\r") == b" 0\r\n:"
-        a.sock.settimeout(1.0)
-        assert a.sock.recv(10) == b""              # the old one was closed
-        a.close()
-        b.close()
+        emu.max_handles = 2
+        a, b = RawClient(emu), RawClient(emu)
+        assert a.send(b"WH\r") == b"IHA\r\n:" and b.send(b"WH\r") == b"IHB\r\n:"
+        c = RawClient(emu)
+        c.sock.settimeout(1.0)
+        c.sock.sendall(b"TPB\r")
+        assert c.sock.recv(10) == b""              # every handle taken: refused
+        c.close()
+        emu.drop_clients()                          # cable pulled: both handles stale
+        assert wait_until(lambda: emu.handles() == {"A": "stale", "B": "stale"})
+        d = RawClient(emu)
+        d.sock.settimeout(1.0)
+        d.sock.sendall(b"TPB\r")
+        assert d.sock.recv(10) == b""              # still refused: nobody freed them
+        d.close()
+        emu.execute("NO")                           # (a command from the serial side)
+        emu._local.link = None
+        assert emu.execute("IHA=>-2") == ""
+        e = RawClient(emu)
+        assert e.send(b"WH\r") == b"IHA\r\n:"
+        assert e.send(b"IHN=>-2\r") == b":"        # every other handle
+        assert emu.handles() == {"A": "open"}
+        for x in (a, b, e):
+            x.close()
+
+
+def test_program_messages_only_to_the_handle_cf_names():
+    """Finding 3: without CF the messages of #INMON never reach a TCP host."""
+    with plant_and_emulator() as (_plant, emu, _cell):
+        c = RawClient(emu)
+        try:
+            assert c.send(b"DL\r#A\rMG \"hi\"\rEN\r\\") == b":"
+            assert c.send(b"CW 1\r") == b":"
+            assert c.send(b"XQ #A\r") == b":"
+            c.sock.settimeout(0.3)
+            with pytest.raises(TimeoutError):
+                c.sock.recv(10)                     # lost: CF names no handle of ours
+            c.sock.settimeout(2.0)
+            assert c.send(b"CF A\r") == b":"
+            got = c.send(b"XQ #A\r", lines=1)
+            assert split(got) == (b":", b"hi\r\n")
+        finally:
+            c.close()

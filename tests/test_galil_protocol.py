@@ -12,8 +12,10 @@ from hypothesis import strategies as st
 from feeder_bt.errors import CommsLost, HalError
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.hal.galil.protocol import (
+    MAX_LABELS,
     MAX_LINE_CHARS,
     MAX_PROGRAM_LINES,
+    CardEvent,
     DistanceEvent,
     DownloadError,
     GalilError,
@@ -192,9 +194,33 @@ def test_parse_unsolicited():
     assert parse_unsolicited("D-0000000020") == DistanceEvent(-20)
     assert parse_unsolicited("?042 JX 1") == ProgramError("042 JX 1")
     assert parse_unsolicited("Hello") == Message("Hello")
-    assert parse_unsolicited("I 9999") == Message("I 9999")
+    assert parse_unsolicited("I 09999") == InputsEvent(9999)        # inputs 1-16
+    assert parse_unsolicited("I 70000") == Message("I 70000")        # more than 16 bits
     assert parse_unsolicited("D xyz") == Message("D xyz")
     assert parse_unsolicited("") == Message("")
+
+
+@pytest.mark.parametrize("line", ["?042 JX 1", "004 JX 1?", "  12 XQ #NONE,1?", "JP #NOWHERE?"])
+def test_program_errors_in_every_echo_form(line):
+    """Finding 4: the card echoes a failed program line with the '?' in more than one
+    place; every form is a ProgramError, never a Message nobody looks at."""
+    assert isinstance(parse_unsolicited(line), ProgramError)
+
+
+def test_card_events():
+    assert parse_unsolicited("E POSERR") == CardEvent("POSERR")
+    assert parse_unsolicited("E CMDERR 1 0012") == CardEvent("CMDERR", "1 0012")
+    assert parse_unsolicited("W") == CardEvent("WATCHDOG")
+    assert parse_unsolicited("E NOTHING") == Message("E NOTHING")
+
+
+def test_an_echoed_bare_cr_does_not_leave_a_reply_incomplete():
+    """Finding 8: a serial port echoes the command and its CR before the ':'."""
+    sp = ReplySplitter()
+    assert sp.feed(b"EO 0\r:") == [Reply(True, "EO 0")]
+    assert sp.feed(b"CW 1\r:") == [Reply(True, "CW 1")]
+    assert sp.feed(b"XX\r?") == [Reply(False)]              # a rejection after its echo
+    assert sp.pending == b""
 
 
 # ---------------------------------------------------------------------------- commands
@@ -275,3 +301,10 @@ def test_every_shipped_program_prepares(tmp_path: Path):
     with pytest.raises(DownloadError) as err:
         read_programs(tmp_path, ["bin.dmc"])
     assert err.value.line == 2
+
+
+def test_download_refuses_more_labels_than_the_card_holds():
+    text = "\n".join(f"#L{i}\nEN" for i in range(MAX_LABELS + 1))
+    with pytest.raises(DownloadError) as err:
+        prepare_download([("many.dmc", text)])
+    assert err.value.code == 61 and "labels" in str(err.value)

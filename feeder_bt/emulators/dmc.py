@@ -9,7 +9,9 @@ return from ``JS``), ``IF``/``ELSE``/``ENDIF`` (nestable), variables and assignm
 (``_TPB``, ``_BGB``, ``_TI0``, ``_ALB``, ``_RLB``, ``_TP~a`` ... answered by the host),
 functions (``@IN[n]``, ``@OUT[n]`` from the host; ``@ABS``, ``@INT``, ``@FRAC``, ``@RND``,
 ``@COM``, ``@SQR`` here), ``MG`` with strings, expressions and ``{Fm.n}``/``{Zm.n}``/
-``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), ``NO`` and
+``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), automatic
+subroutines (``#POSERR``, ``#LIMSWI``, ``#AMPERR`` entered on the host's event, ``#CMDERR``
+on a program error, each ended by ``RE``/``EN``), ``NO`` and
 ``'`` comments. Anything else in a program is handed to the host as a command (``SB 1``,
 ``JG ,100``, ``BGB``...).
 
@@ -24,20 +26,28 @@ thread and is reported to the host with a Galil error code, as ``TC1`` would giv
 
 from __future__ import annotations
 
-import math
 import re
 import threading
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
 
 from ..hal.galil.protocol import (
-    ERROR_TEXT,
+    MAX_LABELS,
     MAX_LINE_CHARS,
     MAX_PROGRAM_LINES,
     MAX_VARIABLE_CHARS,
     THREADS,
     label_problem,
+)
+from .dmc_expr import (
+    _FMT_RE,
+    _MATH,
+    DmcError,
+    DmcHost,
+    Tok,
+    _Parser,
+    format_number,
+    split_args,
+    tokenize,
 )
 
 AXES = "ABCDEFGH"
@@ -47,253 +57,12 @@ SLICE = 200            # statements a thread runs before yielding for a moment
 # Two-letter commands the interpreter hands to the host rather than reading ``XYB=...`` as
 # an assignment to a variable ``XYB``.
 HOST_COMMANDS = frozenset(
-    "AB AC AL BG CB CN CW DC DL EO HX JG MO OB PR RL SB SH SP ST TC TI TP TV XQ".split())
+    "AB AC AL BG CB CF CN CW DC DL EO ER HX IH JG MO OB OE PR RL SB SH SP ST TC TH TI TP TV WH "
+    "XQ".split())
 
-
-class DmcError(Exception):
-    """A Galil error: ``code`` and ``text`` as ``TC1`` reports them."""
-
-    def __init__(self, code: int, detail: str | None = None) -> None:
-        self.code = code
-        self.text = ERROR_TEXT.get(code, "Unrecognized command")
-        self.detail = detail
-        super().__init__(f"{code} {self.text}" + (f" ({detail})" if detail else ""))
-
-
-class DmcHost(Protocol):
-    """What the interpreter needs from the controller around it."""
-
-    def operand(self, name: str, suffix: str) -> float:
-        """``_TPB`` -> ``operand('TP', 'B')``; ``_TI0`` -> ``operand('TI', '0')``."""
-
-    def function(self, name: str, arg: float) -> float:
-        """``@IN[3]`` -> ``function('IN', 3)`` (I/O functions only)."""
-
-    def command(self, text: str, thread: int) -> None:
-        """Carry out a non-flow command from a program (``SB 1``, ``BGB``)."""
-
-    def output(self, text: str) -> None:
-        """Program output (``MG``), with its CR/LF, for the unsolicited channel."""
-
-    def thread_error(self, thread: int, error: DmcError, line: int, text: str) -> None:
-        """A thread stopped on an error at program line ``line``."""
-
-
-# ---------------------------------------------------------------------------- lexer
-
-_TOKEN_RE = re.compile(r"""
-    (?P<ws>\s+)
-  | (?P<str>"[^"]*")
-  | (?P<hex>\$[0-9A-Fa-f]+)
-  | (?P<num>\d+\.?\d*|\.\d+)
-  | (?P<opnd>_[A-Z]{2}(?:~[a-h]|[A-H0-9]*))
-  | (?P<func>@[A-Z]{2,4})
-  | (?P<axv>~[a-h])
-  | (?P<name>[A-Za-z][A-Za-z0-9]*)
-  | (?P<cmp><>|<=|>=|=|<|>)
-  | (?P<op>[-+*/&|])
-  | (?P<punct>[()\[\],])
-""", re.X)
-
-
-@dataclass(frozen=True)
-class Tok:
-    kind: str
-    text: str
-    value: float = 0.0
-
-
-def tokenize(text: str) -> list[Tok]:
-    """Tokens of an expression; raises ``DmcError`` on a character it cannot read."""
-    out: list[Tok] = []
-    pos = 0
-    while pos < len(text):
-        m = _TOKEN_RE.match(text, pos)
-        if not m:
-            raise DmcError(1, f"cannot read {text[pos:]!r}")
-        kind = m.lastgroup or ""
-        s = m.group()
-        pos = m.end()
-        if kind == "ws":
-            continue
-        if kind == "num":
-            out.append(Tok("num", s, float(s)))
-        elif kind == "hex":
-            out.append(Tok("num", s, float(int(s[1:], 16))))
-        else:
-            out.append(Tok(kind, s))
-    return out
-
-
-# ---------------------------------------------------------------------------- expressions
-
-
-class _Parser:
-    """Recursive descent over tokens, evaluating as it goes (Galil's left-to-right rules)."""
-
-    def __init__(self, toks: list[Tok], env: _Env) -> None:
-        self.toks, self.i, self.env = toks, 0, env
-
-    def peek(self) -> Tok | None:
-        return self.toks[self.i] if self.i < len(self.toks) else None
-
-    def take(self) -> Tok:
-        tok = self.peek()
-        if tok is None:
-            raise DmcError(1, "expression ends too early")
-        self.i += 1
-        return tok
-
-    def expect(self, text: str, code: int) -> None:
-        tok = self.peek()
-        if tok is None or tok.text != text:
-            raise DmcError(code, f"expected {text!r}")
-        self.i += 1
-
-    def condition(self) -> float:
-        left = self.arith()
-        tok = self.peek()
-        if tok is not None and tok.kind == "cmp":
-            self.i += 1
-            right = self.arith()
-            return 1.0 if _compare(tok.text, left, right) else 0.0
-        return left
-
-    def arith(self) -> float:
-        value = self.unary()
-        while (tok := self.peek()) is not None and tok.kind == "op":
-            self.i += 1
-            value = _apply(tok.text, value, self.unary())
-        return value
-
-    def unary(self) -> float:
-        tok = self.peek()
-        if tok is not None and tok.kind == "op" and tok.text in "+-":
-            self.i += 1
-            v = self.unary()
-            return -v if tok.text == "-" else v
-        return self.primary()
-
-    def primary(self) -> float:
-        tok = self.take()
-        if tok.kind == "num":
-            return tok.value
-        if tok.text == "(":
-            v = self.condition()
-            self.expect(")", 59)
-            return v
-        if tok.kind == "name":
-            return self.env.variable(tok.text)
-        if tok.kind == "opnd":
-            return self.env.operand(tok.text)
-        if tok.kind == "axv":
-            return float(self.env.axis_var(tok.text[1]))
-        if tok.kind == "func":
-            self.expect("[", 55)
-            arg = self.condition()
-            self.expect("]", 55)
-            return self.env.function(tok.text[1:], arg)
-        if tok.kind == "str":
-            return _string_value(tok.text[1:-1])
-        raise DmcError(1, f"unexpected {tok.text!r}")
-
-
-def _string_value(s: str) -> float:
-    """Galil packs up to 6 characters of a string into one number (first char highest)."""
-    if len(s) > 6:
-        raise DmcError(52, "string longer than 6 characters")
-    v = 0
-    for ch in s:
-        v = (v << 8) | (ord(ch) & 0xFF)
-    return float(v)
-
-
-def _compare(op: str, a: float, b: float) -> bool:
-    if op == "=":
-        return abs(a - b) < 1e-9
-    if op == "<>":
-        return abs(a - b) >= 1e-9
-    return {"<": a < b, ">": a > b, "<=": a <= b + 1e-9, ">=": a >= b - 1e-9}[op]
-
-
-def _apply(op: str, a: float, b: float) -> float:
-    if op == "+":
-        return a + b
-    if op == "-":
-        return a - b
-    if op == "*":
-        return a * b
-    if op == "/":
-        if b == 0:
-            raise DmcError(6, "division by zero")
-        return a / b
-    if op == "&":
-        return float(int(a) & int(b))
-    return float(int(a) | int(b))      # '|'
-
-
-_MATH: dict[str, Callable[[float], float]] = {
-    "ABS": abs,
-    "INT": lambda x: float(math.trunc(x)),
-    "FRAC": lambda x: x - math.trunc(x),
-    "RND": lambda x: float(math.floor(x + 0.5)),
-    "COM": lambda x: float(~int(x) & 0xFFFFFFFF),
-    "SQR": lambda x: math.sqrt(x) if x >= 0 else _raise(DmcError(6, "square root of < 0")),
-}
-
-
-def _raise(e: Exception) -> float:
-    raise e
-
-
-# ---------------------------------------------------------------------------- MG formatting
-
-
-def format_number(value: float, kind: str = "", m: int = 10, n: int = 4) -> str:
-    """A number as ``MG`` prints it: a sign column (space or ``-``), digits, decimals.
-
-    ``kind`` '' is the default variable format (10.4, leading zeros suppressed); ``F`` pads
-    the integer part with zeros to ``m`` digits, ``Z`` does not, ``$`` prints hex. A value
-    too large for ``m`` digits prints as all nines, as the controller does.
-    """
-    sign = "-" if value < 0 else " "
-    a = abs(value)
-    if kind == "$":
-        digits = f"{int(a):X}"
-        return f"{sign}${digits.rjust(m, '0')[-m:] if m else digits}"
-    scale = 10 ** n
-    units = math.floor(a * scale + 0.5)
-    whole, frac = divmod(units, scale)
-    if kind in ("F", "Z") and len(str(whole)) > m:
-        whole, frac = 10 ** m - 1, scale - 1
-    whole_s = str(whole).rjust(m, "0") if kind == "F" else str(whole)
-    if n > 0:
-        return f"{sign}{whole_s}.{str(frac).rjust(n, '0')}"
-    return f"{sign}{whole_s}"
-
-
-_FMT_RE = re.compile(r"\{([^}]*)\}")
-
-
-def split_args(text: str) -> list[str]:
-    """Split on commas outside quotes, brackets, braces and parentheses."""
-    out, depth, quoted, cur = [], 0, False, []
-    for ch in text:
-        if ch == '"':
-            quoted = not quoted
-        elif not quoted and ch in "([{":
-            depth += 1
-        elif not quoted and ch in ")]}":
-            depth -= 1
-        if ch == "," and not quoted and depth == 0:
-            out.append("".join(cur))
-            cur = []
-        else:
-            cur.append(ch)
-    if quoted:
-        raise DmcError(52, "missing quote")
-    out.append("".join(cur))
-    return out
+#: Automatic subroutines (Galil command reference, "#POSERR", "#LIMSWI", "#AMPERR", "#CMDERR"):
+#: the card jumps to them on the event if the downloaded program has the label.
+AUTO_LABELS = ("#POSERR", "#LIMSWI", "#AMPERR", "#CMDERR")
 
 
 # ---------------------------------------------------------------------------- program
@@ -356,6 +125,8 @@ def compile_statement(text: str, line: int) -> Stmt:
                     toks=tokenize(cond) if cond else None)
     if s == "EN" or (head == "EN" and s[2:3] in (" ", ",")):
         return Stmt("en", s, line)
+    if head in ("RE", "RI") and (len(s) == 2 or s[2:3] in " 01"):
+        return Stmt("re", s, line)             # return from an automatic subroutine
     if head == "WT" and not s[2:3].isalpha():
         return Stmt("wt", s, line, expr=s[2:].strip(), toks=tokenize(s[2:]))
     if head == "MG" and not s[2:3].isalnum():
@@ -405,6 +176,8 @@ class Program:
                     name = part.upper()
                     if name in prog.labels:
                         raise DmcError(61, f"line {n}: duplicate label {name}")
+                    if len(prog.labels) >= MAX_LABELS:
+                        raise DmcError(60, f"line {n}: more than {MAX_LABELS} labels")
                     prog.labels[name] = len(prog.stmts)
                     prog.stmts.append(Stmt("label", part, n))
                     continue
@@ -476,6 +249,8 @@ class _Thread:
     stop: threading.Event
     thread: threading.Thread | None = None
     line: int = 0
+    pending: list[str] = field(default_factory=list)    # automatic subroutines to enter
+    in_cmderr: bool = False
 
 
 class DmcInterpreter:
@@ -490,6 +265,8 @@ class DmcInterpreter:
         self.lock = threading.RLock()
         self._threads: dict[int, _Thread] = {}
         self._env = _Env(self)
+        self.error_line = 0            # _ED: program line of the last error a #CMDERR caught
+        self.error_thread = 0          # _ED1: its thread
 
     # ------------------------------------------------------------------ program memory
     def load(self, program: Program) -> None:
@@ -578,6 +355,32 @@ class DmcInterpreter:
             return sorted(n for n, t in self._threads.items()
                           if t.thread is not None and t.thread.is_alive())
 
+    def thread_line(self, thread: int) -> int:
+        """``_XQn``: the program line thread ``n`` is at, or -1 when it does not run."""
+        with self.lock:
+            t = self._threads.get(thread)
+            if t is None or t.thread is None or not t.thread.is_alive():
+                return -1
+            return t.line
+
+    def interrupt(self, label: str, thread: int = 0) -> bool:
+        """An automatic subroutine: enter ``label`` on ``thread`` (started if it does not
+        run), as the card does on an event. False when the program has no such label."""
+        prog = self.program
+        if prog is None or label.upper() not in prog.labels:
+            return False
+        with self.lock:
+            t = self._threads.get(thread)
+            if t is not None and t.thread is not None and t.thread.is_alive():
+                if label.upper() not in t.pending:
+                    t.pending.append(label.upper())
+                return True
+        try:
+            self.execute(label, thread)
+        except DmcError:
+            return False
+        return True
+
     def execute(self, label: str, thread: int = 0) -> None:
         """``XQ #LABEL,n``: start program thread ``n`` at ``label``."""
         if not 0 <= thread < self.max_threads:
@@ -609,59 +412,82 @@ class DmcInterpreter:
 
     def _run(self, prog: Program, pc: int, t: _Thread) -> None:
         stack: list[int] = []
-        stmts = prog.stmts
         count = 0
-        try:
-            while not t.stop.is_set():
-                if pc >= len(stmts):
+        while not t.stop.is_set():
+            try:
+                if t.pending:
+                    with self.lock:
+                        label = t.pending.pop(0)
+                    if len(stack) >= MAX_STACK:
+                        raise DmcError(12)
+                    stack.append(pc)
+                    pc = prog.labels[label]
+                if pc >= len(prog.stmts):
                     return                           # ran off the end: the thread ends
-                st = stmts[pc]
+                st = prog.stmts[pc]
                 t.line = st.line
-                pc += 1
-                kind = st.kind
-                if kind in ("label", "nop", "endif"):
-                    pass
-                elif kind == "if":
-                    if not self.evaluate(st.toks or []):
-                        pc = st.jump
-                elif kind == "else":
-                    pc = st.jump
-                elif kind in ("jp", "js"):
-                    if st.toks is None or self.evaluate(st.toks):
-                        if kind == "js":
-                            if len(stack) >= MAX_STACK:
-                                raise DmcError(12)
-                            stack.append(pc)
-                        pc = prog.labels[st.target]
-                elif kind == "en":
-                    if not stack:
-                        return
-                    pc = stack.pop()
-                elif kind == "wt":
-                    ms = self.evaluate(st.toks or [])
-                    if ms < 0:
-                        raise DmcError(6, "WT < 0")
-                    t.stop.wait(ms / 1000.0)
+                pc, wait = self._step(prog, st, pc + 1, stack, t)
+                if pc < 0:
+                    return
+                if wait is not None:
+                    t.stop.wait(wait)
                     count = 0
                     continue
-                elif kind == "mg":
-                    self.host.output(self.message(st.expr))
-                elif kind == "assign":
-                    self.assign(st.target, st.toks or [])
-                elif kind == "axis":
-                    self.set_axis_var(st.target, st.toks or [])
-                else:
-                    self.host.command(st.text, t.number)
                 count += 1
-                if count >= SLICE:              # a loop without WT must not hog the CPU
+                if count >= SLICE:                  # a loop without WT must not hog the CPU
                     count = 0
                     t.stop.wait(0.0005)
-        except DmcError as e:
-            self.host.thread_error(t.number, e, t.line, prog.lines[t.line - 1]
-                                   if 0 < t.line <= len(prog.lines) else "")
-        except Exception as e:                 # noqa: BLE001 - a host fault stops the thread
-            self.host.thread_error(t.number, DmcError(1, f"{type(e).__name__}: {e}"), t.line,
-                                   prog.lines[t.line - 1] if 0 < t.line <= len(prog.lines) else "")
+            except Exception as e:                  # noqa: BLE001 - a fault stops the thread
+                err = e if isinstance(e, DmcError) else DmcError(1, f"{type(e).__name__}: {e}")
+                text = prog.lines[t.line - 1] if 0 < t.line <= len(prog.lines) else ""
+                handler = prog.labels.get("#CMDERR")
+                if handler is not None and not t.in_cmderr:
+                    with self.lock:
+                        self.error_line, self.error_thread = t.line, t.number
+                    self.host.thread_error(t.number, err, t.line, text, trapped=True)
+                    t.in_cmderr = True
+                    stack.clear()
+                    pc = handler
+                    continue
+                self.host.thread_error(t.number, err, t.line, text)
+                return
+
+    def _step(self, prog: Program, st: Stmt, pc: int, stack: list[int], t: _Thread
+              ) -> tuple[int, float | None]:
+        """Run one statement; returns the next pc (-1: the thread ends) and a wait (s)."""
+        kind = st.kind
+        if kind in ("label", "nop", "endif"):
+            pass
+        elif kind == "if":
+            if not self.evaluate(st.toks or []):
+                pc = st.jump
+        elif kind == "else":
+            pc = st.jump
+        elif kind in ("jp", "js"):
+            if st.toks is None or self.evaluate(st.toks):
+                if kind == "js":
+                    if len(stack) >= MAX_STACK:
+                        raise DmcError(12)
+                    stack.append(pc)
+                pc = prog.labels[st.target]
+        elif kind in ("en", "re"):
+            if not stack:
+                return -1, None
+            pc = stack.pop()
+        elif kind == "wt":
+            ms = self.evaluate(st.toks or [])
+            if ms < 0:
+                raise DmcError(6, "WT < 0")
+            return pc, ms / 1000.0
+        elif kind == "mg":
+            self.host.output(self.message(st.expr))
+        elif kind == "assign":
+            self.assign(st.target, st.toks or [])
+        elif kind == "axis":
+            self.set_axis_var(st.target, st.toks or [])
+        else:
+            self.host.command(st.text, t.number)
+        return pc, None
 
 
 __all__ = ["DmcError", "DmcHost", "DmcInterpreter", "Program", "format_number", "tokenize"]

@@ -13,25 +13,43 @@ is wired to the latch input, thesis 2.3.2).
 
 A fault plan (controller ``galil``) can reject a command (``?`` with a plausible code),
 drop the connection, or stall a reply.
+
+As strict as the controller (docs/real-cell.md has the sources):
+
+- Ethernet *handles*: at most ``handles`` TCP clients (8 on a DMC, ``HANDLES``); another
+  connection is reset. A handle is freed when its client closes the connection; a link
+  dropped from this side (a pulled cable, ``drop_clients``) leaves its handle *stale*
+  until ``IH h=>-2`` frees it, as the card never saw the cable go.
+- Program output (``MG`` of a running thread, error echoes) goes only to the handle that
+  ``CF`` names; before any ``CF`` only to the serial port (pty): a TCP host that never sends
+  ``CF`` gets no messages.
+- Amplifiers are off (``_MO`` 1) until ``SH``; the e-stop input (the cell's ``estop``
+  signal, wired into the amplifier enable chain) and an off-on-error trip (``OE``) turn
+  them off again, and only a new ``SH`` turns them on.
+- The serial port echoes every character until ``EO 0``.
+- The latch of an axis is its fixed latch input (input 1 for A ... 8 for H); the camera
+  trigger is wired to ``galil.latch_input``.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import os
 import re
-import select
 import socket
 import sys
 import threading
 import time
-import tty
 from dataclasses import dataclass
 
-from ..hal.galil.protocol import ERROR_TEXT, MODEL
+from ..hal.galil.protocol import ERROR_TEXT, HANDLES, MODEL
 from .dmc import AXES, DmcError, DmcInterpreter, Program, format_number, is_axis_command
 from .faults import FaultPlan
+from .galil_link import POLL_S
+from .galil_link import Link as _Link
+from .galil_link import PtyLink as _PtyLink
+from .galil_link import Session as _Session
+from .galil_link import TcpLink as _TcpLink
 from .plant import Plant
 
 COPYRIGHT = f"Galil Motion Control {MODEL} emulator (feeder_bt), firmware EMU1.0"
@@ -40,7 +58,6 @@ COPYRIGHT = f"Galil Motion Control {MODEL} emulator (feeder_bt), firmware EMU1.0
 REJECT_CODES = {"BG": 22, "JG": 6, "SP": 6, "PR": 6, "AC": 6, "DC": 6, "XQ": 19, "DL": 17,
                 "SH": 20, "AL": 7, "RL": 7, "TP": 7, "MG": 1, "SB": 6, "CB": 6}
 OUTPUT_BITS = 16
-POLL_S = 0.05                  # how often idle server threads look at the stop flag
 INPUT_BITS = 16
 
 
@@ -57,140 +74,20 @@ class _Axis:
     servo: bool = False
     latch_armed: bool = False
     latched: int = 0
-
-
-class _Link:
-    """One client connection (TCP socket or pty master): bytes in, bytes out."""
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.closed = threading.Event()
-        self._wlock = threading.Lock()
-
-    def write(self, data: bytes) -> None:
-        if self.closed.is_set():
-            return
-        with self._wlock:
-            try:
-                self._write(data)
-            except OSError:
-                self.close()
-
-    def _write(self, data: bytes) -> None:
-        raise NotImplementedError
-
-    def read(self) -> bytes:
-        """Some bytes (b'' on a quiet period); raises OSError when the link is gone."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        self.closed.set()
-
-
-class _TcpLink(_Link):
-    def __init__(self, sock: socket.socket, name: str) -> None:
-        super().__init__(name)
-        self.sock = sock
-        sock.settimeout(2.0)                  # a client that stops reading is dropped
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def _write(self, data: bytes) -> None:
-        self.sock.sendall(data)
-
-    def read(self) -> bytes:
-        ready, _, _ = select.select([self.sock], [], [], POLL_S)
-        if not ready:
-            return b""
-        data = self.sock.recv(4096)
-        if not data:
-            raise OSError("client closed the connection")
-        return data
-
-    def close(self) -> None:
-        if not self.closed.is_set():
-            super().close()
-            try:
-                self.sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            self.sock.close()
-
-
-class _PtyLink(_Link):
-    """The master side of a pseudo-terminal; the driver opens the slave as a serial port."""
-
-    def __init__(self) -> None:
-        super().__init__("pty")
-        self.master, self.slave = os.openpty()
-        tty.setraw(self.slave)                # no echo, no CR/LF translation
-        os.set_blocking(self.master, False)   # nobody reading: output is lost, not stuck
-        self.path = os.ttyname(self.slave)
-
-    def _write(self, data: bytes) -> None:
-        view = memoryview(data)
-        end = time.monotonic() + 0.5
-        while view and time.monotonic() < end:
-            try:
-                view = view[os.write(self.master, view):]
-            except BlockingIOError:           # the slave's buffer is full: wait a little
-                time.sleep(0.005)
-
-    def read(self) -> bytes:
-        ready, _, _ = select.select([self.master], [], [], POLL_S)
-        if not ready:
-            return b""
-        try:
-            return os.read(self.master, 4096)
-        except OSError:                       # EIO while the slave is closed: keep serving
-            time.sleep(0.05)
-            return b""
-
-    def close(self) -> None:
-        if not self.closed.is_set():
-            super().close()
-            for fd in (self.master, self.slave):
-                try:
-                    os.close(fd)
-                except OSError:
-                    pass
-
-
-class _Session:
-    """Command-line state of one link: the partial command, DL mode."""
-
-    def __init__(self, emu: GalilEmulator, link: _Link) -> None:
-        self.emu, self.link = emu, link
-        self.buf: list[str] = []
-        self.quoted = False
-        self.dl: list[str] | None = None       # program text while downloading
-
-    def feed(self, data: bytes) -> None:
-        for byte in data:
-            if self.link.closed.is_set():
-                return
-            ch = chr(byte & 0x7F)
-            if self.dl is not None:
-                if ch == "\\":
-                    text, self.dl = "".join(self.dl), None
-                    self.emu._finish_download(self.link, text)
-                else:
-                    self.dl.append(ch)
-                continue
-            if ch == '"':
-                self.quoted = not self.quoted
-            if ch == "\r" or (ch == ";" and not self.quoted):
-                cmd, self.buf, self.quoted = "".join(self.buf), [], False
-                if self.emu._handle(self.link, cmd):
-                    self.dl = []
-            elif ch != "\n":
-                self.buf.append(ch)
+    oe: int = 0                    # off-on-error
+    er: float = 16384.0            # error limit (counts)
+    sc: int = 1                    # stop code (see _SC)
+    te: float = 0.0                # position error (counts)
+    lf: int = 1                    # forward limit switch: 1 inactive, 0 tripped
+    lr: int = 1
 
 
 class GalilEmulator:
     """A Galil controller on ``host:port`` (and optionally a pty) acting on ``plant``."""
 
     def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
-                 faults: FaultPlan | None = None, pty: bool = False) -> None:
+                 faults: FaultPlan | None = None, pty: bool = False,
+                 handles: int = HANDLES) -> None:
         self.plant = plant
         self.host = host
         self.port = port
@@ -206,7 +103,14 @@ class GalilEmulator:
             if axis is not None:
                 st.ac = st.dc = axis.accel * plant.cpm
         self.cw_msb = False
-        self.echo = False
+        self.echo = True                       # serial port only; EO 0 turns it off
+        self.max_handles = handles
+        self.cf: str | None = None             # handle letter for program output; None: serial
+        self._local = threading.local()        # the link whose command is being run
+        self.latch_input = spec.latch_input or AXES.index(self.latch_axis) + 1
+        sig = plant.cell.io.get("estop")
+        self._estop_signal = "estop" if sig is not None else None
+        self.estops = 0
         self.tc = 0
         self.lock = threading.RLock()          # emulator state; never taken under plant.lock
         self._latch_lock = threading.Lock()    # latch fields only (taken in the trigger)
@@ -238,6 +142,7 @@ class GalilEmulator:
         self._server = srv
         self.port = srv.getsockname()[1]
         self._spawn(self._accept_loop, "galil-emu-accept")
+        self._spawn(self._amplifier_loop, "galil-emu-amps")
         if self.want_pty:
             self.serve_pty()
         return self
@@ -292,15 +197,59 @@ class GalilEmulator:
             except OSError:
                 return
             n += 1
-            self.drop_clients()                # one client at a time: the newest wins
             link = _TcpLink(sock, f"tcp{n}")
+            letter = self._free_handle()
+            if letter is None:                 # every handle taken: the card resets it
+                link.close()
+                continue
+            link.handle = letter
             self._add_link(link)
             self._spawn(lambda link=link: self._serve_link(link), f"galil-emu-{link.name}")
 
     def _add_link(self, link: _Link) -> None:
         with self._links_lock:
-            self._links = [x for x in self._links if not x.closed.is_set()]
+            self._links = [x for x in self._links if not self._released(x)]
             self._links.append(link)
+
+    @staticmethod
+    def _released(link: _Link) -> bool:
+        """A link that holds no handle any more: closed by its client, or freed by IH."""
+        return link.closed.is_set() and (link.handle is None or link.client_closed)
+
+    def _free_handle(self) -> str | None:
+        with self._links_lock:
+            used = {x.handle for x in self._links if x.handle and not self._released(x)}
+        return next((h for h in AXES[:self.max_handles] if h not in used), None)
+
+    def handles(self) -> dict[str, str]:
+        """Handle letter -> 'open' or 'stale' (for tests and ``TH``)."""
+        with self._links_lock:
+            return {x.handle: ("stale" if x.closed.is_set() else "open")
+                    for x in self._links if x.handle and not self._released(x)}
+
+    def _amplifier_loop(self) -> None:
+        """The e-stop chain: while the e-stop input is active every amplifier is off."""
+        was = False
+        while not self._stop.wait(0.01):
+            if self._estop_signal is None:
+                continue
+            now = self.plant.signal(self._estop_signal)
+            if now and not was:
+                self.estops += 1
+            if now:
+                self._motors_off(None, stop_code=6)
+            was = now
+
+    def _motors_off(self, letters: str | None, stop_code: int) -> None:
+        with self.lock:
+            for st in self.axes.values():
+                if letters is not None and st.letter not in letters:
+                    continue
+                if st.servo:
+                    st.sc = stop_code
+                st.servo, st.jogging = False, False
+                if self.plant.axis(st.letter) is not None and self._moving(st.letter):
+                    self.plant.jog(st.letter, 0.0, max(st.dc, 1e6))
 
     def _serve_link(self, link: _Link) -> None:
         session = _Session(self, link)
@@ -315,11 +264,48 @@ class GalilEmulator:
 
     # ================================================================ test hooks
     def drop_clients(self) -> None:
-        """Close every TCP client socket from the server side (as a cable pull would)."""
+        """Close every TCP client socket from the server side (as a cable pull would). The
+        card never sees the cable go: each handle stays taken (stale) until ``IH``."""
         with self._links_lock:
             tcp = [x for x in self._links if isinstance(x, _TcpLink)]
         for link in tcp:
             link.close()
+
+    def trip_position_error(self, axis: str, error_counts: float = 1e5) -> None:
+        """The position error of ``axis`` exceeds ``ER`` (a jam): with ``OE`` set the motor
+        goes off; ``#POSERR`` runs if the program has it."""
+        with self.lock:
+            st = self._axis(axis.upper())
+            st.te = error_counts
+            oe = st.oe
+        if oe:
+            self._motors_off(axis.upper(), stop_code=8)
+        self.interp.interrupt("#POSERR", 0)
+
+    def trip_limit(self, axis: str, forward: bool = True) -> None:
+        """A limit switch of ``axis`` trips: the axis stops; ``#LIMSWI`` runs."""
+        with self.lock:
+            st = self._axis(axis.upper())
+            if forward:
+                st.lf = 0
+            else:
+                st.lr = 0
+            st.jogging = False
+            st.sc = 2 if forward else 3
+            if self.plant.axis(st.letter) is not None and self._moving(st.letter):
+                self.plant.jog(st.letter, 0.0, st.dc)
+        self.interp.interrupt("#LIMSWI", 0)
+
+    def trip_amplifier(self, axis: str) -> None:
+        """The amplifier of ``axis`` reports a fault: it turns the motor off; ``#AMPERR``
+        runs if the program has it."""
+        self._motors_off(axis.upper(), stop_code=6)
+        self.interp.interrupt("#AMPERR", 0)
+
+    def clear_limits(self) -> None:
+        with self.lock:
+            for st in self.axes.values():
+                st.lf = st.lr = 1
 
     def inject_into_next_reply(self, text: str) -> None:
         """Write ``text`` as unsolicited output in the middle of the next reply."""
@@ -333,6 +319,7 @@ class GalilEmulator:
     def _handle(self, link: _Link, cmd: str) -> bool:
         """Run one command from a link and reply; True when it starts a download."""
         cmd = cmd.strip()
+        self._local.link = link
         self.commands.append(cmd)
         rule = self.faults.check("galil", cmd) if self.faults is not None and cmd else None
         if rule is not None and rule.kind == "drop":
@@ -391,6 +378,12 @@ class GalilEmulator:
         s = cmd.strip()
         if not s or s.startswith("'"):
             return ""
+        if s == "\x12\x16":                   # ^R^V: revision information
+            return f"{MODEL} Rev EMU1.0"
+        if s[:2] == "IH":
+            if from_program:
+                raise DmcError(6, "IH from a program is not emulated")
+            return self._cmd_IH(s[2:].strip())
         m = re.match(r"^~([a-h])\s*=\s*(.*)$", s)
         if m:
             if m.group(2).strip() == "?":
@@ -525,14 +518,6 @@ class GalilEmulator:
                     self.plant.move(st.letter, st.pr, st.sp, st.ac)
         return ""
 
-    def _cmd_ST(self, rest: str) -> str:
-        with self.lock:
-            for st in self._axes_arg(rest):
-                st.jogging = False
-                if self.plant.axis(st.letter) is not None and self._moving(st.letter):
-                    self.plant.jog(st.letter, 0.0, st.dc)
-        return ""
-
     def _cmd_AB(self, rest: str) -> str:
         """``AB``: abort motion and programs; ``AB 1``: motion only."""
         if rest.strip() not in ("", "0", "1"):
@@ -548,10 +533,19 @@ class GalilEmulator:
         return ""
 
     def _cmd_SH(self, rest: str) -> str:
+        if self._estop_signal is not None and self.plant.signal(self._estop_signal):
+            raise DmcError(20, "amplifier enable chain open (e-stop)")
         with self.lock:
             for st in self._axes_arg(rest):
                 st.servo = True
+                st.te = 0.0
         return ""
+
+    def _cmd_OE(self, rest: str) -> str:
+        return self._set_or_query("oe", rest)
+
+    def _cmd_ER(self, rest: str) -> str:
+        return self._set_or_query("er", rest, _positive)
 
     def _cmd_MO(self, rest: str) -> str:
         with self.lock:
@@ -559,6 +553,15 @@ class GalilEmulator:
                 if self._moving(st.letter):
                     raise DmcError(7, f"MO while axis {st.letter} moves")
                 st.servo = False
+        return ""
+
+    def _cmd_ST(self, rest: str) -> str:
+        with self.lock:
+            for st in self._axes_arg(rest):
+                st.jogging = False
+                st.sc = 4
+                if self.plant.axis(st.letter) is not None and self._moving(st.letter):
+                    self.plant.jog(st.letter, 0.0, st.dc)
         return ""
 
     def _cmd_TP(self, rest: str) -> str:
@@ -585,11 +588,15 @@ class GalilEmulator:
             return ",".join(_num(st.latched) for st in axes)
 
     def _on_trigger(self, t: float) -> None:
-        """Camera trigger -> latch input: capture the latch axis's count (under plant.lock)."""
-        st = self.axes.get(self.latch_axis)
+        """Camera trigger -> ``latch_input``: an input latches only its own axis (input 1
+        axis A, ... input 8 axis H), so a miswired cell latches nothing on the latch axis."""
+        if not 1 <= self.latch_input <= len(AXES):
+            return
+        letter = AXES[self.latch_input - 1]
+        st = self.axes.get(letter)
         if st is None or not st.latch_armed:
             return
-        count = self.plant.position_counts(self.latch_axis, t)
+        count = self.plant.position_counts(letter, t)
         with self._latch_lock:
             if st.latch_armed:
                 st.latched, st.latch_armed = count, False
@@ -612,10 +619,14 @@ class GalilEmulator:
         return mask
 
     def _inputs(self) -> int:
+        """Input levels: an active-low signal reads 0 while active."""
         mask = 0
         for bit in range(1, INPUT_BITS + 1):
             name = self._signal(bit, "in")
-            if name is not None and self.plant.signal(name):
+            if name is None:
+                continue
+            low = getattr(self.plant.cell.io[name], "active_low", False)
+            if self.plant.signal(name) != low:
                 mask |= 1 << (bit - 1)
         return mask
 
@@ -687,6 +698,48 @@ class GalilEmulator:
     def _cmd_NO(self, rest: str) -> str:
         return ""
 
+    # ---------------------------------------------------------------- handles
+    def _cmd_WH(self, rest: str) -> str:
+        """Which handle: ``IHA`` ... for a TCP client, ``RS232`` on the serial port."""
+        link = getattr(self._local, "link", None)
+        if link is None or link.handle is None:
+            return "RS232"
+        return f"IH{link.handle}"
+
+    def _cmd_CF(self, rest: str) -> str:
+        """Send program output to handle ``h`` (``CF h``), or ``S`` the serial port."""
+        arg = rest.strip().upper()
+        if arg == "S":
+            self.cf = None
+        elif len(arg) == 1 and arg in AXES[:self.max_handles]:
+            self.cf = arg
+        else:
+            raise DmcError(4, rest)
+        return ""
+
+    def _cmd_TH(self, rest: str) -> str:
+        return "\r\n".join(f"IH{h} TCP {state.upper()}"
+                            for h, state in sorted(self.handles().items())) or "NO HANDLES"
+
+    def _cmd_IH(self, rest: str) -> str:
+        """``IHh=>-2`` (or ``>-1``, ``>-3``) frees handle h; ``S`` the sender's, ``N`` all but
+        the sender's. Opening client handles is not emulated."""
+        m = re.match(r"^([A-HSN])\s*=\s*>\s*(-[123])$", rest.upper())
+        if not m:
+            raise DmcError(6, f"IH{rest}")
+        me = getattr(self._local, "link", None)
+        which = m.group(1)
+        with self._links_lock:
+            links = [x for x in self._links if x.handle and not self._released(x)]
+        for link in links:
+            if (which == "S" and link is me) or (which == "N" and link is not me) \
+                    or link.handle == which:
+                link.client_closed = True
+                link.close()
+                if self.cf == link.handle:
+                    self.cf = None
+        return ""
+
     def _cmd_MG(self, rest: str) -> str:
         return self.interp.message(rest).rstrip("\r\n")
 
@@ -742,6 +795,22 @@ class GalilEmulator:
                 return float(self.tc)
         if name == "CW" and not suffix:
             return 1.0 if self.cw_msb else 2.0
+        if name == "XQ":
+            return float(self.interp.thread_line(int(suffix or "0")))
+        if name == "ED":
+            with self.interp.lock:
+                return float(self.interp.error_thread if suffix == "1"
+                             else self.interp.error_line)
+        if name in ("MO", "SC", "TE", "LF", "LR", "OE", "ER"):
+            if len(suffix) != 1 or suffix not in AXES:
+                raise DmcError(4, f"_{name}{suffix}")
+            with self.lock:
+                st = self._axis(suffix)
+                if name == "MO":
+                    return 0.0 if st.servo else 1.0
+                if name == "SC":
+                    return float(0 if self._moving(suffix) else st.sc)
+                return float(getattr(st, name.lower()))
         raise DmcError(1, f"_{name}{suffix}")
 
     def function(self, name: str, arg: float) -> float:
@@ -763,16 +832,24 @@ class GalilEmulator:
             self.output(data + "\r\n")
 
     def output(self, text: str) -> None:
+        """Program output: only to the handle ``CF`` names (before any ``CF``: the serial
+        port). Nobody there: the message is lost, as on the card."""
         data = self._unsolicited_bytes(text)
+        cf = self.cf
         with self._links_lock:
-            links = [x for x in self._links if not x.closed.is_set()]
+            links = [x for x in self._links if not x.closed.is_set()
+                     and (x.handle == cf if cf is not None else isinstance(x, _PtyLink))]
         for link in links:
             link.write(data)
 
-    def thread_error(self, thread: int, error: DmcError, line: int, text: str) -> None:
+    def thread_error(self, thread: int, error: DmcError, line: int, text: str,
+                     trapped: bool = False) -> None:
+        """A program line failed: the card echoes it, numbered, with a ``?`` after it (unless
+        the program's ``#CMDERR`` took over)."""
         with self.lock:
             self.tc = error.code
-        self.output(f"?{line:03d} {text.strip()}\r\n")
+        if not trapped:
+            self.output(f"{line:03d} {text.strip()}?\r\n")
 
     def _unsolicited_bytes(self, text: str) -> bytes:
         raw = text.encode("ascii", errors="replace")

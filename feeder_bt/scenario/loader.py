@@ -139,6 +139,8 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (VisionRecipe, "orientation"): ORIENTATION_METHODS,
     (CellSpec, "hal"): CELL_HALS,
     (IoSignal, "dir"): IO_DIRS,
+    (GalilSpec, "servo_on"): ("start", "reconnect", "never"),
+    (GalilSpec, "free_handles"): ("ours", "others", "none"),
 }
 
 #: Numeric fields: (dataclass, field) -> allowed interval. Cross-file limits (conveyor
@@ -199,8 +201,10 @@ RANGES: dict[tuple[type, str], Range] = {
     (IoSignal, "bit"): NON_NEGATIVE,
     (GalilSpec, "baud"): POSITIVE,
     (GalilSpec, "timeout_s"): POSITIVE,
-    (GalilSpec, "latch_input"): Range(1, 96),
+    (GalilSpec, "latch_input"): Range(1, 8),
     (GalilSpec, "notify_mm"): POSITIVE,
+    (GalilSpec, "watchdog_s"): Range(0.2, 60),
+    (GalilSpec, "stall_mm"): POSITIVE,
     (AdeptSpec, "motion_port"): Range(1, 65535),
     (AdeptSpec, "position_port"): Range(1, 65535),
     (AdeptSpec, "io_port"): Range(1, 65535),
@@ -911,6 +915,32 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
     if e.robot_start >= 2 ** e.robot_bits:
         raise ctx.error("encoder.robot_start", f"must be < 2**robot_bits "
                                                f"({2 ** e.robot_bits}), got {e.robot_start}")
+    _check_galil(cell, ctx)
+
+
+# Galil wiring (issue 15; docs/real-cell.md): I/O bits start at 1, the input monitor reports
+# inputs 1-16, and the DMC-21x3 latches each axis from its own fixed input.
+GALIL_MAX_INPUT = 16
+GALIL_MAX_OUTPUT = 16
+
+
+def _check_galil(cell: CellSpec, ctx: _Ctx) -> None:
+    g = cell.galil
+    for name, sig in cell.io.items():
+        if sig.controller != "galil":
+            continue
+        top = GALIL_MAX_INPUT if sig.dir == "in" else GALIL_MAX_OUTPUT
+        if not 1 <= sig.bit <= top:
+            raise ctx.error(f"io.{name}.bit", f"Galil {'inputs' if sig.dir == 'in' else 'outputs'}"
+                                              f" are numbered 1-{top}, got {sig.bit}")
+    axis = str(g.latch_axis).upper()
+    if len(axis) != 1 or axis not in "ABCDEFGH":
+        raise ctx.error("galil.latch_axis", f"one axis letter A-H, got {g.latch_axis!r}")
+    fixed = "ABCDEFGH".index(axis) + 1
+    if g.latch_input is not None and g.latch_input != fixed:
+        raise ctx.error("galil.latch_input", f"the DMC-21x3 latches axis {axis} from input "
+                                             f"{fixed} only (fixed per axis); wire the camera "
+                                             f"trigger there, got {g.latch_input}")
 
 
 def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:

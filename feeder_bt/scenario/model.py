@@ -234,6 +234,7 @@ class IoSignal:
     controller: str
     bit: int
     dir: str = "out"                     # in | out
+    active_low: bool = False             # the input reads 0 while the signal is active
 
 
 @dataclass
@@ -245,9 +246,18 @@ class GalilSpec:
     timeout_s: float = 2.0               # a reply slower than this is a lost connection
     axes: dict[str, str] = field(default_factory=lambda: {"incline": "A", "horizontal": "B"})
     latch_axis: str = "B"                # the axis whose encoder the camera trigger latches
-    latch_input: int = 1                 # digital input wired to the camera trigger (thesis 2.3)
+    # digital input wired to the camera trigger (thesis 2.3); the DMC-21x3's latch inputs are
+    # fixed per axis (input 1 latches A ... 8 latches H), so None means latch_axis's own
+    latch_input: int | None = None
     programs: list[str] = field(default_factory=lambda: ["monitor.dmc"])  # in galil_programs/
     notify_mm: float = 5.0               # distance notifier period on the latch axis
+    # --- issue 15: safe reconnects (docs/real-cell.md, "The Galil controller")
+    rtscts: bool = False                 # serial ports: RTS/CTS hardware handshake
+    servo_on: str = "start"              # start | reconnect | never: when the driver may SH
+    free_handles: str = "ours"           # ours | others | none: IH clean-up at connect
+    watchdog_s: float = 1.0              # host silent this long: the card stops the belts
+    off_on_error: bool = True            # OE 1 on our axes: motor off on a position error
+    stall_mm: float = 1.0                # jogging, encoder moved less than this in 2 s: stall
 
 
 @dataclass

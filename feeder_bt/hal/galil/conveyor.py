@@ -19,11 +19,27 @@ from ...jobs import DoneJob, FutureJob, Job, JobState
 from ...scenario.model import IoSignal
 from ..interfaces import IoChange
 from .driver import RETRY, Delay, GalilController
-from .protocol import DistanceEvent, Event, InputsEvent, explicit, parse_int, positional
+from .protocol import (
+    DistanceEvent,
+    Event,
+    GalilError,
+    InputsEvent,
+    explicit,
+    parse_int,
+    positional,
+)
 
 COUNTER_BITS = 32
 STALL_S = 2.0                # jogging with no encoder motion this long: a stall
 SETTLE_MARGIN_S = 3.0        # slack on top of a motion's planned time before it is a fault
+# _SC stop codes (Galil command reference, SC; the emulator uses the same; docs/real-cell.md)
+STOP_CODES = {0: "running", 1: "stopped at the commanded position", 2: "forward limit switch",
+              3: "reverse limit switch", 4: "ST command", 6: "abort input (e-stop chain)",
+              7: "abort command", 8: "off-on-error (position error over ER)"}
+
+
+def stop_text(code: int) -> str:
+    return STOP_CODES.get(code, f"stop code {code}")
 
 
 class GalilConveyor:
@@ -42,6 +58,8 @@ class GalilConveyor:
         self._commanded = 0.0          # mm/s, what we last asked for (speed())
         self._mode = "idle"            # idle | jog | move: what the axis is doing for us
         self._stall_ref: tuple[float, int] | None = None   # (since, count) for fault()
+        self._stall_counts = max(1, round(controller.spec.stall_mm * self.cpm))
+        self._commanded_at = 0.0       # clock time of our last motion command
         controller.on_connect(self._configure)
 
     # ---------------------------------------------------------------- helpers
@@ -85,7 +103,7 @@ class GalilConveyor:
         def step():
             self.ctl.ask(explicit("SP", self.axis, speed_counts))
             self.ctl.ask(positional("PR", {self.axis: counts}))
-            self.ctl.ask(f"BG{self.axis}")
+            self._begin()
             self._mode = "move"
         return step
 
@@ -101,10 +119,22 @@ class GalilConveyor:
             before = state.get("from_mm_s", 0.0) if running else 0.0
             self.ctl.ask(positional("JG", {self.axis: self._counts(mm_s)}))
             if not running:
-                self.ctl.ask(f"BG{self.axis}")
+                self._begin()
             self._mode = "jog"
             return Delay(abs(mm_s - before) / self.accel)   # until the speed is reached
         return step
+
+    def _begin(self) -> None:
+        """``BG``; a motor that is off is an operator matter, said so (not a bare code 20)."""
+        try:
+            self.ctl.ask(f"BG{self.axis}")
+        except GalilError as e:
+            if e.code != 20:
+                raise
+            raise ConveyorFault(f"{self.name}: motor off on Galil axis {self.axis} (turned "
+                                f"off by an off-on-error, the e-stop or an operator): it "
+                                f"stays off until an operator's reset turns it on") from None
+        self._commanded_at = self.clock.now()
 
     def _move_time(self, distance_mm: float, mm_s: float) -> float:
         v = max(1e-6, min(abs(mm_s), self.max_mm_s))
@@ -181,20 +211,50 @@ class GalilConveyor:
         return 0 if pos is None else pos
 
     def fault(self) -> HalError | None:
-        """A stall: jogging, yet the encoder has not moved for ``STALL_S`` (a jam, or the
-        amplifier shut the motor off on a following error). Cleared by the next command."""
+        """What stops the belt while we want it to run: the motor off (off-on-error, the
+        e-stop, an operator), a limit switch, the card's watchdog, or a stall — jogging,
+        yet the encoder moved less than ``galil.stall_mm`` (a servo dithers a few counts
+        either way) in ``STALL_S``. Cleared by the next command."""
+        if self._mode == "idle":
+            self._stall_ref = None
+            return None
+        st = self.ctl.status(self.axis)
+        if st is not None and st.t >= self._commanded_at:
+            if st.motor_off:
+                return ConveyorFault(f"{self.name}: motor off on Galil axis {self.axis} "
+                                     f"({stop_text(st.stop_code)}); an operator's reset "
+                                     f"turns it on")
+        events = {kind for kind, _, t in list(self.ctl.card_events) if t >= self._commanded_at}
+        if "LIMSWI" in events:
+            # the card's #LIMSWI said so; _LF/_LR are only reported (their polarity is a
+            # wiring matter: docs/real-cell.md)
+            return ConveyorFault(f"{self.name}: a limit switch tripped on the Galil "
+                                 f"(#LIMSWI); axis {self.axis} stopped")
+        if "WATCHDOG" in events:
+            return ConveyorFault(f"{self.name}: the Galil's host watchdog stopped the belts "
+                                 f"(the host was silent for {self.ctl.spec.watchdog_s:g} s)")
         if self._mode != "jog" or abs(self._commanded) < 1.0:
             self._stall_ref = None
             return None
         now, pos = self.clock.now(), self.position()
         ref = self._stall_ref
-        if ref is None or ref[1] != pos:
+        if ref is None or abs(diff(pos, ref[1], COUNTER_BITS)) > self._stall_counts:
             self._stall_ref = (now, pos)
             return None
         if now - ref[0] < STALL_S:
             return None
-        return ConveyorFault(f"{self.name} conveyor stalled: the encoder has not moved for "
-                             f"{now - ref[0]:.1f} s at {self._commanded:g} mm/s")
+        return ConveyorFault(f"{self.name} conveyor stalled: the encoder moved less than "
+                             f"{self._stall_counts} counts in {now - ref[0]:.1f} s at "
+                             f"{self._commanded:g} mm/s")
+
+    def position_age(self) -> float | None:
+        """Clock seconds since ``position()``'s count was read (None: never). An encoder
+        sync must anchor only on a fresh count (issue 15, finding 11)."""
+        return self.ctl.position_age(self.axis)
+
+    def read_position(self) -> Job:
+        """A fresh ``TP`` read now; the job's result is the count (for anchoring a sync)."""
+        return self._job("read_position", self.ctl.submit(self.ctl.read_position, self.axis))
 
     def travelled(self, distance_mm: float) -> Job:
         """Ends when the count has moved ``distance_mm`` on from the latest count now."""
@@ -230,7 +290,8 @@ class GalilConveyor:
         return self._job("abort", self.ctl.command("AB 1"))
 
     def servo(self, on: bool) -> Job:
-        """``SH`` (servo here: motor on) or ``MO`` (motor off)."""
+        """``SH`` (servo here: motor on) or ``MO`` (motor off). ``SH`` is the operator's
+        reset after an off-on-error or the e-stop: nothing else turns a motor back on."""
         return self._job("servo", self.ctl.command(f"{'SH' if on else 'MO'}{self.axis}"))
 
 
@@ -275,6 +336,8 @@ class GalilIO:
         self.clock = clock or controller.clock
         self.inputs = {n: s.bit for n, s in signals.items()
                        if s.controller == "galil" and s.dir == "in"}
+        self.active_low = {n for n, s in signals.items()
+                           if s.controller == "galil" and s.dir == "in" and s.active_low}
         self.outputs = {n: s.bit for n, s in signals.items()
                         if s.controller == "galil" and s.dir != "in"}
         self._lock = threading.Lock()
@@ -293,16 +356,18 @@ class GalilIO:
             for name, bit in self.inputs.items():
                 was, now = bool(last >> (bit - 1) & 1), bool(ev.mask >> (bit - 1) & 1)
                 if was != now:
-                    self._changes.append(IoChange(name, now, t))
+                    self._changes.append(IoChange(name, now != (name in self.active_low), t))
 
     def get(self, signal: str | int) -> bool:
         """A signal by the cell's name, or an input by its Galil bit number (cached)."""
         if isinstance(signal, int):
             mask = self.ctl.inputs_mask
-            return bool(mask is not None and mask >> (signal - 1) & 1)
+            return bool(signal >= 1 and mask is not None and mask >> (signal - 1) & 1)
         if signal in self.inputs:
             mask = self.ctl.inputs_mask
-            return bool(mask is not None and mask >> (self.inputs[signal] - 1) & 1)
+            if mask is None:
+                return False
+            return bool(mask >> (self.inputs[signal] - 1) & 1) != (signal in self.active_low)
         if signal in self.outputs:
             with self._lock:
                 if signal in self._out:

@@ -17,20 +17,33 @@ A rejected command (``?``) is followed by ``TC1`` and raises ``GalilError(code, 
 A dropped link, or no reply within ``spec.timeout_s``, raises ``CommsLost`` for the
 command in flight and closes the link; the next command reconnects, after a back-off
 (0.1 s doubling to 2 s) once an attempt has failed. Every connect re-runs the start-up
-sequence: ``CW 1``, ``EO 0``, ``HX``, ``DL`` of ``spec.programs``, program variables,
-``XQ`` of the input monitor and the distance notifier, servo on, initial reads.
+sequence (docs/real-cell.md has the source of each step):
+
+1. ``EO 0`` first (a serial port echoes until then), then ``CW 1``;
+2. ``WH``: which Ethernet handle we are; ``CF`` that handle, so program messages come to
+   us; ``IH h=>-2`` frees the handles of our earlier, dropped connections (``free_handles``);
+3. ``HXn`` of *our* threads only (a program on another thread is never killed: the
+   connect fails with a clear error instead, as ``DL`` would be refused);
+4. ``DL`` of ``spec.programs``, program variables, ``XQ`` of the input monitor (0), the
+   distance notifier (1) and the host watchdog (2); ``OE 1`` on our axes;
+5. ``SH`` only as ``spec.servo_on`` allows: at the first connect of a job (``start``),
+   never on a reconnect (an amplifier that is off was turned off by an off-on-error, the
+   e-stop or an operator, and stays off until an operator's reset: ``servo(True)``);
+6. initial reads.
+
+A *health poll* (every ``HEALTH_S``) pets the card's watchdog, reads ``_XQ0``-``_XQ2``
+(a dead thread is reported in ``program_errors`` and started again) and each axis's
+``_MO``, ``_SC``, ``_TE``, ``_LF``, ``_LR`` into ``status(axis)``.
 """
 
 from __future__ import annotations
 
-import heapq
-import itertools
 import logging
 import queue
 import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import Future, InvalidStateError, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,29 +54,45 @@ from ...clock import Clock
 from ...encoder import wrap
 from ...errors import CommsLost, ConfigError, ConveyorFault, HalError
 from ...scenario.model import GalilSpec
+from .link import (
+    DEAD,
+    Connection,
+    Scheduler,
+    done,
+    failed,
+    retrieve,
+    set_exception,
+    set_result,
+)
 from .protocol import (
     AXES,
+    CardEvent,
     DistanceEvent,
     Event,
     GalilError,
     InputsEvent,
     ProgramError,
     ProgramLine,
-    ProtocolError,
     Reply,
-    ReplySplitter,
     download_payload,
     parse_int,
     parse_tell_code,
     parse_unsolicited,
+    positional,
     read_programs,
+)
+from .startup import (
+    DIST_NOTIFIER,
+    HEALTH_S,
+    INPUT_MONITOR,
+    WATCHDOG,
+    AxisStatus,
+    CardSetup,
 )
 
 log = logging.getLogger(__name__)
 
 PROGRAMS_DIR = Path(__file__).resolve().parents[3] / "galil_programs"
-INPUT_MONITOR = "#INMON"        # galil_programs/monitor.dmc, thread 0
-DIST_NOTIFIER = "#DIST"         # galil_programs/monitor.dmc, thread 1
 READ_TIMEOUT_S = 0.05           # reader's read(1) timeout: how fast it notices a close
 BACKOFF_FIRST_S = 0.1
 BACKOFF_MAX_S = 2.0
@@ -88,109 +117,15 @@ class Delay:
     seconds: float
 
 
-_DEAD = object()            # put in the reply queue when the link dies
-
-
-class _Connection:
-    """One open link: the serial object, its reader thread and its reply queue."""
-
-    def __init__(self, ser: serial.SerialBase, on_line: Callable[[str], None], name: str) -> None:
-        self.ser = ser
-        self.on_line = on_line
-        self.splitter = ReplySplitter()
-        self.replies: queue.Queue = queue.Queue()
-        self.alive = True
-        self.error: BaseException | None = None
-        self.thread = threading.Thread(target=self._read_loop, name=f"galil-reader-{name}",
-                                       daemon=True)
-        self.thread.start()
-
-    def _read_loop(self) -> None:
-        while self.alive:
-            try:
-                data = self.ser.read(1)
-            except Exception as e:               # noqa: BLE001 - any failure: the link is gone
-                self._die(e)
-                return
-            if not data:
-                continue
-            try:
-                items = self.splitter.feed(data)
-            except ProtocolError as e:
-                self._die(e)
-                return
-            for item in items:
-                if isinstance(item, Reply):
-                    self.replies.put(item)
-                else:
-                    try:
-                        self.on_line(item.text)
-                    except Exception:            # noqa: BLE001 - a subscriber must not kill us
-                        log.exception("Galil event handler failed on %r", item.text)
-
-    def _die(self, e: BaseException) -> None:
-        if self.alive:
-            self.error = e
-        self.alive = False
-        self.replies.put(_DEAD)
-
-    def close(self) -> None:
-        self.alive = False
-        self.replies.put(_DEAD)
-        try:
-            self.ser.close()
-        except Exception:                        # noqa: BLE001 - closing a broken link
-            pass
-        if self.thread is not threading.current_thread():
-            self.thread.join(1.0)
-
-
-class _Scheduler:
-    """Calls functions after a delay on one timer thread (continuations of operations)."""
-
-    def __init__(self) -> None:
-        self._heap: list[tuple[float, int, Callable[[], None]]] = []
-        self._seq = itertools.count()
-        self._cv = threading.Condition()
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="galil-scheduler", daemon=True)
-        self._thread.start()
-
-    def call_later(self, delay: float, fn: Callable[[], None]) -> None:
-        with self._cv:
-            heapq.heappush(self._heap, (time.monotonic() + max(0.0, delay), next(self._seq), fn))
-            self._cv.notify()
-
-    def _run(self) -> None:
-        while True:
-            with self._cv:
-                while not self._closed and (not self._heap
-                                            or self._heap[0][0] > time.monotonic()):
-                    timeout = self._heap[0][0] - time.monotonic() if self._heap else None
-                    self._cv.wait(timeout)
-                if self._closed:
-                    return
-                _, _, fn = heapq.heappop(self._heap)
-            try:
-                fn()
-            except Exception:                    # noqa: BLE001
-                log.exception("Galil scheduled call failed")
-
-    def close(self) -> None:
-        with self._cv:
-            self._closed = True
-            self._cv.notify()
-        self._thread.join(1.0)
-
-
-class GalilController:
+class GalilController(CardSetup):
     """A Galil DMC on ``spec.url``: commands, events, positions and inputs.
 
     ``counts_per_mm`` (the cell's ``encoder``) turns ``spec.notify_mm`` into the
-    notifier's step in counts. ``servo_axes`` are switched on (``SH``) at every connect;
-    by default the axes of ``spec.axes``. Construction prepares the programs (so a bad
-    program fails at once, naming ``file:line``, before anything is sent) and starts
-    connecting in the background; ``ready`` is that first connect's ``Future``.
+    notifier's step in counts. ``servo_axes`` (by default the axes of ``spec.axes``) are
+    switched on (``SH``) as ``spec.servo_on`` allows: by default once, at the first connect.
+    Construction prepares the programs (so a bad program fails at once, naming
+    ``file:line``, before anything is sent) and starts connecting in the background;
+    ``ready`` is that first connect's ``Future``.
     """
 
     def __init__(self, spec: GalilSpec, clock: Clock, programs_dir: Path | str = PROGRAMS_DIR,
@@ -213,8 +148,8 @@ class GalilController:
         self._has_notifier = DIST_NOTIFIER in labels and spec.notify_mm > 0
         self._worker_name = f"galil-worker-{id(self):x}"
         self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=self._worker_name)
-        self._sched = _Scheduler()
-        self._conn: _Connection | None = None
+        self._sched = Scheduler()
+        self._conn: Connection | None = None
         self._backoff = BACKOFF_FIRST_S
         self._next_attempt = 0.0
         self._last_error: BaseException | None = None
@@ -228,9 +163,21 @@ class GalilController:
         self.outputs_mask: int | None = None
         self.connects = 0                   # successful connects (reconnects = connects - 1)
         self.program_errors: list[str] = []
+        self.card_events: list[tuple[str, str, float]] = []    # (kind, detail, t)
+        self.handle: str | None = None      # our Ethernet handle letter (WH), None on serial
+        self._held_handles: set[str] = set()
+        self.firmware: str | None = None    # the card's answer to ^R^V / CW (commissioning)
+        self._has_watchdog = WATCHDOG in labels and spec.watchdog_s > 0
+        self._status: dict[str, AxisStatus] = {}
+        self.thread_lines: dict[int, int] = {}
+        self.restarts: dict[int, int] = {}
+        self.servo_refused: str | None = None   # why the start-up SH was not sent or failed
+        self._health_busy = False
         self._closed = False
-        self.ready: Future = self.submit(self._first_connect) if connect else _done(False)
-        self.ready.add_done_callback(_retrieve)
+        self.ready: Future = self.submit(self._first_connect) if connect else done(False)
+        self.ready.add_done_callback(retrieve)
+        if connect:
+            self._sched.call_later(HEALTH_S, self._health_tick)
 
     # ================================================================ public API
     def command(self, text: str) -> Future:
@@ -240,11 +187,11 @@ class GalilController:
     def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
         """Run ``fn`` on the device worker (where it may call ``ask``)."""
         if self._closed:
-            return _failed(CommsLost("Galil controller closed"))
+            return failed(CommsLost("Galil controller closed"))
         try:
             return self._worker.submit(fn, *args)
         except RuntimeError:
-            return _failed(CommsLost("Galil controller closed"))
+            return failed(CommsLost("Galil controller closed"))
 
     def ask(self, text: str) -> str:
         """Send one command and wait for its reply (device worker only).
@@ -282,7 +229,12 @@ class GalilController:
         """Run ``fn`` on the worker after every connect (settings the card must be told)."""
         self._connect_hooks.append(fn)
         if self._conn is not None and self._conn.alive:
-            self.submit(fn).add_done_callback(_retrieve)
+            self.submit(fn).add_done_callback(retrieve)
+
+    def status(self, axis: str) -> AxisStatus | None:
+        """The axis as the health poll last read it (None before the first read)."""
+        with self._lock:
+            return self._status.get(axis.upper())
 
     @property
     def connected(self) -> bool:
@@ -313,7 +265,7 @@ class GalilController:
         def done(f: Future) -> None:
             with self._lock:
                 self._polling.discard(axis)
-            _retrieve(f)
+            retrieve(f)
         self.submit(self.read_position, axis).add_done_callback(done)
 
     def read_position(self, axis: str) -> int:
@@ -340,9 +292,9 @@ class GalilController:
             if fut.done():
                 return
             if self._closed:
-                _set_exception(fut, CommsLost("Galil controller closed"))
+                set_exception(fut, CommsLost("Galil controller closed"))
                 return
-            self.submit(run).add_done_callback(_retrieve)
+            self.submit(run).add_done_callback(retrieve)
 
         def run() -> None:
             if fut.done():
@@ -362,14 +314,14 @@ class GalilController:
                         return
                     if r is not None:
                         state["result"] = r
-                _set_result(fut, state["result"])
+                set_result(fut, state["result"])
             except BaseException as e:            # noqa: BLE001 - delivered through the future
-                _set_exception(fut, e)
+                set_exception(fut, e)
 
         if self._closed:
-            _set_exception(fut, CommsLost("Galil controller closed"))
+            set_exception(fut, CommsLost("Galil controller closed"))
         else:
-            self.submit(run).add_done_callback(_retrieve)
+            self.submit(run).add_done_callback(retrieve)
         return fut
 
     def close(self) -> None:
@@ -391,7 +343,7 @@ class GalilController:
         self._ensure_connected()
         return True
 
-    def _ensure_connected(self) -> _Connection:
+    def _ensure_connected(self) -> Connection:
         conn = self._conn
         if conn is not None and conn.alive:
             return conn
@@ -418,31 +370,39 @@ class GalilController:
         self._next_attempt = 0.0
         return conn
 
-    def _connect(self) -> _Connection:
+    def _connect(self) -> Connection:
         try:
             ser = serial.serial_for_url(self.spec.url, baudrate=self.spec.baud,
-                                        timeout=READ_TIMEOUT_S,
+                                        timeout=READ_TIMEOUT_S, rtscts=self.spec.rtscts,
                                         write_timeout=self.spec.timeout_s)
         except (serial.SerialException, OSError, ValueError) as e:
             raise CommsLost(f"Galil at {self.spec.url}: cannot open: {e}") from None
-        conn = _Connection(ser, self._on_line, self.spec.url)
+        conn = Connection(ser, self._on_line, self.spec.url)
         self._conn = conn
+        first = self.connects == 0
         try:
+            self._ask_on(conn, "EO 0")            # no echo first: a serial port echoes
             self._ask_on(conn, "CW 1")            # unsolicited bytes with the top bit set
-            self._ask_on(conn, "EO 0")            # no echo (serial ports echo by default)
-            self._ask_on(conn, "HX")              # DL is refused while a program runs
+            self._claim_handle(conn)
+            self._halt_our_threads(conn)          # DL is refused while a program runs
             self._ask_on(conn, "DL", payload=download_payload(self.program))
             if self._has_notifier:
                 step = max(1, round(self.spec.notify_mm * self.cpm))
                 self._ask_on(conn, f"DSTEP={step}")
                 self._ask_on(conn, f"~a={AXES.index(self.notify_axis)}")
+            if self._has_watchdog:
+                self._ask_on(conn, f"WDMS={round(self.spec.watchdog_s * 1000)}")
             if self._has_monitor:
                 self._ask_on(conn, f"XQ {INPUT_MONITOR},0")
             if self._has_notifier:
                 self._ask_on(conn, f"XQ {DIST_NOTIFIER},1")
-            if self.servo_axes:
-                self._ask_on(conn, f"SH{self.servo_axes}")
-            self.inputs_mask = parse_int(self._ask_on(conn, "MG _TI0"))
+            if self._has_watchdog:
+                self._ask_on(conn, f"XQ {WATCHDOG},2")
+            if self.spec.off_on_error and self.servo_axes:
+                self._ask_on(conn, positional("OE", {a: 1 for a in self.servo_axes}))
+            self._servo_at_connect(conn, first)
+            self.inputs_mask = (parse_int(self._ask_on(conn, "MG _TI0"))
+                                | parse_int(self._ask_on(conn, "MG _TI1")) << 8)
             self.outputs_mask = parse_int(self._ask_on(conn, "MG _OP0"))
             for axis in self.servo_axes:
                 self._set_position(axis, parse_int(self._ask_on(conn, f"TP{axis}")))
@@ -457,14 +417,14 @@ class GalilController:
         log.info("Galil at %s connected (%d)", self.spec.url, self.connects)
         return conn
 
-    def _drop(self, conn: _Connection, why: str) -> CommsLost:
+    def _drop(self, conn: Connection, why: str) -> CommsLost:
         if self._conn is conn:
             self._conn = None
         conn.close()
         self._last_error = CommsLost(why)
         return CommsLost(why)
 
-    def _ask_on(self, conn: _Connection, text: str, payload: bytes | None = None) -> str:
+    def _ask_on(self, conn: Connection, text: str, payload: bytes | None = None) -> str:
         try:
             data = text.encode("ascii") + b"\r" + (payload or b"")
         except UnicodeEncodeError:
@@ -474,7 +434,7 @@ class GalilController:
                 stale = conn.replies.get_nowait()
             except queue.Empty:
                 break
-            if stale is _DEAD:
+            if stale is DEAD:
                 raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
         if not conn.alive:
             raise self._drop(conn, f"Galil link lost before {text!r}: {conn.error}")
@@ -493,13 +453,13 @@ class GalilController:
         code, why = parse_tell_code(tc.data) if tc.ok else (-1, "unknown (TC1 rejected)")
         raise GalilError(code, why, command=text)
 
-    def _wait_reply(self, conn: _Connection, text: str) -> Reply:
+    def _wait_reply(self, conn: Connection, text: str) -> Reply:
         try:
             item = conn.replies.get(timeout=self.spec.timeout_s)
         except queue.Empty:
             raise self._drop(conn, f"Galil: no reply to {text!r} within "
                                    f"{self.spec.timeout_s:g} s") from None
-        if item is _DEAD:
+        if item is DEAD:
             raise self._drop(conn, f"Galil link lost waiting for {text!r}: {conn.error}")
         return item
 
@@ -514,6 +474,9 @@ class GalilController:
         elif isinstance(ev, ProgramError):
             self.program_errors.append(ev.text)
             log.warning("Galil program error: %s", ev.text)
+        elif isinstance(ev, CardEvent):
+            self.card_events.append((ev.kind, ev.detail, t))
+            log.warning("Galil card event: %s %s", ev.kind, ev.detail)
         with self._lock:
             subscribers = list(self._subscribers)
         for fn in subscribers:
@@ -526,38 +489,3 @@ class GalilController:
         with self._lock:
             self._positions[axis] = (wrap(int(count), COUNTER_BITS),
                                      self.clock.now() if t is None else t)
-
-
-# ------------------------------------------------------------------------ futures
-
-
-def _retrieve(f: Future) -> None:
-    """Mark a fire-and-forget future's exception as seen."""
-    if not f.cancelled():
-        f.exception()
-
-
-def _done(value: Any) -> Future:
-    f: Future = Future()
-    f.set_result(value)
-    return f
-
-
-def _failed(e: BaseException) -> Future:
-    f: Future = Future()
-    f.set_exception(e)
-    return f
-
-
-def _set_result(f: Future, value: Any) -> None:
-    try:
-        f.set_result(value)
-    except InvalidStateError:
-        pass
-
-
-def _set_exception(f: Future, e: BaseException) -> None:
-    try:
-        f.set_exception(e)
-    except InvalidStateError:
-        pass

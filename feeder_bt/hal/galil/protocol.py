@@ -36,7 +36,10 @@ MAX_LINE_CHARS = 80          # characters per program line (without the CR)
 MAX_PROGRAM_LINES = 1000     # program memory, lines
 MAX_LABEL_CHARS = 7          # after the '#'
 MAX_VARIABLE_CHARS = 8
+MAX_LABELS = 254             # labels in program memory (DMC-2x00 specifications; unconfirmed)
 THREADS = 8
+HANDLES = 8                  # Ethernet handles A-H (confirmed for the DMC-3425; see real-cell.md)
+INPUT_BANKS = 2              # _TI0 and _TI1: inputs 1-16 are what the monitor reports
 MAX_REPLY_BYTES = 4096       # longer without a terminator: the stream is garbage
 
 LABEL_RE = re.compile(r"^#([A-Za-z][A-Za-z0-9]*)$")
@@ -134,8 +137,9 @@ class ReplySplitter:
     """Separates replies from unsolicited output in a byte stream, in any chunking.
 
     Solicited bytes accumulate until ``:`` ends a reply. A ``:`` counts as the end only when
-    the reply so far is empty or ends a line (``...\\r\\n:``), so a colon inside data does not
-    cut a reply short. A ``?`` with nothing before it is a rejection. Unsolicited bytes
+    the reply so far is empty or ends a line (``...\\r\\n:``, or a bare ``\\r`` as a serial
+    port's echo of the command leaves it), so a colon inside data does not cut a reply
+    short and an echoed command never leaves a reply incomplete. A ``?`` with nothing before it is a rejection. Unsolicited bytes
     (top bit set) accumulate until ``\\n``.
     """
 
@@ -163,11 +167,12 @@ class ReplySplitter:
                         self._unsolicited.clear()
                         raise ProtocolError("unsolicited line too long: garbage on the link")
                 continue
-            if byte == 0x3A and (not self._reply or self._reply.endswith(b"\n")):   # ':'
+            if byte == 0x3A and (not self._reply or self._reply[-1] in (0x0A, 0x0D)):  # ':'
                 out.append(Reply(True, _decode(self._reply).strip("\r\n")))
                 self._reply.clear()
-            elif byte == 0x3F and not self._reply:                                  # '?'
-                out.append(Reply(False))
+            elif byte == 0x3F and (not self._reply or self._reply[-1] in (0x0A, 0x0D)):
+                out.append(Reply(False))                    # '?', maybe after an echo
+                self._reply.clear()
             else:
                 self._reply.append(byte)
                 if len(self._reply) > self._max:
@@ -196,7 +201,7 @@ def _decode(buf: bytes | bytearray) -> str:
 
 @dataclass(frozen=True)
 class InputsEvent:
-    """The input monitor's ``I nnn``: inputs 1..8 as a bit mask (bit 0 = input 1)."""
+    """The input monitor's ``I nnnnn``: inputs 1..16 as a bit mask (bit 0 = input 1)."""
 
     mask: int
 
@@ -210,9 +215,20 @@ class DistanceEvent:
 
 @dataclass(frozen=True)
 class ProgramError:
-    """A program thread stopped on an error (the controller echoes the line with ``?``)."""
+    """A program thread stopped on an error. The controller echoes the failing program line
+    with a ``?`` (at the start, or after the line number or the failing command, depending
+    on firmware); the on-card ``#CMDERR`` handler of ``monitor.dmc`` sends ``E CMDERR``."""
 
     text: str
+
+
+@dataclass(frozen=True)
+class CardEvent:
+    """An on-card automatic subroutine's report: ``E POSERR``, ``E LIMSWI``, ``E AMPERR``,
+    ``E CMDERR <thread> <line>``, or the host watchdog's ``W`` (belts stopped)."""
+
+    kind: str
+    detail: str = ""
 
 
 @dataclass(frozen=True)
@@ -222,20 +238,35 @@ class Message:
     text: str
 
 
-Event = InputsEvent | DistanceEvent | ProgramError | Message
+Event = InputsEvent | DistanceEvent | ProgramError | CardEvent | Message
+
+_ECHO_ERROR_RE = re.compile(r"^\d+\s*\S.*\?|^[A-Z#][^\"]*\?\s*$")
+CARD_EVENTS = ("POSERR", "LIMSWI", "AMPERR", "CMDERR")
 
 
 def parse_unsolicited(line: str) -> Event:
-    """Classify one unsolicited line; never raises (unknown lines become ``Message``)."""
+    """Classify one unsolicited line; never raises (unknown lines become ``Message``).
+
+    Program errors are recognised in every form the controller may echo them: a leading
+    ``?``, a numbered program line with a ``?`` in it (``004 JP #X?``), or a program line
+    ending in ``?``. Output of our programs never contains ``?``.
+    """
     text = line.strip()
     if text.startswith("?"):
         return ProgramError(text[1:].strip())
+    if "?" in text and _ECHO_ERROR_RE.match(text):
+        return ProgramError(text.replace("?", " ").strip())
+    if text == "W":
+        return CardEvent("WATCHDOG")
+    if text.startswith("E ") and text[2:].split(" ", 1)[0] in CARD_EVENTS:
+        kind, _, detail = text[2:].partition(" ")
+        return CardEvent(kind, detail.strip())
     if len(text) >= 2 and text[0] in "ID" and not text[1].isalpha():
         try:
             value = parse_number(text[1:])
         except HalError:
             return Message(text)
-        if text[0] == "I" and 0 <= value < 256 and value == int(value):
+        if text[0] == "I" and 0 <= value < 1 << (8 * INPUT_BANKS) and value == int(value):
             return InputsEvent(int(value))
         if text[0] == "D" and value == int(value):
             return DistanceEvent(int(value))
@@ -413,6 +444,9 @@ def prepare_download(files: Sequence[tuple[str, str]]) -> list[ProgramLine]:
                     raise DownloadError(pl.file, pl.line, f"label {label} is already defined "
                                                           f"at {first.file}:{first.line}", code=61)
                 seen[label] = pl
+                if len(seen) > MAX_LABELS:
+                    raise DownloadError(pl.file, pl.line, f"more than the {MODEL}'s "
+                                                          f"{MAX_LABELS} labels", code=61)
             lines.append(pl)
             if len(lines) > MAX_PROGRAM_LINES:
                 raise DownloadError(pl.file, pl.line, f"program is longer than the {MODEL}'s "
