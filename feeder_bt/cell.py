@@ -152,6 +152,8 @@ class Cell:
             raise CellCommandError("the e-stop is still pressed: release it first")
         if self.fault_reason == "e-stop pressed":
             self.stats.recoveries["estop"] += 1
+        for conv in self.hal.conveyors.values():
+            conv.servo(True)            # the operator's reset: motors on again
         self.fault_reason = None
         self._switch(CellState.STOPPED, None)
 

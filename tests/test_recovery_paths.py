@@ -137,8 +137,12 @@ def test_estop_stops_every_motion_at_once_and_needs_an_operator_reset():
         rig.cell.reset()
     rig.hal.io.values["estop"] = False
     assert rig.cell.state is CellState.FAULT          # releasing is not a reset
+    m = len(rig.hal.calls)
     rig.cell.reset()
     assert rig.cell.state is CellState.STOPPED
+    # the operator's reset is what turns the belt motors back on (issue 15, finding 6)
+    assert sorted(rig.hal.methods()[m:]) == ["horizontal.servo", "incline.servo"]
+    assert all(args == (True,) for _, meth, args in rig.hal.calls[m:])
     assert rig.cell.stats.recoveries["estop"] == 1
     rig.start()
     assert rig.cell.stats.faults["estop"] == 1        # the counts survive the restart

@@ -109,6 +109,10 @@ class Conveyor(Protocol):
         """A fault the controller reported while the belt ran (a jam: the motor stalled,
         a following error), or None. Cleared by the next motion command."""
 
+    def servo(self, on: bool) -> Job:
+        """Motor (amplifier) on or off. Only the operator's reset turns a motor back on
+        after an off-on-error or the e-stop; a simulated belt has no amplifier."""
+
 
 class Camera(Protocol):
     def grab(self) -> Job:

@@ -64,6 +64,9 @@ class MockConveyor(_Device):
     def travelled(self, distance_mm: float) -> Job:
         return self._job("travelled", distance_mm)
 
+    def servo(self, on: bool) -> Job:
+        return self._job("servo", on)
+
     def fault(self):
         """The test sets ``jam`` to a ``ConveyorFault``; a motion command clears it."""
         return self.jam

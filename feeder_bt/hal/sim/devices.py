@@ -79,6 +79,9 @@ class SimConveyor:
     def fault(self) -> HalError | None:
         return None
 
+    def servo(self, on: bool) -> Job:
+        return DoneJob(f"{self.name}.servo")
+
     def travelled(self, distance_mm: float) -> Job:
         job = Job(f"{self.name}.travelled({distance_mm:g})")
         self.world.notify_travel(self.axis, distance_mm, job)
