@@ -112,7 +112,7 @@ class Desk:
         self.inbox = Inbox()
         self.handed: dict[int, Handed] = {}
         self.expired: dict[int, Handed] = {}
-        self.waiting: list[Pending] = []
+        self.queues: dict[Hashable, deque[Pending]] = {}     # per robot, in order
         self.totals = DeskCounts()
         self.wanted: Counter[str] = Counter()
         self.ctx: Ctx | None = None          # the feeding run the records belong to
@@ -132,46 +132,51 @@ class Desk:
             self.serve()
 
     def serve(self) -> int:
-        """Answer what arrived, retry waiting PART requests, expire old records. Returns
-        the number of answers given."""
-        answered = 0
+        """Answer what arrived, keep waiting PART requests, expire old records. Each
+        robot's requests are answered in the order it sent them: a PART that waits holds
+        back what the same robot sent after it. Returns the number of answers given."""
         now = self.clock.now()
         for item in self.inbox.drain():
             if item.cancelled:
                 continue
             self.counts["requests"] += 1
+            self.queues.setdefault(item.conn, deque()).append(item)
+        answered = 0
+        for conn, queue in list(self.queues.items()):
+            while queue:
+                item = queue[0]
+                if item.cancelled:
+                    queue.popleft()
+                    continue
+                reply = self._reply(item, now)
+                if reply is None:
+                    self.clock.wake_at(item.until or now)
+                    break
+                queue.popleft()
+                item.answer(reply)
+                answered += 1
+            if not queue:
+                del self.queues[conn]
+        self._expire(now)
+        return answered
+
+    @property
+    def waiting(self) -> int:
+        """Robots whose PART request waits for a part."""
+        return len(self.queues)
+
+    def _reply(self, item: Pending, now: float) -> str | None:
+        if item.request is None:
             try:
                 item.request = parse_request(item.line)
             except ProtocolError as e:
                 self.counts["refused"] += 1
-                item.answer(f"ERR {e}")
-                answered += 1
-                continue
-            if item.request.command == "PART":
+                return f"ERR {e}"
+        if item.request.command == "PART":
+            if item.until is None:
                 item.until = now + item.request.wait_s
-                self.waiting.append(item)
-            else:
-                item.answer(self._answer(item))
-                answered += 1
-        answered += self._serve_waiting(now)
-        self._expire(now)
-        return answered
-
-    def _serve_waiting(self, now: float) -> int:
-        keep: list[Pending] = []
-        n = 0
-        for item in self.waiting:
-            if item.cancelled:
-                continue
-            reply = self._part(item, now)
-            if reply is None:
-                keep.append(item)
-                self.clock.wake_at(item.until)
-            else:
-                item.answer(reply)
-                n += 1
-        self.waiting = keep
-        return n
+            return self._part(item, now)
+        return self._answer(item)
 
     def _part(self, item: Pending, now: float) -> str | None:
         """The answer to a PART request, or None to keep it waiting."""
@@ -359,7 +364,7 @@ class ServeRobots(NextPart):
         self.desk.ctx, self.desk.chooser = self.ctx, self
         self.desk.serve()
         n = len(self.desk.handed)
-        self.feedback_message = f"{n} part(s) with robots, {len(self.desk.waiting)} waiting"
+        self.feedback_message = f"{n} part(s) with robots, {self.desk.waiting} waiting"
         return Status.RUNNING
 
     def enter_s(self, part: Part) -> float:
@@ -395,7 +400,11 @@ class ServeRobots(NextPart):
             wanted = self.seq[self.seq_i % len(self.seq)]
         parts = [p for p in queue.peek_all() if wanted is None or p.type == wanted]
         if within_s is not None:
-            parts = [p for p in parts if self.enter_s(p) <= within_s]
+            enter = {p.id: self.enter_s(p) for p in parts}
+            later = [t - within_s for t in enter.values() if within_s < t < math.inf]
+            if later:               # a waiting request is worth a look when one comes near
+                self.ctx.clock.wake_at(self.ctx.now() + min(later))
+            parts = [p for p in parts if enter[p.id] <= within_s]
         part = self.policy.choose(parts, self.x_now)
         if part is None or not queue.remove(part.id):
             return None

@@ -13,6 +13,7 @@ instead of the retrieve tree each time it starts.
 from __future__ import annotations
 
 import itertools
+import select
 import socket
 import socketserver
 import threading
@@ -91,8 +92,18 @@ class _Handler(socketserver.StreamRequestHandler):
                     item.cancelled = True
                     self._write("ERR the cell controller is shutting down")
                     return
+                if self._hung_up():      # gone while its PART waited: hand it nothing
+                    item.cancelled = True
+                    return
             if not self._write(box[0]) or box[0] == "OK BYE":
                 return
+
+    def _hung_up(self) -> bool:
+        try:
+            ready, _, _ = select.select([self.connection], [], [], 0)
+            return bool(ready) and self.connection.recv(1, socket.MSG_PEEK) == b""
+        except OSError:
+            return True
 
     def _write(self, text: str) -> bool:
         try:
