@@ -105,6 +105,15 @@ def plant_options(args: argparse.Namespace) -> Any:
                         opcua_insecure=args.opcua_insecure, opcua_pki=args.opcua_pki)
 
 
+def _check_opcua(opts: RunOptions) -> None:
+    """Before the HAL opens: the users file names somebody, and one control token."""
+    if opts.ui:
+        raise FeederError("--ui and --opcua each keep their own control token: serve one "
+                          "of them per run, so that one user at a time controls the cell")
+    from .ui.app import check_users
+    check_users(opts.plant.opcua_users)
+
+
 def _open_plant(opts: RunOptions, cell: Cell, scenario: Scenario):
     """The part server / OPC UA adapters of this run, opened (None: none asked for)."""
     if opts.plant is None:
@@ -244,6 +253,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
         from .ui.app import check_users
         check_users(opts.users)
+    if opcua:
+        _check_opcua(opts)
     plan = None
     if opts.faults:             # like a bad --db: a bad plan fails before the HAL opens
         from .scenario.faults import load_fault_plan

@@ -76,7 +76,7 @@ class PlantAdapters:
                 self.program = self._sim_robot(where)
         if opts.opcua:
             from .opcua import CellUaServer
-            self.opcua = CellUaServer(cell, opts, self.scenario_path)
+            self.opcua = CellUaServer(cell, opts, self.scenario_path, self.cell_path)
             url = self.opcua.start()
             print(f"OPC UA: {url}", file=sys.stderr, flush=True)
 
