@@ -119,8 +119,8 @@ def _open_plant(opts: RunOptions, cell: Cell, scenario: Scenario):
     if opts.plant is None:
         return None
     from .plant.adapters import PlantAdapters
-    plant = PlantAdapters(cell, opts.plant, opts.scenario, opts.cell or scenario.cell_path)
-    plant.fast = opts.fast
+    plant = PlantAdapters(cell, opts.plant, opts.scenario, opts.cell or scenario.cell_path,
+                          fast=opts.fast)
     plant.open()
     return plant
 

@@ -50,8 +50,8 @@ class PlantAdapters:
     """Whatever of the part server, the simulated robot and OPC UA this run serves."""
 
     def __init__(self, cell: Cell, opts: PlantOptions, scenario_path: str | None = None,
-                 cell_path: str | None = None) -> None:
-        self.cell, self.opts = cell, opts
+                 cell_path: str | None = None, fast: bool = False) -> None:
+        self.cell, self.opts, self.fast = cell, opts, fast
         self.desk: Desk | None = None
         self.server = None
         self.program = None
@@ -93,8 +93,6 @@ class PlantAdapters:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario)
-
-    fast = True
 
     def pump(self) -> None:
         """After each tick, on the tick thread."""

@@ -103,15 +103,20 @@ class LoopLink:
     def __init__(self, desk, clock: Clock, conn: Hashable = "sim-robot") -> None:
         self.desk, self.clock, self.conn = desk, clock, conn
         self.replies: deque[str] = deque()
-        self.sent: list = []
+        self.sent: dict[int, object] = {}       # requests not answered yet
         self.closed = False
 
     def send(self, line: str) -> None:
         if self.closed:
             raise PartServerError("link closed")
         from ..behaviours.serve import Pending
-        item = Pending(self.conn, line, self.replies.append)
-        self.sent.append(item)
+
+        def answer(text: str) -> None:
+            self.sent.pop(id(item), None)
+            self.replies.append(text)
+
+        item = Pending(self.conn, line, answer)
+        self.sent[id(item)] = item
         self.desk.inbox.put(item)
         self.clock.wake_at(self.clock.now() + 1e-6)
 
@@ -126,8 +131,8 @@ class LoopLink:
     def close(self) -> None:
         """Like a killed robot program: whatever it asked and did not get is dropped."""
         self.closed = True
-        for item in self.sent:
-            item.cancelled = True
+        for item in self.sent.values():
+            item.cancelled = True  # type: ignore[attr-defined]
         self.sent.clear()
 
 
