@@ -299,3 +299,115 @@ def test_a_bad_part_server_address_is_one_line(capsys):
     err = capsys.readouterr().err
     assert code != 0 and "--part-server" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
+
+
+# --------------------------------------------------------------------------- the desk's rules
+
+class Talk:
+    """One robot talking to a serving cell's desk through the loop link, tick by tick."""
+
+    def __init__(self, s: Serving, name: str = "robot") -> None:
+        self.s = s
+        self.client = PartClient(LoopLink(s.desk, s.clock, name))
+
+    def say(self, line: str) -> tuple[str, list[str]]:
+        self.client.submit(line)
+        t_end = self.s.clock.now() + 10.0
+        while True:
+            got = self.client.poll()
+            if got is not None:
+                return got
+            assert self.s.clock.now() < t_end, f"no answer to {line}"
+            self.s.run(self.s.clock.now() + 0.01)
+
+
+def _serving_with_parts(n: int = 2) -> Serving:
+    s = Serving(seed=1)
+    s.program.kill()
+    s.start()
+    s.run(60.0, stop=lambda: s.cell.ctx is not None and len(s.cell.ctx.queue) >= n)
+    assert len(s.cell.ctx.queue) >= n
+    return s
+
+
+def test_a_report_after_the_time_out_counts_the_part_where_the_robot_says():
+    s = _serving_with_parts()
+    robot = Talk(s)
+    kind, fields = robot.say("PART")
+    offer = parse_offer(fields)
+    s.run(s.clock.now() + offer.left_s + 6.0)
+    assert s.desk.counts["expired"] == 1
+    assert robot.say(f"PLACED {offer.id}")[0] == "PLACED"          # late, but believed
+    assert (s.desk.counts["expired"], s.desk.counts["late_reports"],
+            s.desk.counts["placed"]) == (0, 1, 1)
+    assert robot.say(f"PLACED {offer.id}")[0] == "ERR"             # once only
+    s.close()
+
+
+def test_a_picked_part_cannot_be_released_and_reports_name_their_robot():
+    s = _serving_with_parts()
+    robot, other = Talk(s, "robot"), Talk(s, "other")
+    offer = parse_offer(robot.say("PART lens")[1])
+    assert robot.say(f"PICKED {offer.id}") == ("PICKED", [str(offer.id)])
+    kind, fields = robot.say(f"RELEASE {offer.id}")
+    assert kind == "ERR" and "place it" in fields[0]
+    kind, fields = other.say(f"MISSED {offer.id}")
+    assert kind == "ERR" and "another robot" in fields[0]
+    assert robot.say(f"MISSED {offer.id} dropped on the way")[0] == "MISSED"
+    assert s.cell.stats.counts["missed"] == 1
+    s.close()
+
+
+def test_within_hands_out_only_parts_in_reach_by_then():
+    s = _serving_with_parts(1)
+    robot = Talk(s)
+    ctx, sp = s.cell.ctx, s.cell.cell.robot
+    # the first parts are still upstream of the reach: none is reachable at once ...
+    kind, fields = robot.say("PART WITHIN 0")
+    if kind == "PART":
+        offer = parse_offer(fields)
+        moved = (s.hal.robot_position.belt_encoder() - offer.latch) \
+            / s.cell.cell.encoder.counts_per_mm
+        assert math.hypot(offer.x + moved - sp.base_mm[0], offer.y - sp.base_mm[1]) \
+            <= sp.reach_mm + 1.0
+    else:
+        assert (kind, fields) == ("NONE", ["empty"])
+        # ... but waiting for one hands it out as it comes within reach
+        kind, fields = robot.say("PART WITHIN 0 WAIT 30")
+        assert kind == "PART"
+        offer = parse_offer(fields)
+        moved = (s.hal.robot_position.belt_encoder() - offer.latch) \
+            / s.cell.cell.encoder.counts_per_mm
+        assert math.hypot(offer.x + moved - sp.base_mm[0], offer.y - sp.base_mm[1]) \
+            <= sp.reach_mm + 1.0
+    assert ctx is s.cell.ctx
+    s.close()
+
+
+def test_quit_and_over_long_lines_close_the_connection():
+    import socket
+
+    s = Serving(seed=1)
+    s.program.kill()
+    server = PartServer(s.desk, "127.0.0.1", 0)
+    host, port = server.start().split(":")
+    done = threading.Event()
+    thread = threading.Thread(target=lambda: Ticker(s.cell, fast=False).run(
+        until=s.clock.now() + 30.0, stop=done.is_set, every=s.desk.serve_idle))
+    thread.start()
+    try:
+        with socket.create_connection((host, int(port)), timeout=10) as sock:
+            f = sock.makefile("rwb")
+            f.write(b"quit\r\n")
+            f.flush()
+            assert f.readline() == b"OK BYE\n" and f.readline() == b""
+        with socket.create_connection((host, int(port)), timeout=10) as sock:
+            f = sock.makefile("rwb")
+            f.write(b"PART " + b"x" * 400 + b"\n")
+            f.flush()
+            assert f.readline().startswith(b"ERR line longer than") and f.readline() == b""
+    finally:
+        done.set()
+        thread.join()
+        server.close()
+        s.close()
