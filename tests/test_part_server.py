@@ -82,7 +82,7 @@ class Serving:
 
     def new_program(self, name: str) -> SimRobotProgram:
         return SimRobotProgram(PartClient(LoopLink(self.desk, self.clock, name)),
-                               self.hal.robot, self.scenario)
+                               self.hal.robot, self.scenario, self.clock)
 
     def _watch(self) -> None:
         grip, release = self.world.grip, self.world.release
@@ -411,3 +411,27 @@ def test_quit_and_over_long_lines_close_the_connection():
         thread.join()
         server.close()
         s.close()
+
+
+def test_robot_faults_under_the_part_server_lose_nothing(tmp_path):
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("scripted:\n"
+                    "  - {at_s: 30, kind: servo_timeout}\n"
+                    "  - {at_s: 40, kind: missed_grab}\n"
+                    "  - {at_s: 50, kind: comms_lost, device: adept, outage_s: 2.0}\n"
+                    "  - {at_s: 70.3, kind: comms_lost, device: adept, outage_s: 3.0}\n")
+    r = run_job(RunOptions(scenario=LENSES, duration=120.0, fast=True, seed=3, view="none",
+                           db=None, faults=str(plan),
+                           plant=PlantOptions(part_server="127.0.0.1:0")))
+    ps, parts = r["part_server"], r["parts"]
+    assert r["injected"].get("servo_timeout") == 1 and r["injected"].get("missed_grab") == 1
+    assert parts["lost"] == 0 and parts["duplicated"] == 0 and parts["misplaced"] == {}
+    assert r["faults"]["servo_timeout"] == 1 and r["faults"]["missed_grab"] == 1
+    assert r["recoveries"].get("servo_timeout", 0) == 0     # the robot's own business now
+    # the world placed what the cell counted, plus at most the part still being placed
+    in_hand = ps["picked"] - ps["placed"]
+    assert r["world"]["placed"]["lens"] == parts["retrieved"]["lens"] + in_hand
+    assert in_hand <= ps["outstanding"] <= 1
+    assert ps["handed_out"] == ps["placed"] + ps["missed"] + ps["released"] + ps["expired"] + \
+        ps["held_expired"] + ps["outstanding"]
+    assert ps["refused"] == 0 and ps["sim_robot"]["refused"] == 0

@@ -41,6 +41,9 @@ PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expir
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires
 STATIONARY_S = 60.0       # a part on a belt that does not move: its pick time-out
 FORGET = 1000             # expired ids remembered for late reports
+# MISSED id WHY: a first word naming a fault kind counts the miss under that kind
+MISS_KINDS = {"servo_timeout": "servo_timeout", "servo": "servo_timeout",
+              "comms_lost": "comms_lost", "dropped": "dropped", "missed_grab": "missed_grab"}
 
 
 @dataclass
@@ -286,8 +289,9 @@ class Desk:
         ctx = self.ctx
         if ctx is None:
             return
-        unreachable = why.lower().startswith(("unreach", "envelope", "reach"))
-        kind = "envelope" if unreachable else "missed_grab"
+        word = (why.split() or ["missed_grab"])[0].lower()
+        unreachable = word.startswith(("unreach", "envelope", "reach"))
+        kind = "envelope" if unreachable else MISS_KINDS.get(word, "missed_grab")
         ctx.stats.faults[kind] += 1
         ctx.stats.count("unreachable" if unreachable else "missed")
         ctx.stats.emit(ctx.now(), "fault", kind=kind, id=rec.part.id,

@@ -92,7 +92,7 @@ class PlantAdapters:
         else:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
-        return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario)
+        return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
 
     def pump(self) -> None:
         """After each tick, on the tick thread."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections import deque
 
+from ..clock import EPS, Clock
 from ..errors import HalError
 from ..hal.interfaces import PickTarget, Pose, Robot
 from ..jobs import Job, JobState
@@ -27,9 +28,10 @@ WAIT_S = 5.0            # PART ... WAIT: the server holds the request this long
 class SimRobotProgram:
     """Pick-and-place loop of one simulated robot, driven through a ``PartClient``."""
 
-    def __init__(self, client: PartClient, robot: Robot, scenario: Scenario,
+    def __init__(self, client: PartClient, robot: Robot, scenario: Scenario, clock: Clock,
                  speed_pct: float | None = None, part_type: str | None = None) -> None:
-        self.client, self.robot, self.scenario = client, robot, scenario
+        self.client, self.robot, self.scenario, self.clock = client, robot, scenario, clock
+        self.again: tuple[float, str] | None = None   # ask the controller again at t
         self.part_type = part_type
         self.expect: deque[str] = deque()         # the command of each reply still to come
         self.job: Job | None = None
@@ -38,6 +40,7 @@ class SimRobotProgram:
         self.asking = False
         self.dead = False
         self.error: str | None = None
+        self.tries = 0
         self.counts = {"offers": 0, "picked": 0, "placed": 0, "missed": 0, "refused": 0}
         self.robot.set_speed(speed_pct if speed_pct is not None
                              else scenario.retrieve.robot_speed_pct)
@@ -51,7 +54,11 @@ class SimRobotProgram:
         try:
             self._replies()
             self._motion()
-            if self.job is None and self.offer is None and not self.asking:
+            if self.again is not None and self.clock.now() >= self.again[0] - EPS:
+                doing, self.again = self.again[1], None
+                self._start(doing, self.robot.held())
+            if self.job is None and self.again is None and self.offer is None \
+                    and not self.asking:
                 words = "PART" + (f" {self.part_type}" if self.part_type else "")
                 self._send(f"{words} WAIT {WAIT_S:g}")
                 self.asking = True
@@ -96,27 +103,70 @@ class SimRobotProgram:
             return
         doing, self.job, self.doing = self.doing, None, None
         offer = self.offer
-        if doing == "pick" and offer is not None:
-            if job.ok:
-                self.counts["picked"] += 1
-                self._send(f"PICKED {offer.id}")
-                spec = self.scenario.parts[offer.type].place
-                rz = -offer.rz if spec.orient else 0.0
-                self._start("place", self.robot.place(Pose(spec.x, spec.y, spec.z, rz)))
-            else:
-                err = job.error or HalError("pick failed")
-                self.counts["missed"] += 1
-                why = "unreachable" if err.kind == "envelope" else err.kind
-                self._send(f"MISSED {offer.id} {why}")
-                self.offer = None
-                if err.kind == "servo_timeout":
-                    self._start("recover", self.robot.recover())
-        elif doing == "place" and offer is not None:
-            self.counts["placed"] += 1
-            self._send(f"PLACED {offer.id}")
-            self.offer = None
-        elif doing == "recover":
+        err = None if job.ok else (job.error or HalError(f"{doing} failed"))
+        if doing == "recover":
             self._start("safe", self.robot.move_safe())
+        elif offer is None:
+            return
+        elif doing == "pick" and err is None:
+            self._picked(offer)
+        elif doing == "pick" and err.kind == "comms_lost":
+            self._start("held after pick", self.robot.held())    # gripped before the cut?
+        elif doing == "pick":
+            self._missed(offer, "unreachable" if err.kind == "envelope" else err.kind)
+            if err.kind == "servo_timeout":
+                self._start("recover", self.robot.recover())
+        elif doing.startswith("held") and err is not None:
+            self._ask_again(doing)              # the link is still down: back off
+        elif doing == "held after pick":
+            held, self.tries = job.result, 0
+            if held is not None and held.part_id == offer.id:
+                self._picked(offer)
+            else:
+                self._missed(offer, "comms_lost")
+        elif doing == "place" and err is None:
+            self._placed(offer)
+        elif doing == "place" and err.kind == "comms_lost":
+            self._start("held after place", self.robot.held())
+        elif doing == "place":                  # a servo fault: still held, place again
+            self._start("recover then place", self.robot.recover())
+        elif doing == "recover then place":
+            self._place(offer)
+        elif doing == "held after place":
+            held, self.tries = job.result, 0
+            if held is not None and held.part_id == offer.id:
+                self._place(offer)
+            elif held is not None and held.last_placed == offer.id:
+                self._placed(offer)
+            else:
+                self._missed(offer, "dropped")
+
+    def _ask_again(self, doing: str) -> None:
+        """Ask the controller again after a back-off (0.5 s, doubling, at most 8 s)."""
+        self.tries += 1
+        wait = min(8.0, 0.5 * 2 ** (self.tries - 1))
+        self.again = (self.clock.now() + wait, doing)
+        self.clock.wake_at(self.again[0])
+
+    def _picked(self, offer: Offer) -> None:
+        self.counts["picked"] += 1
+        self._send(f"PICKED {offer.id}")
+        self._place(offer)
+
+    def _place(self, offer: Offer) -> None:
+        spec = self.scenario.parts[offer.type].place
+        rz = -offer.rz if spec.orient else 0.0
+        self._start("place", self.robot.place(Pose(spec.x, spec.y, spec.z, rz)))
+
+    def _placed(self, offer: Offer) -> None:
+        self.counts["placed"] += 1
+        self._send(f"PLACED {offer.id}")
+        self.offer = None
+
+    def _missed(self, offer: Offer, why: str) -> None:
+        self.counts["missed"] += 1
+        self._send(f"MISSED {offer.id} {why}")
+        self.offer = None
 
     def kill(self) -> None:
         """The robot program is aborted: the motion stops where it is (a pick not yet
