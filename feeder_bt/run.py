@@ -121,7 +121,11 @@ def _open_plant(opts: RunOptions, cell: Cell, scenario: Scenario):
     from .plant.adapters import PlantAdapters
     plant = PlantAdapters(cell, opts.plant, opts.scenario, opts.cell or scenario.cell_path,
                           fast=opts.fast)
-    plant.open()
+    try:
+        plant.open()
+    except BaseException:       # e.g. the OPC UA port is taken: the part server closes too
+        plant.close()
+        raise
     return plant
 
 

@@ -246,6 +246,15 @@ def test_option_mistakes_are_one_line(tmp_path):
     with pytest.raises(FeederError, match="loopback only"):
         run_job(RunOptions(**base, plant=PlantOptions(opcua="0.0.0.0:0", opcua_users=users,
                                                       opcua_insecure=True)))
+    import socket
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(FeederError, match=f"--opcua 127.0.0.1:{port}: .*in use"):
+            run_job(RunOptions(**base, plant=PlantOptions(
+                opcua=f"127.0.0.1:{port}", opcua_users=users, part_server="127.0.0.1:0",
+                opcua_pki=str(tmp_path / "pki"))))
     with pytest.raises(FeederError, match="no users"):
         run_job(RunOptions(**base, plant=PlantOptions(
             opcua="127.0.0.1:0", opcua_users=str(tmp_path / "nobody.json"))))

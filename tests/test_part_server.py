@@ -435,3 +435,17 @@ def test_robot_faults_under_the_part_server_lose_nothing(tmp_path):
     assert ps["handed_out"] == ps["placed"] + ps["missed"] + ps["released"] + ps["expired"] + \
         ps["held_expired"] + ps["outstanding"]
     assert ps["refused"] == 0 and ps["sim_robot"]["refused"] == 0
+
+
+def test_a_part_server_port_in_use_is_one_line(capsys):
+    import socket
+
+    from feeder_bt.cli import main
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        code = main(["run", LENSES, "--fast", "--duration", "1", "--view", "none", "--no-db",
+                     "--part-server", f"127.0.0.1:{port}"])
+    err = capsys.readouterr().err
+    assert code != 0 and f"--part-server 127.0.0.1:{port}" in err and "Traceback" not in err

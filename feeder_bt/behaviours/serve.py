@@ -293,7 +293,7 @@ class Desk:
         unreachable = word.startswith(("unreach", "envelope", "reach"))
         kind = "envelope" if unreachable else MISS_KINDS.get(word, "missed_grab")
         ctx.stats.faults[kind] += 1
-        ctx.stats.count("unreachable" if unreachable else "missed")
+        ctx.stats.count({"envelope": "unreachable", "dropped": "dropped"}.get(kind, "missed"))
         ctx.stats.emit(ctx.now(), "fault", kind=kind, id=rec.part.id,
                        message=f"{conn}: {why or 'missed'}")
 

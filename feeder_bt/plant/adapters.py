@@ -65,8 +65,8 @@ class PlantAdapters:
             host, port = parse_hostport(opts.part_server, DEFAULT_PORT, "--part-server")
             self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
             install(cell, self.desk)
-            self.server = PartServer(self.desk, host, port)
             try:
+                self.server = PartServer(self.desk, host, port)
                 where = self.server.start()
             except OSError as e:
                 raise FeederError(f"--part-server {opts.part_server}: {e.strerror or e}") \

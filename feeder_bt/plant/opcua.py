@@ -192,7 +192,7 @@ class CellUaServer:
     # ------------------------------------------------------------------ life
     def start(self) -> str:
         """Serve on a thread of its own; returns once the endpoint listens."""
-        logging.getLogger("asyncua").setLevel(logging.ERROR)
+        logging.getLogger("asyncua").setLevel(logging.CRITICAL)   # one-line errors
         _install_session_hooks()
         self.bridge.publish()
         self.thread = threading.Thread(target=self._main, name="opcua", daemon=True)
@@ -290,8 +290,11 @@ class CellUaServer:
         self.last_msg = max((m.seq for m in self.bridge.latest().messages), default=0)
 
     def close(self) -> None:
-        if self.loop is not None and self.stopping is not None:
-            self.loop.call_soon_threadsafe(self.stopping.set)
+        if self.loop is not None and self.stopping is not None and not self.loop.is_closed():
+            try:
+                self.loop.call_soon_threadsafe(self.stopping.set)
+            except RuntimeError:             # the loop ended meanwhile
+                pass
         if self.thread is not None:
             self.thread.join(timeout=10.0)
 
