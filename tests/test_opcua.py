@@ -57,9 +57,15 @@ class LiveCell:
             opcua_insecure=True, opcua_pki=str(self.pki)), LENSES)
         self.url = self.ua.start()
         self.done = threading.Event()
+        self.todo: list = []                # callables for the tick thread (the cell's own)
         self.thread = threading.Thread(target=lambda: Ticker(self.cell).run(
-            until=3600.0, stop=self.done.is_set, every=self.ua.pump))
+            until=3600.0, stop=self.done.is_set, every=self.every))
         self.thread.start()
+
+    def every(self) -> None:
+        while self.todo:
+            self.todo.pop(0)()
+        self.ua.pump()
 
     def close(self) -> None:
         self.done.set()
@@ -178,6 +184,41 @@ def test_the_controlling_user_starts_and_stops_and_a_second_user_is_refused(live
     actions = [(c["user"], c["action"]) for c in live.ua.report()["commands"]]
     assert ("alice", "start") in actions and ("alice", "stop") in actions
     assert not any(user == "bob" and a in ("start", "stop") for user, a in actions)
+
+
+def test_a_fault_is_an_alarm_until_the_reset(live):
+    async def go():
+        async with client(live.url, ALICE) as alice:
+            idx, a = await cell_node(alice)
+            alarms: list[dict] = []
+
+            class Handler:
+                def event_notification(self, event):
+                    f = event.get_event_props_as_fields_dict()
+                    alarms.append({k: f[k].Value for k in ("ActiveState/Id", "Message",
+                                                          "ConditionName", "Severity")})
+
+            sub = await alice.create_subscription(50, Handler())
+            await sub.subscribe_events(a, ua.ObjectIds.OffNormalAlarmType)
+            await a.call_method(f"{idx}:TakeControl")
+            await a.call_method(f"{idx}:Start")
+            assert await wait_state(a, idx, "RUNNING") == "RUNNING"
+            live.todo.append(lambda: live.cell.fault("test: a fault on purpose"))
+            assert await wait_state(a, idx, "FAULT") == "FAULT"
+            assert await read(a, idx, "Fault") == "test: a fault on purpose"
+            with pytest.raises(UaError):                   # not from FAULT: reset first
+                await a.call_method(f"{idx}:Start")
+            await a.call_method(f"{idx}:Reset")
+            assert await wait_state(a, idx, "STOPPED") == "STOPPED"
+            t_end = time.monotonic() + WAIT_S
+            while len(alarms) < 2 and time.monotonic() < t_end:
+                await asyncio.sleep(0.1)
+            await a.call_method(f"{idx}:ReleaseControl")
+            assert [(x["ActiveState/Id"], x["ConditionName"]) for x in alarms] == \
+                [(True, "CellFault"), (False, "CellFault")]
+            assert alarms[0]["Message"].Text == "test: a fault on purpose"
+            assert alarms[0]["Severity"] > alarms[1]["Severity"]
+    asyncio.run(go())
 
 
 def test_control_goes_with_the_session(live):

@@ -287,6 +287,8 @@ class CellUaServer:
             [("Kind", ua.VariantType.String), ("OldState", ua.VariantType.String),
              ("NewState", ua.VariantType.String)])
         self.events = await server.get_event_generator(self.etype, cell)
+        self.alarm = await server.get_event_generator(ua.ObjectIds.OffNormalAlarmType, cell)
+        self.alarm_active = False
         self.last_msg = max((m.seq for m in self.bridge.latest().messages), default=0)
 
     def close(self) -> None:
@@ -333,6 +335,7 @@ class CellUaServer:
             await node.write_value(ua.Variant(_value(v, vt), vt))
         await self._per_name(self.by_type, self.by_type_node, status.get("fed_by_type") or {})
         await self._per_name(self.faults, self.faults_node, status.get("faults") or {})
+        await self._fault_alarm(status)
         for msg in pub.messages:
             if msg.seq <= self.last_msg:
                 continue
@@ -346,6 +349,29 @@ class CellUaServer:
                 known[name] = await parent.add_variable(self.idx, name, 0,
                                                         varianttype=ua.VariantType.Int64)
             await known[name].write_value(ua.Variant(int(v), ua.VariantType.Int64))
+
+    async def _fault_alarm(self, status: dict[str, Any]) -> None:
+        """The cell's fault as an OffNormalAlarm condition: active from the fault until the
+        reset. (Acknowledging it from a client is not implemented: Reset clears it.)"""
+        active = status.get("state") in ("FAULTING", "FAULT")
+        if active == self.alarm_active:
+            return
+        self.alarm_active = active
+        ev = self.alarm.event
+        text = (status.get("fault") or "cell fault") if active else "fault reset"
+        ev.Message = ua.LocalizedText(text)
+        ev.Severity = 900 if active else 100
+        ev.SourceName = "Cell"
+        ev.ConditionName = "CellFault"
+        ev.Retain = active
+        ev.EnabledState = ua.LocalizedText("Enabled")
+        setattr(ev, "EnabledState/Id", True)
+        ev.ActiveState = ua.LocalizedText("Active" if active else "Inactive")
+        setattr(ev, "ActiveState/Id", active)
+        ev.AckedState = ua.LocalizedText("Unacknowledged" if active else "Acknowledged")
+        setattr(ev, "AckedState/Id", not active)
+        await self.alarm.trigger()
+        self.events_sent += 1
 
     async def _event(self, msg) -> None:
         ev = self.events.event
