@@ -353,7 +353,7 @@ def test_a_picked_part_cannot_be_released_and_reports_name_their_robot():
     assert kind == "ERR" and "place it" in fields[0]
     kind, fields = other.say(f"MISSED {offer.id}")
     assert kind == "ERR" and "another robot" in fields[0]
-    assert robot.say(f"MISSED {offer.id} dropped on the way")[0] == "MISSED"
+    assert robot.say(f"MISSED {offer.id} nothing under the cup")[0] == "MISSED"
     assert s.cell.stats.counts["missed"] == 1
     s.close()
 
@@ -449,3 +449,18 @@ def test_a_part_server_port_in_use_is_one_line(capsys):
                      "--part-server", f"127.0.0.1:{port}"])
     err = capsys.readouterr().err
     assert code != 0 and f"--part-server 127.0.0.1:{port}" in err and "Traceback" not in err
+
+
+def test_the_operator_hears_when_no_robot_asks_for_parts():
+    s = _serving_with_parts()                      # the robot program was killed
+    s.run(s.clock.now() + 31.0)
+    told = [e for e in s.cell.stats.events if e.kind == "fault"
+            and e.data.get("kind") == "robot_idle"]
+    assert len(told) == 1 and s.cell.stats.faults["robot_idle"] == 1
+    robot = Talk(s)
+    assert robot.say("STATUS")[0] == "STATUS"      # a robot is back
+    s.run(s.clock.now() + 0.05)
+    assert s.cell.stats.recoveries["robot_idle"] == 1
+    assert [e.data.get("kind") for e in s.cell.stats.events
+            if e.kind == "recovered"][-1:] == ["robot_idle"]
+    s.close()

@@ -40,6 +40,7 @@ from .retrieve import NextPart, count_retrieved
 PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expires
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires
 STATIONARY_S = 60.0       # a part on a belt that does not move: its pick time-out
+ROBOT_IDLE_S = 30.0       # parts waiting and no robot asking this long: tell the operator
 FORGET = 1000             # expired ids remembered for late reports
 # MISSED id WHY: a first word naming a fault kind counts the miss under that kind
 MISS_KINDS = {"servo_timeout": "servo_timeout", "servo": "servo_timeout",
@@ -119,6 +120,8 @@ class Desk:
         self.totals = DeskCounts()
         self.wanted: Counter[str] = Counter()
         self.ctx: Ctx | None = None          # the feeding run the records belong to
+        self.last_request = clock.now()
+        self.idle_told = False               # "no robot is asking" was told the operator
         self.chooser: ServeRobots | None = None
 
     @property
@@ -144,6 +147,7 @@ class Desk:
                 continue
             self.counts["requests"] += 1
             self.queues.setdefault(item.conn, deque()).append(item)
+            self.last_request = now
         answered = 0
         for conn, queue in list(self.queues.items()):
             while queue:
@@ -325,6 +329,7 @@ class Desk:
             values["types"] = ",".join(ctx.scenario.parts)
         for k in ("placed", "missed", "expired"):
             values[k] = int(self.counts[k])
+        values["wanted"] = int(sum(self.wanted.values()))
         return status_line(values)
 
     def _expire(self, now: float) -> None:
@@ -356,6 +361,7 @@ class ServeRobots(NextPart):
         super().__init__(name, ctx)
         self.desk = desk
         self.v_mm_s = 0.0
+        self.hinted: float | None = None
 
     def initialise(self) -> None:
         self.desk.ctx, self.desk.chooser = self.ctx, self
@@ -367,9 +373,30 @@ class ServeRobots(NextPart):
     def update(self) -> Status:
         self.desk.ctx, self.desk.chooser = self.ctx, self
         self.desk.serve()
+        self._watch_robots()
         n = len(self.desk.handed)
         self.feedback_message = f"{n} part(s) with robots, {self.desk.waiting} waiting"
         return Status.RUNNING
+
+    def _watch_robots(self) -> None:
+        """Parts are waiting and no robot has asked for ``ROBOT_IDLE_S``: a fault event for
+        the operator (the cell feeds on; the parts recirculate), once, and a recovery
+        event when a robot asks again."""
+        desk, stats, now = self.desk, self.ctx.stats, self.ctx.now()
+        quiet = now - desk.last_request
+        if desk.idle_told and (quiet < ROBOT_IDLE_S or desk.queues):
+            desk.idle_told = False
+            stats.recoveries["robot_idle"] += 1
+            stats.emit(now, "recovered", kind="robot_idle", attempts=0)
+        elif not desk.idle_told and quiet >= ROBOT_IDLE_S and len(self.ctx.queue) \
+                and not desk.queues and not desk.handed:
+            desk.idle_told = True
+            stats.faults["robot_idle"] += 1
+            stats.emit(now, "fault", kind="robot_idle",
+                       message=f"no robot has asked for a part for {quiet:.0f} s")
+        elif not desk.idle_told and self.hinted != desk.last_request:
+            self.hinted = desk.last_request           # one hint per quiet spell
+            self.ctx.clock.wake_at(desk.last_request + ROBOT_IDLE_S)
 
     def enter_s(self, part: Part) -> float:
         """Seconds until the part's grip point is inside the robot's reach (0: it is)."""
