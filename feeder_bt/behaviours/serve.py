@@ -210,8 +210,10 @@ class Desk:
         self.handed[part.id] = Handed(part, item.conn, now, until)
         self.clock.wake_at(until)
         self.counts["handed_out"] += 1
-        if self.wanted[part.type] > 0:
-            self.wanted[part.type] -= 1
+        for key in (part.type, "*"):               # the announced demand, served
+            if self.wanted[key] > 0:
+                self.wanted[key] -= 1
+                break
         return offer.line()
 
     def _record(self, req: Request, conn: Hashable) -> tuple[Handed | None, str | None]:
