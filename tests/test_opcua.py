@@ -299,3 +299,20 @@ def test_option_mistakes_are_one_line(tmp_path):
     with pytest.raises(FeederError, match="no users"):
         run_job(RunOptions(**base, plant=PlantOptions(
             opcua="127.0.0.1:0", opcua_users=str(tmp_path / "nobody.json"))))
+
+
+def test_a_user_removed_while_logged_in_can_no_longer_command(live):
+    users = UsersFile(live.ua.users.path)
+
+    async def go():
+        async with client(live.url, BOB) as bob:
+            idx, b = await cell_node(bob)
+            assert await b.call_method(f"{idx}:TakeControl") == "you have control"
+            users.remove("bob")
+            try:
+                with pytest.raises(BadUserAccessDenied):
+                    await b.call_method(f"{idx}:Start")
+                assert live.ua.control.holder is None      # and control went with him
+            finally:
+                users.add(*BOB)
+    asyncio.run(go())

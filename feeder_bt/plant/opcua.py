@@ -391,6 +391,10 @@ class CellUaServer:
         if ua_session is None or ua_session.user is None or not ua_session.user.name:
             return None
         s = self.sessions.get(id(ua_session))
+        if not self.users.exists(ua_session.user.name):     # removed since the login
+            if s is not None:
+                self.control.drop(s.token)
+            return None
         if s is None:
             s = self.sessions[id(ua_session)] = Session(
                 token=str(ua_session.session_id), user=ua_session.user.name, ip="",
