@@ -384,7 +384,7 @@ def test_within_hands_out_only_parts_in_reach_by_then():
     s.close()
 
 
-def test_quit_and_over_long_lines_close_the_connection():
+def test_quit_and_over_long_lines_close_the_connection(capsys):
     import socket
 
     s = Serving(seed=1)
@@ -406,6 +406,13 @@ def test_quit_and_over_long_lines_close_the_connection():
             f.write(b"PART " + b"x" * 400 + b"\n")
             f.flush()
             assert f.readline().startswith(b"ERR line longer than") and f.readline() == b""
+        # the reference client by hand: one reply per request, refusals as they come
+        from feeder_bt.plant.client import main
+        assert main([f"{host}:{port}", "help", "PICKED 12345", "STATUS", "QUIT"]) == 0
+        out = capsys.readouterr().out.splitlines()
+        assert out[0].startswith("OK HELP PART") and out[1].startswith("ERR PICKED 12345")
+        assert out[2].startswith("OK STATUS state=STOPPED") and out[3] == "OK BYE"
+        assert main([f"{host}:1"]) == 1 and "cannot connect" in capsys.readouterr().err
     finally:
         done.set()
         thread.join()

@@ -232,3 +232,44 @@ class PartClient:
 
     def close(self) -> None:
         self.link.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m feeder_bt.plant.client [HOST:]PORT [REQUEST ...]``: send each request (or
+    each line of standard input) and print each reply — a robot's side, by hand."""
+    import sys
+
+    from .adapters import parse_hostport
+    args = sys.argv[1:] if argv is None else argv
+    if not args or args[0] in ("-h", "--help"):
+        print(main.__doc__)
+        return 0 if args else 2
+    try:
+        host, port = parse_hostport(args[0], 7600, "part server")
+        with PartClient.connect(host, port) as client:
+            lines = args[1:] or (line.strip() for line in sys.stdin)
+            for line in lines:
+                if not line:
+                    continue
+                wait = 0.0
+                words = line.split()
+                if words[0].upper() == "PART" and "WAIT" in (w.upper() for w in words):
+                    i = [w.upper() for w in words].index("WAIT")
+                    wait = float(words[i + 1]) if i + 1 < len(words) else 0.0
+                client.submit(line)
+                got = client.poll(client.timeout + wait)
+                if got is None:
+                    raise PartServerError(f"no reply to {words[0]}")
+                kind, fields = got
+                print("ERR " + fields[0] if kind == "ERR" else " ".join(["OK", kind, *fields]),
+                      flush=True)
+                if kind == "BYE":
+                    break
+    except (FeederError, ValueError) as e:
+        print(f"feeder part client: {e}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
