@@ -231,8 +231,8 @@ def test_a_robot_over_tcp_gets_parts_and_is_refused_what_is_not_its_own():
     s = Serving(seed=1)
     s.program.kill()                        # no simulated robot here: the test is the robot
     s.start()
-    s.run(60.0, stop=lambda: s.cell.ctx is not None and len(s.cell.ctx.queue) >= 3)
-    assert len(s.cell.ctx.queue) >= 3
+    s.run(80.0, stop=lambda: s.cell.ctx is not None and len(s.cell.ctx.queue) >= 4)
+    assert len(s.cell.ctx.queue) >= 4
     server = PartServer(s.desk, "127.0.0.1", 0)
     host, port = server.start().split(":")
     done = threading.Event()
@@ -265,9 +265,18 @@ def test_a_robot_over_tcp_gets_parts_and_is_refused_what_is_not_its_own():
             assert again is not None
             robot.missed(again.id, "nothing under the gripper")
             taken = other.part()
-            assert taken is not None
-        # ``other`` went away holding an offer and said nothing about it
-        assert s.desk.counts["missed"] == 1 and s.desk.counts["released"] == 1
+            kept = other.part()
+            assert taken is not None and kept is not None
+            with pytest.raises(PartServerError, match="handed to another robot"):
+                robot.missed(kept.id)             # ``other`` is still connected
+        # ``other`` went away holding two offers; it reconnects and reports one of them
+        for _ in range(1000):                    # the server notices the hang-ups
+            if not server.server.robots:
+                break
+            threading.Event().wait(0.01)
+        with PartClient.connect(host, int(port)) as back:
+            back.missed(kept.id, "lost it when the program stopped")
+        assert s.desk.counts["missed"] == 2 and s.desk.counts["released"] == 1
     finally:
         done.set()
         thread.join()

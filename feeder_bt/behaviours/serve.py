@@ -123,6 +123,8 @@ class Desk:
         self.last_request = clock.now()
         self.idle_told = False               # "no robot is asking" was told the operator
         self.chooser: ServeRobots | None = None
+        # is a robot's connection still open? (the TCP server knows; in process: yes)
+        self.alive: Callable[[Hashable], bool] = lambda conn: True
 
     @property
     def counts(self) -> Counter:
@@ -223,15 +225,27 @@ class Desk:
         rec = self.handed.get(pid)
         if rec is None:
             late = self.expired.get(pid)
-            if late is not None and late.owner == conn:
+            if late is not None and self._owns(late, conn):
                 return late, None
             self.counts["refused"] += 1
             return None, (f"ERR {req.command} {pid}: part {pid} was not handed to a robot "
                           "(or was already reported)")
-        if rec.owner != conn:
+        if not self._owns(rec, conn):
             self.counts["refused"] += 1
             return None, f"ERR {req.command} {pid}: part {pid} was handed to another robot"
         return rec, None
+
+    def _owns(self, rec: Handed, conn: Hashable) -> bool:
+        """The robot that took the part, on its connection; or the same host on a new
+        connection once the old one has closed (a robot that reconnected after a crash
+        reports what it did)."""
+        if rec.owner == conn:
+            return True
+        host = _host(conn)
+        if host is not None and host == _host(rec.owner) and not self.alive(rec.owner):
+            rec.owner = conn
+            return True
+        return False
 
     def _answer(self, item: Pending) -> str:
         req = item.request
@@ -252,7 +266,7 @@ class Desk:
         now = self.clock.now()
         late = pid not in self.handed
         if late and cmd in ("PICKED", "PLACED"):       # expired, then reported after all
-            self.counts["expired"] -= 1
+            self.counts["held_expired" if rec.picked else "expired"] -= 1
             self.counts["late_reports"] += 1
             del self.expired[pid]
             self.handed[pid] = rec
@@ -350,6 +364,13 @@ class Desk:
                                     robot=str(rec.owner), picked=held,
                                     message=("reported picked, never placed" if held else
                                              "handed out, never reported: recirculated"))
+
+
+def _host(conn: Hashable) -> str | None:
+    """The peer address of a TCP robot's connection name (``robot-N@HOST:PORT``)."""
+    if not isinstance(conn, str) or "@" not in conn:
+        return None
+    return conn.split("@", 1)[1].rpartition(":")[0] or None
 
 
 class ServeRobots(NextPart):

@@ -151,6 +151,7 @@ class PartServer:
     def __init__(self, desk: Desk, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> None:
         self.desk = desk
         self.server = _Server((host, port), desk)
+        desk.alive = lambda conn: conn in self.server.robots
         self.thread = threading.Thread(target=self.server.serve_forever,
                                        kwargs={"poll_interval": POLL_S},
                                        name="part-server", daemon=True)
