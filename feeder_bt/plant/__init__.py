@@ -6,7 +6,7 @@
 - ``client``: the reference robot client; ``sim_robot``: a robot program on the simulated
   robot, written against it;
 - ``opcua``: the cell as an OPC UA server (``feeder run --opcua``), commanded under the
-  dashboard's rules;
+  dashboard's rules (``ua_security``: its users and the session hooks);
 - ``adapters``: what one run opens, pumps after each tick and closes.
 
 Each is a thin translation onto the cell's own operations. This module imports nothing

@@ -21,8 +21,6 @@ unsecured endpoint, on a loopback address only, for tests.
 from __future__ import annotations
 
 import asyncio
-import contextvars
-import ipaddress
 import logging
 import socket
 import threading
@@ -32,95 +30,24 @@ from typing import Any
 
 from asyncua import Server, ua
 from asyncua.crypto.cert_gen import setup_self_signed_certificate
-from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
-from asyncua.server.user_managers import UserManager
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from ..cell import Cell
 from ..errors import FeederError
 from ..ui.bridge import Bridge, Outcome
-from ..ui.control import Control, LoginLimiter, Session
+from ..ui.control import Control, Session
 from ..ui.operate import SPEED_KEYS, CellOps
 from ..ui.status import CellPanel
-from ..ui.users import UsersFile, default_path
+from ..ui.users import UsersFile
 from .adapters import PlantOptions, parse_hostport
+from .ua_security import CLOSED, SESSION, UaUsers, default_pki, install_session_hooks, is_loopback
 
 NAMESPACE = "urn:feeder_bt"
 DEFAULT_PORT = 4840
 COMMAND_TIMEOUT_S = 10.0
 SEVERITY = {"fault": 800, "state": 300, "recovered": 400, "operator": 200}
 EVENT_KINDS = frozenset(SEVERITY)
-
-# --------------------------------------------------------------------------- who calls
-# asyncua hands a method callback only the object and the arguments. The session making
-# the call is put in a context variable around InternalSession.call (the callback runs in
-# the same task), and InternalSession.close_session tells us when a session ends so that
-# its control is released.
-_SESSION: contextvars.ContextVar[InternalSession | None] = contextvars.ContextVar(
-    "feeder_ua_session", default=None)
-_CLOSED: dict[int, Any] = {}            # id(InternalServer) -> callback(session)
-
-
-def _install_session_hooks() -> None:
-    if getattr(InternalSession, "_feeder_hooks", False):
-        return
-    call, close = InternalSession.call, InternalSession.close_session
-
-    async def call_with_session(self, params):
-        token = _SESSION.set(self)
-        try:
-            return await call(self, params)
-        finally:
-            _SESSION.reset(token)
-
-    async def close_and_tell(self, delete_subs: bool = True) -> None:
-        await close(self, delete_subs)
-        fn = _CLOSED.get(id(self.iserver))
-        if fn is not None:
-            fn(self)
-
-    InternalSession.call = call_with_session
-    InternalSession.close_session = close_and_tell
-    InternalSession._feeder_hooks = True
-
-
-class _Users(UserManager):
-    """User name and password against the users file; failures slow the next try down."""
-
-    def __init__(self, users: UsersFile) -> None:
-        self.users = users
-        self.limiter = LoginLimiter()
-
-    def get_user(self, iserver, username: str | None = None, password: str | None = None,
-                 certificate: Any = None) -> User | None:
-        if not username or password is None:
-            return None                    # anonymous, or a certificate alone: refused
-        keys = (f"user:{username}",)
-        if self.limiter.locked_for(keys) > 0 or not self.limiter.begin(keys):
-            return None
-        try:
-            ok = self.users.verify(username, password)
-        finally:
-            self.limiter.end(keys)
-        if not ok:
-            self.limiter.failure(keys)
-            return None
-        self.limiter.success(keys)
-        return User(role=UserRole.User, name=username)
-
-
-def default_pki() -> Path:
-    """Beside the users file: ``$XDG_CONFIG_HOME/feeder_bt/opcua``."""
-    return default_path().parent / "opcua"
-
-
-def _is_loopback(host: str) -> bool:
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return host == "localhost"
-
 
 # status key -> (browse name, variant type)
 VARIABLES: dict[str, tuple[str, ua.VariantType]] = {
@@ -147,7 +74,7 @@ class CellUaServer:
                  cell_path: str | None = None) -> None:
         self.cell, self.opts = cell, opts
         self.host, self.port = parse_hostport(opts.opcua or "", DEFAULT_PORT, "--opcua")
-        if opts.opcua_insecure and not _is_loopback(self.host):
+        if opts.opcua_insecure and not is_loopback(self.host):
             raise FeederError(f"--opcua-insecure: an unsecured endpoint is for loopback only "
                               f"(127.0.0.1), not {self.host}")
         self.users = UsersFile(opts.opcua_users)
@@ -193,7 +120,7 @@ class CellUaServer:
     def start(self) -> str:
         """Serve on a thread of its own; returns once the endpoint listens."""
         logging.getLogger("asyncua").setLevel(logging.CRITICAL)   # one-line errors
-        _install_session_hooks()
+        install_session_hooks()
         self.bridge.publish()
         self.thread = threading.Thread(target=self._main, name="opcua", daemon=True)
         self.thread.start()
@@ -213,9 +140,9 @@ class CellUaServer:
     async def _serve(self) -> None:
         self.loop = asyncio.get_running_loop()
         self.stopping, self.dirty = asyncio.Event(), asyncio.Event()
-        server = self.server = Server(user_manager=_Users(self.users))
+        server = self.server = Server(user_manager=UaUsers(self.users))
         await server.init()
-        _CLOSED[id(server.iserver)] = self._session_closed
+        CLOSED[id(server.iserver)] = self._session_closed
         server.set_endpoint(self.url)
         server.set_server_name(f"feeder_bt cell {self.cell.cell.name}")
         await server.set_application_uri(f"{NAMESPACE}:cell:{self.cell.cell.name}")
@@ -240,7 +167,7 @@ class CellUaServer:
         publisher.cancel()
         self.bridge.unsubscribe(self._published)
         await server.stop()
-        _CLOSED.pop(id(server.iserver), None)
+        CLOSED.pop(id(server.iserver), None)
 
     async def _certificate(self, server: Server) -> None:
         """The server's key and self-signed certificate, made on first start."""
@@ -387,7 +314,7 @@ class CellUaServer:
 
     # ------------------------------------------------------------------ sessions, control
     def _session(self) -> Session | None:
-        ua_session = _SESSION.get()
+        ua_session = SESSION.get()
         if ua_session is None or ua_session.user is None or not ua_session.user.name:
             return None
         s = self.sessions.get(id(ua_session))
