@@ -67,6 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
     add_ui_options(r)
+    from .run import add_plant_options
+    add_plant_options(r)
 
     t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
     t.add_argument("scenario")
@@ -88,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from .run import RunOptions, run_job
+    from .run import RunOptions, plant_options, run_job
     if args.fast and args.hal != "sim":
         raise FeederError("--fast needs the simulated cell (--hal sim): real hardware runs "
                           "in real time")
@@ -96,7 +98,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
-                                faults=args.faults))
+                                faults=args.faults, plant=plant_options(args)))
     p = report["parts"]
     print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
           f"({report['wall_seconds']:.1f} s wall): retrieved "

@@ -42,6 +42,7 @@ class RunOptions:
     users: str | None = None       # the UI's users file (default: feeder_bt.ui.users)
     start: bool | None = None      # start feeding at once; None: yes, unless --ui
     faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
+    plant: Any = None              # PlantOptions: --part-server / --opcua (docs/plant.md)
 
 
 def add_db_options(parser: argparse.ArgumentParser) -> None:
@@ -70,6 +71,62 @@ def add_ui_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start", action="store_true", default=None,
                         help="with --ui: start feeding at once instead of waiting for an "
                              "operator")
+
+
+# ------------------------------------------------------------------ plant adapters
+def add_plant_options(parser: argparse.ArgumentParser) -> None:
+    """``--part-server [HOST:]PORT`` (docs/part-server.md) and ``--opcua [HOST:]PORT``
+    (docs/plant.md) for ``feeder run``."""
+    parser.add_argument("--part-server", metavar="[HOST:]PORT", nargs="?", const="7600",
+                        help="serve parts to robots over TCP (default 127.0.0.1:7600); on "
+                             "the simulated cell its robot runs a program using the "
+                             "reference client")
+    parser.add_argument("--no-sim-robot", dest="sim_robot", action="store_false",
+                        help="with --part-server on the simulated cell: no simulated robot "
+                             "program (an outside client only talks to the server)")
+    parser.add_argument("--opcua", metavar="[HOST:]PORT", nargs="?", const="4840",
+                        help="serve the cell over OPC UA at opc.tcp://HOST:PORT/feeder "
+                             "(default 127.0.0.1:4840)")
+    parser.add_argument("--opcua-insecure", action="store_true",
+                        help="with --opcua: also an unsecured endpoint (loopback only; "
+                             "for tests)")
+    parser.add_argument("--opcua-pki", metavar="DIR",
+                        help="with --opcua: where the server's certificate is kept (made "
+                             "on first start)")
+
+
+def plant_options(args: argparse.Namespace) -> Any:
+    """The ``PlantOptions`` of parsed ``feeder run`` arguments (None: no adapter)."""
+    if not getattr(args, "part_server", None) and not getattr(args, "opcua", None):
+        return None
+    from .plant.adapters import PlantOptions
+    return PlantOptions(part_server=args.part_server, sim_robot=args.sim_robot,
+                        opcua=args.opcua, opcua_users=args.users,
+                        opcua_insecure=args.opcua_insecure, opcua_pki=args.opcua_pki)
+
+
+def _check_opcua(opts: RunOptions) -> None:
+    """Before the HAL opens: the users file names somebody, and one control token."""
+    if opts.ui:
+        raise FeederError("--ui and --opcua each keep their own control token: serve one "
+                          "of them per run, so that one user at a time controls the cell")
+    from .ui.app import check_users
+    check_users(opts.plant.opcua_users)
+
+
+def _open_plant(opts: RunOptions, cell: Cell, scenario: Scenario):
+    """The part server / OPC UA adapters of this run, opened (None: none asked for)."""
+    if opts.plant is None:
+        return None
+    from .plant.adapters import PlantAdapters
+    plant = PlantAdapters(cell, opts.plant, opts.scenario, opts.cell or scenario.cell_path,
+                          fast=opts.fast)
+    try:
+        plant.open()
+    except BaseException:       # e.g. the OPC UA port is taken: the part server closes too
+        plant.close()
+        raise
+    return plant
 
 
 class _FeedSpan:
@@ -190,13 +247,18 @@ class _StopRequest:
 def run_job(opts: RunOptions) -> dict[str, Any]:
     if opts.ui and opts.fast:
         raise FeederError("--ui serves operators in real time: drop --fast")
+    opcua = bool(opts.plant is not None and opts.plant.opcua)
+    if opcua and opts.fast:
+        raise FeederError("--opcua serves a plant in real time: drop --fast")
     # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
-    duration = 60.0 if opts.duration is None and not opts.ui else opts.duration
+    duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
     if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
         from .ui.app import check_users
         check_users(opts.users)
+    if opcua:
+        _check_opcua(opts)
     plan = None
     if opts.faults:             # like a bad --db: a bad plan fails before the HAL opens
         from .scenario.faults import load_fault_plan
@@ -234,7 +296,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     t_start = clock.now()
     t_stop = t_start
     ui = None
-    feed = _FeedSpan(cell) if opts.ui else None
+    plant = None
+    feed = _FeedSpan(cell) if opts.ui or (opts.plant and opts.plant.opcua) else None
     try:
         cell.load(scenario)
         if opts.ui:             # commands run and snapshots are taken in the tick thread
@@ -246,11 +309,15 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             if isinstance(show, _UiLiveView):
                 show.url = url
             every = _chain(every, ui.pump)
+        plant = _open_plant(opts, cell, scenario)
+        if plant is not None:
+            every = _chain(every, plant.pump)
         if start:
             cell.start()
         try:
+            operated = bool(ui) or (plant is not None and plant.opcua is not None)
             ticker.run(until=None if duration is None else t_start + duration,
-                       stop=(lambda: request.requested or broken()) if ui else
+                       stop=(lambda: request.requested or broken()) if operated else
                        (lambda: request.requested or broken()
                         or cell.state is CellState.STOPPED
                         or (cell.state is CellState.FAULT and not _operator_resets(cell, plan))),
@@ -261,12 +328,14 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         t_stop = clock.now()
         if ui:
             ui.closing()        # operators see the clean-up but can no longer command
+        if plant is not None:
+            plant.closing()
         cell.stop()
         if isinstance(clock, SimClock):   # no need to watch the clean-up in real time
             ticker.fast, ticker.skip_idle = True, opts.skip_idle
         ticker.run(until=clock.now() + STOP_GRACE_S,
                    stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT),
-                   every=ui.pump if ui else None)
+                   every=_chain(ui.pump if ui else None, plant.pump if plant else None))
         if show:
             show.update(force=True)
             if isinstance(show, Progress):
@@ -276,6 +345,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             signal.signal(sig, handler)
         if ui:
             ui.close()
+        if plant is not None:
+            plant.close()
         hal.close()
         if log:
             log.flush()               # even when interrupted: nothing buffered is lost
@@ -290,6 +361,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         report["fault_plan"] = str(opts.faults)
     if ui:
         report["operator"] = ui.report()
+    if plant is not None:
+        report.update(plant.report())
     if opts.report:
         Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
         write_report(report, opts.report)

@@ -1,0 +1,14 @@
+"""Plant integration: the cell's outer adapters beside the operator UI (``ui/``).
+
+- ``part_server``: robots of any brand pull parts from the cell over a line-based TCP
+  protocol (``feeder run --part-server``; the protocol is ``feeder_bt.part_protocol``,
+  the server's side of the exchange is ``behaviours/serve.py`` and ``trees/serve.py``);
+- ``client``: the reference robot client; ``sim_robot``: a robot program on the simulated
+  robot, written against it;
+- ``opcua``: the cell as an OPC UA server (``feeder run --opcua``), commanded under the
+  dashboard's rules (``ua_security``: its users and the session hooks);
+- ``adapters``: what one run opens, pumps after each tick and closes.
+
+Each is a thin translation onto the cell's own operations. This module imports nothing
+heavy, so the command line can parse its options without loading asyncua.
+"""

@@ -1,0 +1,126 @@
+"""The plant adapters of one run (``feeder run --part-server`` / ``--opcua``), put together.
+
+run.py opens them after the scenario is loaded, calls ``pump()`` after every tick (on the
+tick thread: the desk answers robots while the cell is not feeding, the simulated robot
+program takes its next step, the OPC UA server's commands run and its variables are
+published) and ``close()`` at the end.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from typing import Any
+
+from ..behaviours.serve import Desk
+from ..cell import Cell
+from ..clock import SimClock
+from ..errors import FeederError
+
+
+@dataclass
+class PlantOptions:
+    part_server: str | None = None      # "[HOST:]PORT"
+    sim_robot: bool = True              # on the simulated cell: drive its robot through
+                                        # the reference client
+    pick_grace_s: float = 5.0
+    opcua: str | None = None            # "[HOST:]PORT"
+    opcua_users: str | None = None
+    opcua_insecure: bool = False        # an unsecured endpoint too (loopback only)
+    opcua_pki: str | None = None
+
+
+def parse_hostport(text: str, default_port: int, what: str) -> tuple[str, int]:
+    """``[HOST:]PORT`` (``PORT`` alone: loopback) to (host, port); one-line error."""
+    text = text.strip()
+    host, sep, port_text = text.rpartition(":")
+    if not sep:
+        host, port_text = "127.0.0.1", text
+    host = host.strip("[]") or "127.0.0.1"
+    try:
+        port = int(port_text) if port_text else default_port
+    except ValueError:
+        raise FeederError(f"{what}: expected [HOST:]PORT, got {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise FeederError(f"{what}: port must be 0..65535, got {port}")
+    return host, port
+
+
+class PlantAdapters:
+    """Whatever of the part server, the simulated robot and OPC UA this run serves."""
+
+    def __init__(self, cell: Cell, opts: PlantOptions, scenario_path: str | None = None,
+                 cell_path: str | None = None, fast: bool = False) -> None:
+        self.cell, self.opts, self.fast = cell, opts, fast
+        self.desk: Desk | None = None
+        self.server = None
+        self.program = None
+        self.opcua = None
+        self.scenario_path, self.cell_path = scenario_path, cell_path
+
+    def open(self) -> None:
+        cell, opts = self.cell, self.opts
+        if opts.part_server:
+            from .part_server import DEFAULT_PORT, PartServer, install
+            host, port = parse_hostport(opts.part_server, DEFAULT_PORT, "--part-server")
+            self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
+            install(cell, self.desk)
+            try:
+                self.server = PartServer(self.desk, host, port)
+                where = self.server.start()
+            except OSError as e:
+                raise FeederError(f"--part-server {opts.part_server}: {e.strerror or e}") \
+                    from None
+            print(f"part server: {where}", file=sys.stderr, flush=True)
+            if opts.sim_robot and getattr(cell.hal, "world", None) is not None:
+                self.program = self._sim_robot(where)
+        if opts.opcua:
+            from .opcua import CellUaServer
+            self.opcua = CellUaServer(cell, opts, self.scenario_path, self.cell_path)
+            url = self.opcua.start()
+            print(f"OPC UA: {url}", file=sys.stderr, flush=True)
+
+    def _sim_robot(self, where: str):
+        """The simulated robot's program: over TCP in real time, lock-step in a fast run
+        (a socket's timing would make a virtual-time run depend on the machine)."""
+        from .client import LoopLink, PartClient, TcpLink
+        from .sim_robot import SimRobotProgram
+        cell = self.cell
+        assert self.desk is not None and cell.scenario is not None
+        if isinstance(cell.clock, SimClock) and self.fast:
+            link = LoopLink(self.desk, cell.clock)
+        else:
+            host, _, port = where.rpartition(":")
+            link = TcpLink(host, int(port))
+        return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
+
+    def pump(self) -> None:
+        """After each tick, on the tick thread."""
+        if self.program is not None:
+            self.program.step()
+        if self.desk is not None:
+            self.desk.serve_idle()
+        if self.opcua is not None:
+            self.opcua.pump()
+
+    def closing(self) -> None:
+        if self.opcua is not None:
+            self.opcua.closing()
+
+    def close(self) -> None:
+        if self.program is not None:
+            self.program.kill()
+        if self.server is not None:
+            self.server.close()
+        if self.opcua is not None:
+            self.opcua.close()
+
+    def report(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.server is not None:
+            out["part_server"] = self.server.report()
+            if self.program is not None:
+                out["part_server"]["sim_robot"] = dict(self.program.counts)
+        if self.opcua is not None:
+            out["opcua"] = self.opcua.report()
+        return out
