@@ -86,11 +86,13 @@ class _Blob:
     """One contour on its way through the cascade: what has been measured so far."""
 
     __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
-                 "face", "oriented")
+                 "face", "oriented", "holes")
 
     def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
-                 mom: dict[str, float], area_px: float, det: Detection, full: bool) -> None:
+                 mom: dict[str, float], area_px: float, det: Detection, full: bool,
+                 holes: list[np.ndarray] | None = None) -> None:
         self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
+        self.holes = holes                # its hole contours (None: not looked for)
         self.full = full                  # every boundary pixel (else the chain's corners)
         self.box = box                    # bounding box u, v, width, height
         self.mom = mom                    # its moments (cv2.moments)
@@ -221,6 +223,7 @@ class Locator:
         self.parts = parts
         self.calibration = calibration
         self._golden: np.ndarray | None = None
+        self._light = recipe.foreground == "light"   # parts brighter than the belt
         for cls in recipe.classes:
             for name in cls.ranges:
                 if name not in FEATURES:
@@ -237,6 +240,9 @@ class Locator:
                                for cls in recipe.classes for n in cls.ranges) or (
             recipe.orientation == "cut_corner"
             and any(cls.mirrored is not None for cls in recipe.classes))
+        # hole contours are searched for only when a class ranges over them
+        self._want_holes = any(GROUP_OF[n] == GROUP_OF["holes"]
+                               for cls in recipe.classes for n in cls.ranges)
         self._signatures: dict[str, _CornerSignature] = {}
         if recipe.orientation == "cut_corner":
             for cls in recipe.classes:
@@ -271,8 +277,12 @@ class Locator:
         th = self.recipe.threshold
         self._below = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
-            # golden - img > t  <=>  img < golden - t (saturated at 0: never below 0)
-            self._below = cv2.subtract(self._golden, math.floor(th.value))
+            if self._light:
+                # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
+                self._below = cv2.add(self._golden, math.floor(th.value))
+            else:
+                # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
+                self._below = cv2.subtract(self._golden, math.floor(th.value))
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
@@ -293,10 +303,16 @@ class Locator:
         return buf
 
     def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
-        """Dark parts on a bright belt -> bright: the golden image minus the frame."""
+        """The image in which parts are bright: for dark parts the golden image minus the
+        frame (or the inverted frame), for light parts the frame minus the golden image
+        (or the frame itself)."""
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
+            if self._light:
+                return cv2.subtract(img, golden, dst=dst)
             return cv2.subtract(golden, img, dst=dst)
+        if self._light:
+            return img
         return cv2.bitwise_not(img, dst=dst)
 
     def _threshold(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, float | None]:
@@ -308,7 +324,8 @@ class Locator:
         if th.method == "fixed" and self.recipe.golden_image and self._below is not None \
                 and self._below.shape == img.shape:
             # the same mask as subtract-then-threshold, in one pass over the frame
-            return cv2.compare(img, self._below, cv2.CMP_LT, dst=mask), None, float(th.value)
+            return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
+                                dst=mask), None, float(th.value))
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
@@ -322,8 +339,10 @@ class Locator:
         elif th.method == "adaptive":
             level = None
             block = max(3, int(th.block_px) | 1)
+            # OpenCV's meaning of C: foreground where the part-bright image is above its
+            # local mean minus c (so c < 0: that far above the mean)
             cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
-                                  cv2.THRESH_BINARY, block, -th.c, dst=mask)
+                                  cv2.THRESH_BINARY, block, th.c, dst=mask)
         else:
             raise ValueError(f"unknown threshold method {th.method!r}")
         return mask, diff, level
@@ -357,8 +376,14 @@ class Locator:
         return out
 
     def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
+        """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
+        return self._contours_holes(mask, full, holes=False)[0]
+
+    def _contours_holes(self, mask: np.ndarray, full: bool, holes: bool
+                        ) -> tuple[list[np.ndarray], list[list[np.ndarray]] | None]:
         """External contours of the opened and closed ``mask``, in ``findContours``' order
-        (as on the whole frame: by first point, last found first).
+        (as on the whole frame: by first point, last found first), and with ``holes`` each
+        one's hole contours (``RETR_CCOMP``; else None).
 
         The morphology and the contour search run only on ``_rois``: inside each, every
         pixel comes out as on the whole frame, outside them nothing does. The rectangles
@@ -373,13 +398,15 @@ class Locator:
         h, w = mask.shape
         rois = self._rois(mask)
         if not rois:
-            return []
+            return [], ([] if holes else None)
+        mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
         # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
         # the morphology), which also keeps it one pixel clear of its neighbours
         pad = self._margin if morph else 1
-        out: list[tuple[int, np.ndarray]] = []    # (whole frame's raster index of 1st point, c)
+        out: list[tuple[int, np.ndarray, list[np.ndarray]]] = []   # (whole frame's raster
+        # index of the 1st point, contour, its holes)
         srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
         starts: list[int] = []
         shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
@@ -392,9 +419,9 @@ class Locator:
                 top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
                     pad * (u0 == 0), pad * (u1 == w)
                 if morph and not self._mirror:
-                    cs, _ = cv2.findContours(self._morph(src), cv2.RETR_EXTERNAL, chain,
-                                             offset=(u0, v0))
-                    out += [(c.item(1) * w + c.item(0), c) for c in cs]
+                    cs, hier = cv2.findContours(self._morph(src), mode, chain, offset=(u0, v0))
+                    out += [(c.item(1) * w + c.item(0), c, hs)
+                            for c, hs in _with_holes(cs, hier, holes)]
                     continue
                 src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
                 mirrors.append((x, top, bottom, left, right, src.shape))
@@ -418,14 +445,16 @@ class Locator:
                     packed[:, x0:x0 + left] = 0
                 if right:
                     packed[:, x0 + sw - right:x0 + sw] = 0
-            cs, _ = cv2.findContours(packed, cv2.RETR_EXTERNAL, chain)
-            for c in cs:
-                flat = c.view(np.int64)
-                flat += shifts[bisect.bisect_right(starts, c.item(0)) - 1]
-                out.append((c.item(1) * w + c.item(0), c))
+            cs, hier = cv2.findContours(packed, mode, chain)
+            for c, hs in _with_holes(cs, hier, holes):
+                shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
+                for k in (c, *hs):               # a blob's holes lie in its rectangle
+                    flat = k.view(np.int64)
+                    flat += shift
+                out.append((c.item(1) * w + c.item(0), c, hs))
         # the whole frame's findContours lists contours by first point, last found first
         out.sort(key=_first, reverse=True)
-        return [c for _, c in out]
+        return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
 
     # -------------------------------------------------------------- locate
 
@@ -439,7 +468,8 @@ class Locator:
         img = _grey(image)
         mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
-        blobs = self._blobs(self._contours(mask, full), img.shape[:2], all_features, full=full)
+        contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes)
         # classes first; the blobs that need a face wait for one batch of fine outlines
         waiting = [b for b in blobs if not b.det.reason and not self._classify(b)]
         if waiting:
@@ -463,19 +493,20 @@ class Locator:
         classification ("touches border", "too small"); ``part`` is always None.
         """
         img = _grey(image)
-        blobs = self._blobs(self._contours(self._threshold(img)[0], True), img.shape[:2],
-                            all_features=True, full=True)
+        contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
+        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
         return [b.det for b in blobs]
 
     # -------------------------------------------------------------- per blob
 
     def _blobs(self, contours: list[np.ndarray], shape: tuple[int, int], all_features: bool,
-               full: bool = True) -> list[_Blob]:
+               full: bool = True, holes: list[list[np.ndarray]] | None = None) -> list[_Blob]:
         """The contours worth reporting (not specks), measured as far as every blob is:
         area, centroid (mm), the border and size rules; with ``all_features`` every feature
         of every blob, the rejected ones too.
 
         ``full``: the contours have every boundary pixel (else only the chain's corners).
+        ``holes``: each contour's hole contours, if they were looked for.
         The centroids go to mm in one call.
         """
         h, w = shape
@@ -483,7 +514,7 @@ class Locator:
         min_px = self.recipe.min_area_mm2 / s2
         blobs: list[_Blob] = []
         centres = []
-        for c in contours:
+        for i, c in enumerate(contours):
             box = cv2.boundingRect(c)
             if box[2] * box[3] < min_px * 0.5:
                 continue
@@ -501,7 +532,8 @@ class Locator:
             touches = bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
             det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
                             "touches border" if touches else "")
-            blobs.append(_Blob(c, box, mom, area_px, det, full))
+            blobs.append(_Blob(c, box, mom, area_px, det, full,
+                               None if holes is None else holes[i]))
         if not blobs:
             return blobs
         steps = ([len(b.contour) for b in blobs] if full
@@ -537,7 +569,20 @@ class Locator:
         s = self.calibration.mm_per_px
         c, area_px = b.contour, b.area_px
         group = GROUP_OF[name]
-        if group == GROUP_OF["hu1"]:
+        if group == GROUP_OF["holes"]:
+            # A hole contour runs through the blob's pixels around the hole: by Pick's
+            # theorem the hole's pixel count is the polygon's area - boundary pixels / 2 + 1.
+            if b.holes is None:
+                raise RuntimeError("hole features asked of a blob whose holes were not found")
+            s2 = self.calibration.mm2_per_px2
+            steps = (([len(k) for k in b.holes] if b.full else _chain_steps(b.holes))
+                     if b.holes else [])
+            areas = [(abs(cv2.contourArea(k)) - 0.5 * n + 1.0) * s2
+                     for k, n in zip(b.holes, steps, strict=True)]
+            big = [a for a in areas if a >= self.recipe.min_hole_mm2]
+            feats["holes"] = float(len(big))
+            feats["hole_area_mm2"] = float(sum(big))
+        elif group == GROUP_OF["hu1"]:
             # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
             mom = b.mom
             if mom["m00"] != 0:
@@ -636,8 +681,9 @@ class Locator:
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
             g = golden.ravel()[at].astype(np.int16)
-            return np.maximum(g - img.ravel()[at], 0).astype(np.uint8)
-        return 255 - img.ravel()[at]
+            d = img.ravel()[at] - g if self._light else g - img.ravel()[at]
+            return np.maximum(d, 0).astype(np.uint8)
+        return img.ravel()[at] if self._light else 255 - img.ravel()[at]
 
     @staticmethod
     def _principal_angle(mom: dict[str, float]) -> float:
@@ -682,10 +728,29 @@ class Locator:
                 det.angle_deg = angle
                 break
         if chosen is None:
-            det.reason = "no class (face)" if looked else "touching parts / no class"
+            det.reason = "no class (face)" if looked else self._no_class(b)
         else:
             det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
         return True
+
+    def _no_class(self, b: _Blob) -> str:
+        """Why a blob fits no class: the class nearest it by area and the first of that
+        class's ranges it is outside (already measured: the cascade stopped there)."""
+        if not self._checks:
+            return "no class (the recipe has none)"
+        area = b.det.features["area_mm2"]
+
+        def far(item: tuple[VisionClass, list[tuple[str, float, float]]]) -> float:
+            lo, hi = item[0].ranges.get("area_mm2", (area, area))
+            return max(lo - area, area - hi, 0.0) / max(hi, 1e-9)
+
+        cls, checks = min(self._checks, key=far)
+        for name, lo, hi in checks:
+            v = self._feature(b, name)
+            if not lo <= v <= hi:
+                return (f"no class; nearest {cls.part}/{cls.pose}: {name} {v:.4g} not in "
+                        f"[{lo:.4g}, {hi:.4g}]")
+        return f"no class; nearest {cls.part}/{cls.pose}: its face"
 
     def _symmetric_angle(self, b: _Blob) -> float:
         """Angle of a class without a face to tell: its long axis if it has one, else 0."""
@@ -767,8 +832,22 @@ def _full_chain(contour: np.ndarray) -> np.ndarray:
     return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
 
 
-def _first(item: tuple[int, np.ndarray]) -> int:
+def _first(item: tuple) -> int:
     return item[0]
+
+
+def _with_holes(contours: tuple[np.ndarray, ...], hierarchy: np.ndarray | None, holes: bool
+                ) -> list[tuple[np.ndarray, list[np.ndarray]]]:
+    """``findContours``' outer contours, each with its holes' (``RETR_CCOMP``'s two levels:
+    an outer contour's children are its holes; without ``holes``, none)."""
+    if not holes or hierarchy is None:
+        return [(c, []) for c in contours]
+    hier = hierarchy.reshape(-1, 4)
+    kids: dict[int, list[np.ndarray]] = {}
+    for i, parent in enumerate(hier[:, 3].tolist()):
+        if parent >= 0:
+            kids.setdefault(parent, []).append(contours[i])
+    return [(c, kids.get(i, [])) for i, c in enumerate(contours) if hier[i, 3] < 0]
 
 
 def _chain_steps(contours: list[np.ndarray]) -> list[int]:
