@@ -63,6 +63,7 @@ from feeder_bt.scenario.model import (
     Scenario,
     Shape,
     StablePose,
+    TargetSpec,
     Threshold,
     VisionClass,
     VisionRecipe,
@@ -85,6 +86,7 @@ RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline", "shortest_cyc
 THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 FOREGROUNDS: tuple[str, ...] = ("dark", "light")
 LIGHTINGS: tuple[str, ...] = ("backlit", "frontlit")
+TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
 ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
@@ -142,6 +144,7 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (VisionRecipe, "orientation"): ORIENTATION_METHODS,
     (VisionRecipe, "foreground"): FOREGROUNDS,
     (RenderSpec, "lighting"): LIGHTINGS,
+    (TargetSpec, "kind"): TARGET_KINDS,
     (CellSpec, "hal"): CELL_HALS,
     (IoSignal, "dir"): IO_DIRS,
 }
@@ -186,6 +189,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (CameraSpec, "grab_s"): NON_NEGATIVE,
     (CameraSpec, "vision_latency_s"): NON_NEGATIVE,
     (CameraCalibration, "mm_per_px"): POSITIVE,
+    (TargetSpec, "pitch_mm"): POSITIVE,
+    (TargetSpec, "dot_mm"): POSITIVE,
+    (TargetSpec, "marker_mm"): NON_NEGATIVE,
     (RenderSpec, "backlight"): GREY,
     (RenderSpec, "falloff"): Range(0, 1),
     (RenderSpec, "part_grey"): GREY,
@@ -956,6 +962,15 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         raise ctx.error("robot.inner_reach_mm", f"must be < robot.reach_mm "
                                                 f"({_num(r.reach_mm)}), got "
                                                 f"{_num(r.inner_reach_mm)}")
+    t = cell.camera.target
+    if t is not None:
+        if min(t.board) < 2:
+            raise ctx.error("camera.target.board", f"needs at least 2 points per row and 2 "
+                                                   f"rows, got {t.board[0]}x{t.board[1]}")
+        if t.kind == "charuco" and t.marker_mm >= t.pitch_mm:
+            raise ctx.error("camera.target.marker_mm", f"must be < pitch_mm "
+                                                       f"({_num(t.pitch_mm)}), got "
+                                                       f"{_num(t.marker_mm)}")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
         raise ctx.error("encoder.robot_start", f"must be < 2**robot_bits "

@@ -195,6 +195,19 @@ class RenderSpec:
 
 
 @dataclass
+class TargetSpec:
+    """The cell's calibration target (``feeder calibrate camera``; see
+    ``feeder_bt.calibration.targets`` for the kinds and their points)."""
+
+    kind: str = "chessboard"             # chessboard | circles | acircles | charuco
+    board: tuple[int, int] = (8, 12)     # points per row and rows (inner corners, dots)
+    pitch_mm: float = 40.0               # square side; dots' spacing along a row
+    dot_mm: float = 14.0                 # circle grids: dot diameter
+    marker_mm: float = 0.0               # charuco: marker side (0: 0.7 of the square)
+    dictionary: str = "DICT_4X4_250"     # charuco: OpenCV's ArUco dictionary
+
+
+@dataclass
 class CameraSpec:
     width_px: int = 640
     height_px: int = 484
@@ -208,6 +221,7 @@ class CameraSpec:
     # real cell only: "0" (a device index), a stream URL, a folder of images or a video file
     source: str = "0"
     render: RenderSpec = field(default_factory=RenderSpec)
+    target: TargetSpec | None = None     # the calibration target (None: --target's default)
 
 
 @dataclass
