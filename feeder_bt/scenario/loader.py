@@ -720,7 +720,8 @@ def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], holes: list[list[tuple[
     a, cx, cy = _ring_area(pts)
     if not math.isfinite(a) or abs(a) < 1e-9:
         raise ctx.error(ppath, "polygon has no area (points collinear or repeated)")
-    area, sx, sy = abs(a), math.copysign(cx, a), math.copysign(cy, a)
+    sign = 1.0 if a > 0 else -1.0                 # either winding
+    area, sx, sy = abs(a), sign * cx, sign * cy
     for i, hole in enumerate(holes):
         hpath = f"{path}.holes_mm[{i}]"
         if len(hole) < 3:
@@ -732,9 +733,10 @@ def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], holes: list[list[tuple[
             if not _inside(p, pts):
                 raise ctx.error(hpath, f"point [{_num(p[0])}, {_num(p[1])}] is not inside "
                                        f"the polygon's points_mm")
+        hsign = 1.0 if ha > 0 else -1.0
         area -= abs(ha)
-        sx -= math.copysign(hx, ha)
-        sy -= math.copysign(hy, ha)
+        sx -= hsign * hx
+        sy -= hsign * hy
     if area <= 1e-9:
         raise ctx.error(_join(path, "holes_mm"), "the holes leave the polygon no area")
     cx, cy = sx / (6.0 * area), sy / (6.0 * area)
