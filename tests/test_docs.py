@@ -54,7 +54,8 @@ def test_docs_have_examples():
 def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
     args = shlex.split(line)[1:]
-    if args[0] in ("locate", "recipe", "report"):  # they read what `render` / `run --db` wrote
+    if args[0] in ("locate", "recipe", "report") or "--images" in args:
+        # they read what `render` / `run --db` wrote
         cmds = commands()
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
