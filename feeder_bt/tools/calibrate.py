@@ -4,9 +4,12 @@ On the simulated cell (``hal: sim``) each command runs its procedure against the
 simulator: it lays a target under the camera, or moves the robot onto a marker with a
 little touch noise (fixed ``--seed``). The ``--sim-*`` options set the simulator's hidden
 truth (a camera that is not where the cell file says, a belt encoder that is not quite
-``counts_per_mm``, a tool offset) so the procedure can be seen to recover it. On other
-cells the belt and tool procedures need the hardware drivers, which this release does not
-have; ``calibrate camera --image`` works on any cell from saved images of the target.
+``counts_per_mm``, a tool offset) so the procedure can be seen to recover it. With
+``--hal emulated`` (or on a cell whose ``hal`` is ``emulated`` or ``real``) the belt and tool
+procedures run through the Galil and V+ drivers (``calibration.drivers``): against the
+emulators a scripted operator touches the marker; on a real cell the operator jogs the
+robot with the pendant and presses Enter. ``calibrate camera --image`` works on any cell
+from saved images of the target.
 
 The target is the cell's ``camera.target`` unless ``--target``/``--board``/``--square`` (and
 ``--dot``, ``--marker``, ``--dictionary``) say otherwise; ``--no-prior`` trusts the stated
@@ -22,6 +25,7 @@ import datetime
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from ..calibration import (
     DEFAULT_TARGETS,
@@ -37,11 +41,13 @@ from ..calibration import (
 )
 from ..calibration.camera import Target, TargetPose, centred_pose
 from ..calibration.common import CalibrationError
+from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from ..calibration.files import calibration_path, write_calibration_file
 from ..calibration.lens import LensFit, fit_lens
 from ..calibration.targets import parse_board
 from ..clock import SimClock
 from ..errors import FeederError
+from ..jobs import Job
 from ..scenario import load_cell
 from ..scenario.model import CameraCalibration, CellSpec, Scenario, VisionRecipe
 
@@ -91,8 +97,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    metavar=("DX", "DY", "DEG", "PCT"),
                    help="simulated camera's error: origin shift mm, rotation, scale %%")
 
+    def hal_option(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--hal", choices=("sim", "emulated", "real"),
+                        help="run through the simulator (sim), the drivers against the "
+                             "emulators (emulated) or the real cell's drivers (real); "
+                             "default: the cell's `hal`")
+
     b = sub.add_parser("belt", help="belt <-> robot: counts per mm and belt direction")
     common(b)
+    hal_option(b)
     b.add_argument("--noise", type=float, default=0.05, help="touch noise sigma, mm")
     b.add_argument("--sim-counts-per-mm", type=float,
                    help="simulated encoder's true counts per mm (default: the cell's)")
@@ -101,6 +114,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
     t = sub.add_parser("tool", help="tool offset from touches of one point at several angles")
     common(t)
+    hal_option(t)
     t.add_argument("--noise", type=float, default=0.05, help="touch noise sigma, mm")
     t.add_argument("--sim-tool", nargs=2, type=float, default=[0.0, 0.0],
                    metavar=("DX", "DY"), help="simulated tool's true offset, mm")
@@ -112,30 +126,37 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     cell = load_cell(args.cell, calibration_files=False)   # we may be about to write them
     if args.what == "camera":
         return _camera(args, cell)
-    _need_sim(cell, args.what)
+    kind = args.hal or cell.hal
     if args.what == "belt":
-        fit = sim_belt(cell, seed=args.seed, noise_mm=args.noise,
-                       counts_per_mm=args.sim_counts_per_mm, frame_deg=args.sim_frame_deg)
+        if kind == "sim":
+            fit = sim_belt(cell, seed=args.seed, noise_mm=args.noise,
+                           counts_per_mm=args.sim_counts_per_mm, frame_deg=args.sim_frame_deg)
+        else:
+            fit = driver_belt(cell, kind, seed=args.seed, noise_mm=args.noise)
         print(format_belt(fit))
         _write(args, cell, "belt", fit.as_dict())
     else:
-        fit_t = sim_tool(cell, tuple(args.sim_tool), seed=args.seed, noise_mm=args.noise)
+        if kind == "sim":
+            fit_t = sim_tool(cell, tuple(args.sim_tool), seed=args.seed, noise_mm=args.noise)
+        else:
+            fit_t = driver_tool(cell, kind, tuple(args.sim_tool), seed=args.seed,
+                                noise_mm=args.noise)
         print(format_tool(fit_t))
         _write(args, cell, "tool", fit_t.as_dict())
     return 0
 
 
 class HardwareNeeded(FeederError):
-    """The procedure has to move real hardware, and this cell's drivers are not there yet."""
+    """The procedure needs what this cell does not offer (a simulated camera to render)."""
 
     exit_code = 2
 
 
 def _need_sim(cell: CellSpec, what: str) -> None:
     if cell.hal != "sim":
-        raise HardwareNeeded(f"calibrate {what}: cell {cell.name!r} has hal {cell.hal!r}: the "
-                             "real-cell procedure needs the hardware drivers (not yet in this "
-                             "release)")
+        raise HardwareNeeded(f"calibrate {what}: cell {cell.name!r} has hal {cell.hal!r}: "
+                             "photograph the target lying on the belt and give the photo "
+                             "with --image (and its place with --pose)")
 
 
 def camera_target(cell: CellSpec, args: argparse.Namespace) -> Target:
@@ -287,6 +308,66 @@ def sim_tool(cell: CellSpec, tool_offset_mm: tuple[float, float] = (0.0, 0.0), s
         rig = SimToucher(hal.world, hal.robot, tool_offset_mm, noise_mm=noise_mm, seed=seed)
         point = TOOL_POINT_MM
         return tool_procedure(hal, wait, lambda rz: rig.touch(point, rz), angles_deg)
+    finally:
+        hal.close()
+
+
+# ------------------------------------------------------------------------------ drivers
+
+
+def _driver_hal(cell: CellSpec, kind: str, seed: int):
+    """The cell behind its drivers: the emulators (``emulated``) or the real controllers."""
+    from ..hal.factory import make_hal
+
+    empty = Scenario(name="calibration", path=Path("-"), cell_path=Path(cell.path), parts={},
+                     hopper={}, vision=VisionRecipe())
+    hal, _ = make_hal(kind, empty, cell, seed)
+    return hal
+
+
+def driver_belt(cell: CellSpec, kind: str, seed: int = 1, noise_mm: float = 0.05,
+                ask=input, operator: bool | None = None) -> BeltFit:
+    """Belt calibration through the drivers (see ``calibration.drivers``); ``operator``: an
+    operator at the terminal touches (default: on a real cell), else the emulated plant's
+    scripted one."""
+    hal = _driver_hal(cell, kind, seed)
+    try:
+        if not (kind == "real" if operator is None else operator):
+            rig = PlantToucher(hal.extras["plant"], hal.robot, noise_mm=noise_mm, seed=seed)
+            rig.put_marker(*BELT_MARKER_MM)
+            touch = rig.touch_marker
+        else:
+            print("Stick a marker on the belt within the robot's reach. At each prompt jog "
+                  "the tool tip onto the marker with the pendant; the belt then advances "
+                  "80 mm and the robot goes to its safe pose.")
+            def touch() -> Job:
+                return OperatorTouch("tool tip on the marker? press Enter ", ask)
+        return belt_procedure(hal, real_waiter(), touch, robot_bits=cell.encoder.robot_bits,
+                              settle=refresh(hal))
+    finally:
+        hal.close()
+
+
+def driver_tool(cell: CellSpec, kind: str, tool_offset_mm: tuple[float, float] = (0.0, 0.0),
+                seed: int = 1, noise_mm: float = 0.05, ask=input,
+                angles_deg=(-90.0, -30.0, 30.0, 90.0), operator: bool | None = None
+                ) -> ToolFit:
+    """Tool calibration through the drivers (see ``calibration.drivers``; ``operator`` as
+    for ``driver_belt``)."""
+    hal = _driver_hal(cell, kind, seed)
+    try:
+        if not (kind == "real" if operator is None else operator):
+            rig = PlantToucher(hal.extras["plant"], hal.robot, tool_offset_mm,
+                               noise_mm=noise_mm, seed=seed)
+            def touch(rz: float) -> Job:
+                return rig.touch(np.array(TOOL_POINT_MM), rz)
+        else:
+            print("Fix a pointed marker within the robot's reach. At each prompt jog the "
+                  "tool tip onto it with the tool turned to the angle asked.")
+            def touch(rz: float) -> Job:
+                return OperatorTouch(f"tool turned {rz:g} deg, tip on the point? press Enter ",
+                                     ask)
+        return tool_procedure(hal, real_waiter(), touch, angles_deg, settle=refresh(hal))
     finally:
         hal.close()
 
