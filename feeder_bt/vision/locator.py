@@ -1,15 +1,18 @@
 """The OpenCV locator: a grey image -> poses of singulated parts in the belt frame.
 
 It sees only pixels, the cell's calibration and the recipe — never ground truth.
-Pipeline: golden-image subtraction (dark parts become bright), threshold, morphology,
-external contours; blobs touching the image border or smaller than ``min_area_mm2`` are
-rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
+Pipeline: the image in which parts are bright (``foreground: dark``: the golden image minus
+the frame, or the inverted frame; ``light``: the frame minus the golden image, or the
+frame), threshold, morphology, external contours (with their holes, ``RETR_CCOMP``, when a
+class ranges over ``holes`` or ``hole_area_mm2``); blobs touching the image border or
+smaller than ``min_area_mm2`` are rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
 calibration, corrected for pixelisation so that they are close to the physical value (a
 50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
 names the part and pose. Position is the blob's area centroid, which is the part frame's
 origin (``geometry``).
 Merged (touching) parts fall outside every class and are rejected, so they are never
-picked.
+picked; a blob that fits no class is rejected with the class nearest it by area and the
+first of that class's ranges it is outside (``Locator._no_class``).
 
 Features are measured as a cascade, cheapest first (``features.GROUPS``): every blob gets
 its area and centroid from the contour's moments; a class's other features are measured
@@ -23,7 +26,8 @@ Recipe semantics worth knowing:
 
 * ``threshold.method``: ``fixed`` (``value`` grey levels of difference), ``otsu`` (Otsu's
   level, but never below ``value``, so an empty belt does not turn noise into blobs), or
-  ``adaptive`` (``block_px``, ``c`` above the local mean).
+  ``adaptive`` (``block_px``; foreground above the local mean minus ``c``: OpenCV's
+  ``C``, so ``c`` < 0).
 * ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
   (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
   which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
@@ -215,7 +219,7 @@ def _angle(v: tuple[float, float]) -> float:
 
 
 class Locator:
-    """Finds parts in backlit images with one recipe; see the module docstring."""
+    """Finds parts in images with one recipe; see the module docstring."""
 
     def __init__(self, recipe: VisionRecipe, parts: dict[str, PartSpec],
                  calibration: Calibration) -> None:
