@@ -52,10 +52,19 @@ import numpy as np
 from ..geometry import pose_outline, wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .calibration import Calibration
+from .chains import WINDOW as _WINDOW  # noqa: F401  (tests read it here)
+from .chains import _chain_steps, _first, _full_chain, _runs, _smooth_length, _with_holes
+from .corners import (
+    _angle,
+    _corner_signature,
+    _corner_signatures,  # noqa: F401  (tests read it here)
+    _CornerSignature,
+    _cross,
+    _densify,
+)
 from .features import FEATURES, GROUP_OF
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
-_WINDOW = 5                    # points in the moving average of the smoothed perimeter
 # the four 4-neighbours of a pixel (u, v): where the outline may cross between them
 _DU = np.array([1, -1, 0, 0])
 _DV = np.array([0, 0, 1, -1])
@@ -107,112 +116,6 @@ class _Blob:
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
         self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
-
-
-# ------------------------------------------------------------------- cut-corner signature
-
-
-@dataclass
-class _CornerSignature:
-    """Where a square's cut corner is and which way its long cut leg runs.
-
-    ``corner``: unit vector from the rectangle centre towards the cut corner; ``leg``: unit
-    vector along the side on which the cut is longer, pointing away from the corner.
-    ``alpha``: the minimum-area rectangle's angle (rad, mod 90°).
-    """
-
-    corner: tuple[float, float]
-    leg: tuple[float, float]
-    alpha: float
-
-
-def _from_frame(vx: float, vy: float, c: float, s: float) -> tuple[float, float]:
-    """A vector in the rectangle's frame (cos ``c``, sin ``s`` of its angle) -> outline frame."""
-    return vx * c - vy * s, vx * s + vy * c
-
-
-_SQRT2 = math.sqrt(2.0)
-
-
-def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
-    """Cut-corner signature of one closed outline given as points in mm."""
-    return _corner_signatures([np.asarray(pts, dtype=np.float32).reshape(-1, 2)])[0]
-
-
-_CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's corners,
-_CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
-
-
-def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | None]:
-    """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
-    (at least one point each).
-
-    The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
-    from the outline is the cut one; the cut is longer along one side than the other,
-    which tells the faces apart. All of it reads only the outline's convex hull (the
-    rectangle, the points nearest the rectangle's corners and at the ends of its sides),
-    and all the hulls go through one set of array operations on complex numbers (numpy's
-    per-call cost dominates when done one by one).
-    """
-    hulls = [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
-    rects = [cv2.minAreaRect(hl) for hl in hulls]
-    n = len(hulls)
-    counts = [len(hl) for hl in hulls]
-    seg = np.repeat(np.arange(n), counts)                       # each point's outline
-    starts = np.cumsum([0] + counts[:-1])
-    z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
-    # per outline: centre, angle, half-sides
-    par = np.array([(cx, cy, math.radians(a), w / 2.0, h / 2.0)
-                    for (cx, cy), (w, h), a in rects]).reshape(n, 5)
-    half = par[:, 3:]
-    centre = par[:, 0] + 1j * par[:, 1]
-    q = (z - centre[seg]) * np.exp(-1j * par[:, 2])[seg]     # in the rectangle's frame
-    # distance of the nearest hull point to each rectangle corner (a column each)
-    corners = half[:, :1] * _CORNER_X + 1j * (half[:, 1:] * _CORNER_Y)       # (n, 4)
-    k = np.minimum.reduceat(np.abs(q[:, None] - corners[seg]), starts).argmax(axis=1)
-    sx = np.sign(half[:, 0] * _CORNER_X[k])
-    sy = np.sign(half[:, 1] * _CORNER_Y[k])
-    fx, fy = q.real * sx[seg], q.imag * sy[seg]           # cut corner now at (+, +)
-    tol = 1.5
-    # the far end of the side parallel to x (y) short of the cut: the top (right) side's
-    # points within tol of it, their largest x (y); -inf if it has none
-    top = np.maximum.reduceat(np.where(np.abs(fy - half[seg, 1]) < tol, fx, -np.inf), starts)
-    right = np.maximum.reduceat(np.where(np.abs(fx - half[seg, 0]) < tol, fy, -np.inf),
-                                starts)
-    out: list[_CornerSignature | None] = []
-    for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
-                                                      top.tolist(), right.tolist(),
-                                                      strict=True):
-        if tj == -math.inf or rj == -math.inf:
-            out.append(None)
-            continue
-        cj, sj = math.cos(aj), math.sin(aj)
-        leg_x = hxj - tj                     # cut length along the side parallel to x
-        leg_y = hyj - rj
-        corner = _from_frame(sxj / _SQRT2, syj / _SQRT2, cj, sj)
-        leg = (_from_frame(-sxj, 0.0, cj, sj) if leg_x >= leg_y
-               else _from_frame(0.0, -syj, cj, sj))
-        out.append(_CornerSignature(corner=corner, leg=leg, alpha=aj))
-    return out
-
-
-def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:
-    out = []
-    n = len(outline)
-    for i in range(n):
-        a, b = outline[i], outline[(i + 1) % n]
-        m = max(int(math.ceil(np.hypot(*(b - a)) / step)), 1)
-        t = np.arange(m)[:, None] / m
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
-
-
-def _cross(a: tuple[float, float], b: tuple[float, float]) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
-
-
-def _angle(v: tuple[float, float]) -> float:
-    return math.atan2(v[1], v[0])
 
 
 # ---------------------------------------------------------------------------- locator
@@ -821,97 +724,6 @@ def _label(out: np.ndarray, text: str, at: tuple[int, int], dy: int,
     y = min(max(at[1] + dy, th + 2), out.shape[0] - 4)
     cv2.putText(out, text, (max(x, 0), y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
                 cv2.LINE_AA)
-
-
-def _full_chain(contour: np.ndarray) -> np.ndarray:
-    """The ``CHAIN_APPROX_NONE`` contour of a ``CHAIN_APPROX_SIMPLE`` one: each segment
-    between two corners is a straight horizontal, vertical or diagonal run of pixels."""
-    pts = contour.reshape(-1, 2)
-    step = np.roll(pts, -1, axis=0) - pts
-    n = np.abs(step).max(axis=1)
-    if len(pts) == 1 or not n.all():
-        return contour
-    at = np.repeat(np.arange(len(pts)), n)
-    k = np.arange(len(at)) - np.repeat(np.cumsum(n) - n, n)       # steps into the segment
-    return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
-
-
-def _first(item: tuple) -> int:
-    return item[0]
-
-
-def _with_holes(contours: tuple[np.ndarray, ...], hierarchy: np.ndarray | None, holes: bool
-                ) -> list[tuple[np.ndarray, list[np.ndarray]]]:
-    """``findContours``' outer contours, each with its holes' (``RETR_CCOMP``'s two levels:
-    an outer contour's children are its holes; without ``holes``, none)."""
-    if not holes or hierarchy is None:
-        return [(c, []) for c in contours]
-    hier = hierarchy.reshape(-1, 4)
-    kids: dict[int, list[np.ndarray]] = {}
-    for i, parent in enumerate(hier[:, 3].tolist()):
-        if parent >= 0:
-            kids.setdefault(parent, []).append(contours[i])
-    return [(c, kids.get(i, [])) for i, c in enumerate(contours) if hier[i, 3] < 0]
-
-
-def _chain_steps(contours: list[np.ndarray]) -> list[int]:
-    """Points of the full 8-connected chain (``CHAIN_APPROX_NONE``) of closed contours
-    given by their ``CHAIN_APPROX_SIMPLE`` vertices: each segment between two vertices is
-    a straight horizontal, vertical or diagonal run of max(|du|, |dv|) steps. All the
-    contours in one set of array operations."""
-    sizes = [len(c) for c in contours]
-    pts = np.concatenate(contours).reshape(-1, 2)
-    ends = np.cumsum(sizes)
-    nxt = np.empty_like(pts)
-    nxt[:-1] = pts[1:]
-    nxt[ends - 1] = pts[ends - sizes]             # each contour closes on its first point
-    steps = np.abs(nxt - pts).max(axis=1)
-    out = np.add.reduceat(steps, ends - sizes).tolist()
-    return [n if size > 1 else 1 for n, size in zip(out, sizes, strict=True)]
-
-
-def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
-    first, last = int(idx[0]), int(idx[-1])
-    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
-        return [(first, last)]
-    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
-    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
-    lasts = idx[cuts].tolist() + [int(idx[-1])]
-    return list(zip(firsts, lasts, strict=True))
-
-
-_STRIDES: dict[int, np.ndarray] = {}        # n -> the order visiting a closed n-chain by
-                                            # steps of _WINDOW points
-
-
-def _smooth_length(contour: np.ndarray, window: int = _WINDOW) -> float:
-    """Length of a closed pixel contour after a circular moving average of its points.
-
-    The averaged points' steps are ``(p[i + window] - p[i]) / window`` (neighbouring windows
-    differ by one point in, one out), so the length is the sum of the distances between
-    points ``window`` apart: the perimeter of the polygon that visits the contour
-    ``window`` points at a time (one closed tour when n and ``window`` are coprime, else
-    ``window`` of them), which ``cv2.arcLength`` measures in one call. A contour shorter
-    than two windows keeps its plain length.
-    """
-    uv = contour.reshape(-1, 2)
-    n = len(uv)
-    if n < 2 * window:
-        return float(cv2.arcLength(uv, True))
-    order = _STRIDES.get(n)
-    if order is None:
-        if len(_STRIDES) > 4096:
-            _STRIDES.clear()
-        if n % window:
-            order = _STRIDES[n] = np.arange(n) * window % n
-        else:                               # window tours, one a row
-            order = _STRIDES[n] = np.arange(n).reshape(-1, window).T.copy()
-    # gather (u, v) pairs as one int64 each: numpy's gather of rows is far slower
-    tours = uv.view(np.int64).ravel()[order].view(np.int32)
-    if order.ndim == 1:
-        return float(cv2.arcLength(tours.reshape(-1, 2), True)) / window
-    return sum(float(cv2.arcLength(t.reshape(-1, 2), True)) for t in tours) / window
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
