@@ -197,3 +197,14 @@ def test_cell_target_board_is_checked(tmp_path):
     p.write_text(text)
     with pytest.raises(ConfigError, match=r"camera\.target\.board"):
         load_cell(p)
+
+
+@pytest.mark.parametrize("kind", ["chessboard", "charuco"])
+def test_front_lit_cell_sees_the_printed_board(kind):
+    """Under the front light the board is dark ink on white paper, as printed."""
+    front = load_cell(ROOT / "cells" / "sim_frontlit.yaml")
+    cam = front.camera
+    truth = calibrate.sim_truth(cam.calibration, 3.0, -2.0, 0.4, 1.5)
+    pose = centred_pose(cam.calibration, cam.width_px, cam.height_px)
+    fit = calibrate.sim_camera(front, DEFAULT_TARGETS[kind], pose, truth, seed=1)
+    assert window_error_mm(fit.calibration, truth, cam.width_px, cam.height_px) < 0.3

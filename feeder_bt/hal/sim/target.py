@@ -14,6 +14,7 @@ counts. These rigs produce them from a ground truth the procedures are not told:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -25,6 +26,9 @@ from ...scenario.model import CameraCalibration, CameraSpec
 from ..interfaces import Frame, Pose, RobotPosition
 from .render import Renderer
 from .world import World
+
+PAPER_GREY = 200.0       # front-lit: a printed board's white paper, grey level
+INK_GREY = 30.0          # and its ink
 
 
 def target_polygons(target: Target, pose: TargetPose) -> list[np.ndarray]:
@@ -38,11 +42,15 @@ class TargetCamera:
     """A ``Camera`` over a cleared, stopped belt on which a calibration target lies.
 
     ``truth`` is how the simulated camera really maps pixels to the belt; ``None`` means
-    the cell file's calibration is exactly right.
+    the cell file's calibration is exactly right. Under a front light the board is what
+    is printed: dark ink on white paper that fills the view (``PAPER_GREY``, ``INK_GREY``).
     """
 
     def __init__(self, camera: CameraSpec, truth: CameraCalibration | None = None,
                  seed: int = 1) -> None:
+        if camera.render.lighting == "frontlit":
+            camera = dataclasses.replace(camera, render=dataclasses.replace(
+                camera.render, lighting="backlit", backlight=PAPER_GREY, part_grey=INK_GREY))
         self.renderer = Renderer(camera, truth)
         self.seed = seed
         self.outlines: list[np.ndarray] = []
