@@ -80,6 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("check", help="validate scenario and cell YAML files")
     c.add_argument("files", nargs="+")
+    c.add_argument("--images", metavar="DIR", help="also run each scenario's recipe on the "
+                   "images in DIR (golden.png there: the golden image) and report the finds")
 
     r.set_defaults(handler=cmd_run)
     t.set_defaults(handler=cmd_tree)
@@ -105,6 +107,10 @@ def cmd_run(args: argparse.Namespace) -> int:
           f"{sum(p['retrieved'].values())} {json.dumps(p['retrieved'])}, "
           f"{report['parts_per_minute']:.1f} parts/min, located {p['located']}, "
           f"missed {p['missed']}, lost {p['lost']}")
+    nm = report["vision"].get("no_match") or {}
+    if nm.get("alarms"):
+        print(f"WARNING: for up to {nm['longest_s']:.0f} s frames showed blobs but no part: "
+              f"{nm['example']} (see the vision_no_match events)", file=sys.stderr)
     problems = p.get("accounting") or []
     if problems:
         for prob in problems[:10]:
@@ -140,7 +146,10 @@ def cmd_check(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr)
     if not errors:
         print(f"ok: {len(args.files)} file(s)")
-    return 2 if errors else 0
+    if errors or not args.images:
+        return 2 if errors else 0
+    from .tools.check_images import check_images
+    return max(check_images(f, args.images) for f in args.files)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -92,13 +92,19 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "recoveries": dict(s.recoveries),
         "tick": ticker.stats.summary(),
         "vision": {"frames": s.counts["frames"], "p50_ms": _pct(s.vision_ms, 50),
-                   "p99_ms": _pct(s.vision_ms, 99)},
+                   "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell)},
     }
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed_touching": world.counts["landed_touching"],
                            "placed": dict(world.placed_by_type)}
     return report
+
+
+def _no_match(cell: Cell) -> dict[str, Any] | None:
+    """The vision watch's summary (``feeder_bt.vision.watch``): frames that fit no class."""
+    watch = cell.ctx.extras.get("recipe_watch") if cell.ctx is not None else None
+    return watch.summary() if watch is not None else None
 
 
 def write_report(report: dict[str, Any], path: str | Path) -> None:

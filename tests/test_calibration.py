@@ -266,13 +266,26 @@ def test_cli_belt_and_tool_write_yaml(tmp_path, capsys):
     assert "counts_per_mm: 20.0" in (tmp_path / "b.yaml").read_text()
 
 
-@pytest.mark.parametrize("what", ["camera", "belt", "tool"])
-def test_cli_real_cell_needs_drivers(tmp_path, capsys, what):
+def test_cli_real_cell_camera_needs_a_photo(tmp_path, capsys):
     real = tmp_path / "real.yaml"
     real.write_text(SIM_CELL.read_text().replace("hal: sim", "hal: real"))
-    assert _cli(["calibrate", what, str(real)]) == 2
+    assert _cli(["calibrate", "camera", str(real)]) == 2
     out = capsys.readouterr().out.strip()
-    assert "needs the hardware drivers" in out and "\n" not in out
+    assert "give the photo with --image" in out and "\n" not in out
+
+
+@pytest.mark.parametrize("what", ["belt", "tool"])
+def test_cli_real_cell_belt_and_tool_go_through_the_drivers(tmp_path, capsys, what):
+    """On a real cell the procedures connect to the controllers (here: nobody listens on
+    the cell's ports): one line naming the controller, a non-zero exit."""
+    real = tmp_path / "real.yaml"
+    real.write_text(SIM_CELL.read_text().replace("hal: sim", "hal: real")
+                    + "adept: {host: 127.0.0.1, motion_port: 9, position_port: 9, "
+                      "io_port: 9, notify_port: 9, timeout_s: 1}\n"
+                    + "galil: {url: 'socket://127.0.0.1:9', timeout_s: 1}\n")
+    assert _cli(["calibrate", what, str(real)]) != 0
+    out = capsys.readouterr().out.strip()
+    assert "not connected" in out and "\n" not in out
 
 
 def test_cli_write_without_file_or_cell_key(capsys):

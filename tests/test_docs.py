@@ -54,11 +54,13 @@ def test_docs_have_examples():
 def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
     args = shlex.split(line)[1:]
-    if args[0] in ("locate", "recipe", "report"):  # they read what `render` / `run --db` wrote
+    if args[0] in ("locate", "recipe", "report") or "--images" in args or "--image" in args:
+        # they read what `render` / `run --db` / `calibrate --save-image` wrote
         cmds = commands()
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
-            if d == doc and (prev[0] == "render" if args[0] != "report" else args[1] in prev):
+            if d == doc and ((prev[0] == "render" or "--save-image" in prev)
+                             if args[0] != "report" else args[1] in prev):
                 _run(doc, earlier, tmp_path, monkeypatch)
     _run(doc, line, tmp_path, monkeypatch)
 
@@ -74,8 +76,9 @@ def _run(doc, line, tmp_path, monkeypatch):
             else a
             for a in argv]
     if argv[0] == "check":                    # expand globs the shell would expand
-        argv = [argv[0]] + [str(p) for a in argv[1:] for p in sorted(Path.cwd().glob(
-            a[len(str(Path.cwd())) + 1:])) or [Path(a)]]
+        root = str(Path.cwd())
+        argv = [argv[0]] + [str(p) for a in argv[1:] for p in (sorted(Path.cwd().glob(
+            a[len(root) + 1:])) if a.startswith(root + "/") else []) or [Path(a)]]
     if argv[0] == "tree" and argv[argv.index("--format") + 1] in ("svg", "png"):
         pytest.importorskip("shutil").which("dot") or pytest.skip("Graphviz not installed")
     monkeypatch.chdir(tmp_path)

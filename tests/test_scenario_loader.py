@@ -358,7 +358,7 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         ["did you mean 'disc'"]),
     "shape_wrong_field": (
         [("{disc: {diameter_mm", "{disc: {size_mm")], 6, "parts.lens.shape.disc.size_mm",
-        ["unknown key 'size_mm' (known: diameter_mm)"]),
+        ["unknown key 'size_mm' (known: diameter_mm, hole_mm)"]),
     "shape_negative_diameter": (
         [("diameter_mm: 50.8", "diameter_mm: -50.8")], 6,
         "parts.lens.shape.disc.diameter_mm", ["> 0"]),

@@ -11,6 +11,7 @@ from ..encoder import diff
 from ..hal.interfaces import Frame
 from ..jobs import Job
 from ..parts import Part
+from ..vision.watch import recipe_watch
 from .common import Ctx, JobLeaf, Leaf, client
 
 
@@ -144,6 +145,7 @@ class Enqueue(Leaf):
             else:
                 stats.count("located_unpickable")
         stats.count("rejected_blobs", len(result.rejected))
+        recipe_watch(self.ctx.extras).feed(frame.t, result, stats)   # no silent zero
         self.bb.set("/locate/found", new)
         self.feedback_message = f"frame {frame.index}: {new} new"
         return Status.SUCCESS

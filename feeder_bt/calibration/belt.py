@@ -90,11 +90,13 @@ def fit_belt(touches: Sequence[BeltTouch], robot_bits: int = 24) -> BeltFit:
 def belt_procedure(hal: Hal, wait: Waiter, touch_marker: Callable[[], Job],
                    steps_mm: Sequence[float] = (80.0, 80.0, 80.0, 80.0),
                    speed_mm_s: float = 100.0, conveyor: str = "horizontal",
-                   robot_bits: int = 24) -> BeltFit:
+                   robot_bits: int = 24,
+                   settle: Callable[[], None] | None = None) -> BeltFit:
     """The guided procedure: touch the marker, advance the belt by each step, touch again.
 
     ``touch_marker`` puts the tool on the marker (the operator with a pendant, or the
-    simulator's rig) and returns a job that ends when it is there.
+    simulator's rig) and returns a job that ends when it is there; ``settle`` (optional)
+    runs after each touch, before the pose and count are read.
     """
     belt = hal.conveyors[conveyor]
     touches = []
@@ -103,6 +105,8 @@ def belt_procedure(hal: Hal, wait: Waiter, touch_marker: Callable[[], Job],
             wait(hal.robot.move_safe())
             wait(belt.move(steps_mm[k - 1], speed_mm_s))
         wait(touch_marker())
+        if settle is not None:
+            settle()                 # a real controller: read the pose after the touch
         pose = hal.robot_position.pose()
         touches.append(BeltTouch(pose.x, pose.y, hal.robot_position.belt_encoder()))
     wait(hal.robot.move_safe())

@@ -12,9 +12,13 @@ reflection (and robustly, by RANSAC, by default), so it cannot be used as is; a 
 affine and a homography are fitted as well, only to tell whether the camera looks tilted
 (a homography explaining the points much better than the model can).
 
-The target (a chessboard or a symmetric dot grid) lies flat on the belt at a known pose:
-placed against fixtures, or its corners touched by the robot. Its feature points are then
-known in the belt frame, and the camera gives them in pixels.
+The target (any of ``targets.KINDS``: chessboards, circle grids, ChArUco boards) lies flat
+on the belt at a known pose: placed against fixtures, or its corners touched by the robot.
+Its feature points are then known in the belt frame, and the camera gives them in pixels.
+Which detected point is which comes from the board itself (ChArUco markers, an asymmetric
+grid) or, for a symmetric grid, from the cell's present calibration (within half a pitch)
+or, for a first calibration (``prior=False``), from the board's colours and handedness
+(``order_grid``).
 """
 
 from __future__ import annotations
@@ -29,6 +33,11 @@ from ..hal.interfaces import Camera, Frame
 from ..scenario.model import CameraCalibration
 from ..vision.calibration import Calibration
 from .common import CalibrationError, Waiter, rms_max
+from .targets import DEFAULT_TARGETS, Target, detect_points
+
+__all__ = ["DEFAULT_TARGETS", "CameraFit", "Target", "TargetPose", "calibrate_camera_image",
+           "camera_procedure", "centred_pose", "correspondences", "detect_target",
+           "fit_camera", "match_order", "order_grid", "target_points_mm", "window_error_mm"]
 
 MIN_POINTS = 4
 TILT_RATIO = 2.0         # homography rms this many times smaller than the model's ...
@@ -36,46 +45,14 @@ TILT_MIN_GAIN_MM = 0.1   # ... and by at least this much: the camera may be tilt
 
 
 @dataclass(frozen=True)
-class Target:
-    """A calibration target: ``nx`` x ``ny`` feature points ``pitch_mm`` apart.
-
-    ``chessboard``: the points are the inner corners, so the board has ``nx + 1`` by
-    ``ny + 1`` squares. ``dots``: a symmetric grid of dark dots ``dot_mm`` across.
-    Board x runs along ``nx``; the board frame's origin is the centre of the points.
-    """
-
-    kind: str = "chessboard"
-    nx: int = 8
-    ny: int = 12
-    pitch_mm: float = 40.0
-    dot_mm: float = 14.0
-
-    def __post_init__(self) -> None:
-        if self.kind not in ("chessboard", "dots"):
-            raise CalibrationError(f"target kind must be chessboard or dots, got {self.kind!r}")
-        if self.nx < 2 or self.ny < 2:
-            raise CalibrationError(f"a target needs at least 2x2 points, got {self.nx}x{self.ny}")
-        if not self.pitch_mm > 0:
-            raise CalibrationError(f"target pitch_mm must be > 0, got {self.pitch_mm}")
-
-    def points_board(self) -> np.ndarray:
-        """``(ny, nx, 2)`` feature points in the board frame (mm)."""
-        i = (np.arange(self.nx) - (self.nx - 1) / 2.0) * self.pitch_mm
-        j = (np.arange(self.ny) - (self.ny - 1) / 2.0) * self.pitch_mm
-        bx, by = np.meshgrid(i, j)
-        return np.stack([bx, by], axis=-1)
-
-
-DEFAULT_TARGETS = {
-    "chessboard": Target("chessboard", nx=8, ny=12, pitch_mm=40.0),
-    "dots": Target("dots", nx=9, ny=13, pitch_mm=36.0, dot_mm=14.0),
-}
-
-
-@dataclass(frozen=True)
 class TargetPose:
-    """Where the target lies: its centre in the belt frame (mm) and its x axis's angle
-    from the belt's x axis (degrees)."""
+    """Where the target lies, face up: its centre in the belt frame (mm) and its x axis's
+    angle from the belt's x axis (degrees).
+
+    The belt frame, seen from above, is a mirror image of the board's printed frame (x
+    right, y down, as a camera image), as it is of the camera's: so a board's y goes to
+    the belt mirrored, and the camera sees the board as printed (ArUco markers and
+    asymmetric grids read only that way)."""
 
     x_mm: float
     y_mm: float
@@ -84,7 +61,7 @@ class TargetPose:
     def to_belt(self, pts: np.ndarray) -> np.ndarray:
         r = math.radians(self.angle_deg)
         c, s = math.cos(r), math.sin(r)
-        rot = np.array([[c, -s], [s, c]])
+        rot = np.array([[c, s], [s, -c]])           # turn after mirroring the board's y
         return pts @ rot.T + np.array([self.x_mm, self.y_mm])
 
 
@@ -203,29 +180,13 @@ def window_error_mm(a: CameraCalibration, b: CameraCalibration, width_px: int,
 
 
 def detect_target(image: np.ndarray, target: Target) -> np.ndarray:
-    """Feature points of ``target`` in ``image``: ``(ny, nx, 2)`` pixels, in OpenCV's order
-    (row by row; which corner comes first is up to OpenCV — see ``match_order``)."""
-    img = np.asarray(image)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    if img.dtype != np.uint8 or img.ndim != 2 or img.size == 0:
-        raise CalibrationError("the camera image must be an 8-bit grey or colour image")
-    size = (target.nx, target.ny)                  # (points per row, points per column)
-    if target.kind == "chessboard":
-        flags = (cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-                 | cv2.CALIB_CB_FAST_CHECK)          # FAST_CHECK: give up quickly on no board
-        found, pts = cv2.findChessboardCorners(img, size, flags=flags)
-        if found:
-            criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-            pts = cv2.cornerSubPix(img, pts, (5, 5), (-1, -1), criteria)
-        what = f"chessboard of {target.nx}x{target.ny} inner corners"
-    else:
-        found, pts = cv2.findCirclesGrid(img, size, flags=cv2.CALIB_CB_SYMMETRIC_GRID)
-        what = f"{target.nx}x{target.ny} grid of dots"
-    if not found or pts is None:
-        raise CalibrationError(f"no {what} found in the image: is the whole target in view, "
-                               "flat, lit and of that size?")
-    return np.asarray(pts, dtype=float).reshape(target.ny, target.nx, 2)
+    """Feature points of a grid ``target`` in ``image``: ``(ny, nx, 2)`` pixels, in OpenCV's
+    order (row by row; which corner comes first is up to OpenCV — see ``order_grid``)."""
+    px, _ = detect_points(image, target)
+    if len(px) != target.nx * target.ny:
+        raise CalibrationError(f"found {len(px)} of the {target.nx * target.ny} points of the "
+                               f"{target.describe()}")
+    return px.reshape(target.ny, target.nx, 2)
 
 
 def match_order(detected_px: np.ndarray, expected_px: np.ndarray, pitch_px: float) -> np.ndarray:
@@ -235,38 +196,118 @@ def match_order(detected_px: np.ndarray, expected_px: np.ndarray, pitch_px: floa
     the expected pixels (the known target pose through the cell's present calibration)
     decide which. The present calibration may be off by anything under half a pitch.
     """
-    candidates = [detected_px[::sj, ::si] for sj in (1, -1) for si in (1, -1)]
-    if detected_px.shape[0] == detected_px.shape[1]:
-        candidates += [c.transpose(1, 0, 2) for c in candidates]
+    candidates = _readings(detected_px)
     errs = [float(np.linalg.norm(c - expected_px, axis=-1).mean()) for c in candidates]
     best = int(np.argmin(errs))
     if errs[best] > 0.5 * pitch_px:
         raise CalibrationError(f"the target was found {errs[best]:.0f} px on average from where "
                                "the cell's present calibration expects it (more than half a "
-                               "pitch): check the target pose, or the calibration is far off")
+                               "pitch): check the target pose, or, for a first calibration, "
+                               "give --no-prior (the stated pose is then trusted)")
     return candidates[best]
 
 
+def _readings(grid: np.ndarray) -> list[np.ndarray]:
+    """The ways a symmetric grid's detected points may be read: from each corner, and
+    transposed when it is square."""
+    out = [grid[::sj, ::si] for sj in (1, -1) for si in (1, -1)]
+    if grid.shape[0] == grid.shape[1]:
+        out += [c.transpose(1, 0, 2) for c in out]
+    return out
+
+
+def order_grid(image: np.ndarray, grid: np.ndarray, target: Target, mm: np.ndarray,
+               rotation_deg: float) -> tuple[np.ndarray, str | None]:
+    """A first calibration's reading of a symmetric grid, without a prior position.
+
+    A reading that mirrors the board cannot be fitted by the camera model (which has one
+    handedness), so the fit's residual rules those out. Of the rest, for a chessboard, the
+    one that puts a dark square at the board's (-x, -y) corner; if that leaves several
+    (a board that looks the same turned half round, or a circle grid), the one whose
+    rotation is nearest ``rotation_deg`` (the present calibration's, which only needs to be
+    right to within a quarter turn), with a note saying so.
+    """
+    flat = mm.reshape(-1, 2)
+    fits = []
+    for c in _readings(grid):
+        f = fit_camera(c.reshape(-1, 2), flat)
+        fits.append((c, f))
+    best_rms = min(f.rms_mm for _, f in fits)
+    ok = [(c, f) for c, f in fits if f.rms_mm <= max(4 * best_rms, 0.05 * target.pitch_mm)]
+    note = None
+    if target.kind == "chessboard" and len(ok) > 1:
+        coloured = [(c, f) for c, f in ok if _dark_corner(image, c)]
+        if coloured:
+            ok = coloured
+    if len(ok) > 1:
+        note = (f"the {target.describe()} reads the same turned round: its reading was "
+                f"chosen by the present calibration's rotation ({rotation_deg:g} deg)")
+
+        def turn(item) -> float:
+            d = (item[1].calibration.rotation_deg - rotation_deg + 180.0) % 360.0 - 180.0
+            return abs(d)
+        ok.sort(key=turn)
+    return ok[0][0], note
+
+
+def _dark_corner(image: np.ndarray, grid: np.ndarray) -> bool:
+    """Whether the square beyond a grid reading's first corner (the board's (-x, -y)
+    corner square) is darker than its neighbour along the first row."""
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    p0, ex, ey = grid[0, 0], grid[0, 1] - grid[0, 0], grid[1, 0] - grid[0, 0]
+
+    def grey(pt: np.ndarray) -> float:
+        u, v = int(round(pt[0])), int(round(pt[1]))
+        h, w = img.shape
+        if not (1 <= u < w - 1 and 1 <= v < h - 1):
+            return math.nan
+        return float(img[v - 1:v + 2, u - 1:u + 2].mean())
+
+    dark, light = grey(p0 - (ex + ey) / 2), grey(p0 + (ex - ey) / 2)
+    return not math.isnan(dark) and not math.isnan(light) and dark < light
+
+
 def correspondences(image: np.ndarray, target: Target, pose: TargetPose,
-                    nominal: CameraCalibration) -> tuple[np.ndarray, np.ndarray]:
-    """``(pixels, mm)`` of the target's points in ``image``, each ``(N, 2)``."""
+                    nominal: CameraCalibration, prior: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, str | None]:
+    """``(pixels, mm, note)`` of the target's points in ``image``, each ``(N, 2)``; see the
+    module docstring for how points are identified (``prior``: the present calibration is
+    close enough to tell a symmetric grid's corners apart)."""
     mm = target_points_mm(target, pose)
-    expected = Calibration(nominal).mm_to_px(mm.reshape(-1, 2)).reshape(mm.shape)
-    found = detect_target(image, target)
-    px = match_order(found, expected, target.pitch_mm / nominal.mm_per_px)
-    return px.reshape(-1, 2), mm.reshape(-1, 2)
+    px, index = detect_points(image, target)
+    if target.kind == "charuco":
+        return px, mm.reshape(-1, 2)[index], None
+    if len(px) != target.nx * target.ny:
+        raise CalibrationError(f"found {len(px)} of the {target.nx * target.ny} points of the "
+                               f"{target.describe()}")
+    grid = px.reshape(target.ny, target.nx, 2)
+    if target.kind == "acircles":                # one reading fits: the best-fitting one
+        ordered, _ = order_grid(image, grid, target, mm, nominal.rotation_deg)
+        return ordered.reshape(-1, 2), mm.reshape(-1, 2), None
+    if prior:
+        expected = Calibration(nominal).mm_to_px(mm.reshape(-1, 2)).reshape(mm.shape)
+        ordered = match_order(grid, expected, target.pitch_mm / nominal.mm_per_px)
+        return ordered.reshape(-1, 2), mm.reshape(-1, 2), None
+    ordered, note = order_grid(image, grid, target, mm, nominal.rotation_deg)
+    return ordered.reshape(-1, 2), mm.reshape(-1, 2), note
 
 
 def calibrate_camera_image(image: np.ndarray, target: Target, pose: TargetPose,
-                           nominal: CameraCalibration) -> CameraFit:
-    """Fit the camera from one image of ``target`` lying at ``pose``."""
-    px, mm = correspondences(image, target, pose, nominal)
-    return fit_camera(px, mm)
+                           nominal: CameraCalibration, prior: bool = True) -> CameraFit:
+    """Fit the camera from one image of ``target`` lying at ``pose`` (``prior``: see
+    ``correspondences``)."""
+    px, mm, note = correspondences(image, target, pose, nominal, prior)
+    fit = fit_camera(px, mm)
+    if note:
+        fit.hint = f"{fit.hint}; {note}" if fit.hint else note
+    return fit
 
 
 def camera_procedure(camera: Camera, wait: Waiter, target: Target, pose: TargetPose,
-                     nominal: CameraCalibration) -> CameraFit:
+                     nominal: CameraCalibration, prior: bool = True) -> CameraFit:
     """The guided procedure: with the target lying at ``pose`` on the belt (belt stopped,
     backlight on), grab a frame and fit the calibration from its pixels."""
     frame: Frame = wait(camera.grab())
-    return calibrate_camera_image(frame.image, target, pose, nominal)
+    return calibrate_camera_image(frame.image, target, pose, nominal, prior)

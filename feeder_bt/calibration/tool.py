@@ -78,7 +78,8 @@ def fit_tool(touches: Sequence[ToolTouch]) -> ToolFit:
 
 
 def tool_procedure(hal: Hal, wait: Waiter, touch_point: Callable[[float], Job],
-                   angles_deg: Sequence[float] = (-90.0, -30.0, 30.0, 90.0)) -> ToolFit:
+                   angles_deg: Sequence[float] = (-90.0, -30.0, 30.0, 90.0),
+                   settle: Callable[[], None] | None = None) -> ToolFit:
     """The guided procedure: touch the fixed point with the tool at each angle.
 
     ``touch_point(rz)`` puts the tip on the point with the tool turned ``rz`` (robot frame)
@@ -87,6 +88,8 @@ def tool_procedure(hal: Hal, wait: Waiter, touch_point: Callable[[float], Job],
     touches = []
     for rz in angles_deg:
         wait(touch_point(rz))
+        if settle is not None:
+            settle()                 # a real controller: read the pose after the touch
         pose = hal.robot_position.pose()
         touches.append(ToolTouch(pose.x, pose.y, pose.rz))
     wait(hal.robot.move_safe())

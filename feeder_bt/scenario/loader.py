@@ -64,6 +64,7 @@ from feeder_bt.scenario.model import (
     Scenario,
     Shape,
     StablePose,
+    TargetSpec,
     Threshold,
     VisionClass,
     VisionRecipe,
@@ -73,7 +74,7 @@ from feeder_bt.vision.features import FEATURES
 
 __all__ = [
     "ADJUST_ALGORITHMS", "ADJUST_ORDER", "ADJUST_PARAMS", "CELL_HALS", "CONVEYOR_NAMES",
-    "ENUMS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
+    "ENUMS", "FOREGROUNDS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
     "PROBABILITY_TOLERANCE", "RANGES", "RETRIEVE_POLICIES", "SHAPE_KINDS", "THRESHOLD_METHODS",
     "Range", "check_files", "load_cell", "load_fault_plan", "load_scenario", "part_size_mm",
 ]
@@ -84,6 +85,9 @@ PRESENT_MODES: tuple[str, ...] = ("continuous", "incremental")
 RETRIEVE_POLICIES: tuple[str, ...] = ("fifo", "earliest_deadline", "shortest_cycle",
                                       "lookahead")
 THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
+FOREGROUNDS: tuple[str, ...] = ("dark", "light")
+LIGHTINGS: tuple[str, ...] = ("backlit", "frontlit")
+TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
 ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
@@ -94,6 +98,8 @@ SHAPE_KINDS: dict[str, tuple[str, ...]] = {
     "rect": ("size_mm",),
     "polygon": ("points_mm",),
 }
+#: Optional ``Shape`` fields of each kind (holes).
+SHAPE_OPTIONAL: dict[str, tuple[str, ...]] = {"disc": ("hole_mm",), "polygon": ("holes_mm",)}
 
 #: Conveyors a cell describes; ``return`` is not a belt, only its transit time.
 CONVEYOR_NAMES: tuple[str, ...] = ("horizontal", "incline")
@@ -137,6 +143,9 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (RetrieveParams, "policy"): RETRIEVE_POLICIES,
     (Threshold, "method"): THRESHOLD_METHODS,
     (VisionRecipe, "orientation"): ORIENTATION_METHODS,
+    (VisionRecipe, "foreground"): FOREGROUNDS,
+    (RenderSpec, "lighting"): LIGHTINGS,
+    (TargetSpec, "kind"): TARGET_KINDS,
     (CellSpec, "hal"): CELL_HALS,
     (IoSignal, "dir"): IO_DIRS,
     (GalilSpec, "servo_on"): ("start", "reconnect", "never"),
@@ -154,6 +163,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (Morphology, "open_px"): NON_NEGATIVE,
     (Morphology, "close_px"): NON_NEGATIVE,
     (VisionRecipe, "min_area_mm2"): NON_NEGATIVE,
+    (VisionRecipe, "min_hole_mm2"): NON_NEGATIVE,
     (PresentParams, "horizontal_mm_s"): POSITIVE,
     (PresentParams, "incline_pct"): Range(0, 200),
     (PresentParams, "big_advance_mm"): POSITIVE,
@@ -182,9 +192,15 @@ RANGES: dict[tuple[type, str], Range] = {
     (CameraSpec, "grab_s"): NON_NEGATIVE,
     (CameraSpec, "vision_latency_s"): NON_NEGATIVE,
     (CameraCalibration, "mm_per_px"): POSITIVE,
+    (TargetSpec, "pitch_mm"): POSITIVE,
+    (TargetSpec, "dot_mm"): POSITIVE,
+    (TargetSpec, "marker_mm"): NON_NEGATIVE,
     (RenderSpec, "backlight"): GREY,
     (RenderSpec, "falloff"): Range(0, 1),
     (RenderSpec, "part_grey"): GREY,
+    (RenderSpec, "belt_grey"): GREY,
+    (RenderSpec, "shading"): Range(0, 1),
+    (RenderSpec, "highlight"): Range(0, 255),
     (RenderSpec, "noise_sigma"): NON_NEGATIVE,
     (RenderSpec, "blur_px"): NON_NEGATIVE,
     (RobotSpec, "reach_mm"): POSITIVE,
@@ -361,7 +377,7 @@ def _shape_size(s: Shape) -> float:
         return s.diameter_mm
     if s.kind == "rect":
         return math.hypot(*s.size_mm)
-    pts = s.points_mm
+    pts = s.points_mm                     # holes lie inside: the outer ring bounds the size
     return max((math.dist(a, b) for a in pts for b in pts), default=0.0)
 
 
@@ -654,9 +670,10 @@ def _build_shape(ctx: _Ctx, node: Node, path: str) -> Shape:
     kpath = _join(path, kind)
     hints = _hints(Shape)
     values: dict[str, Any] = {}
+    known = SHAPE_KINDS[kind] + SHAPE_OPTIONAL.get(kind, ())
     for key, _, vnode in ctx.entries(inner, kpath):
-        if key not in SHAPE_KINDS[kind]:
-            ctx.unknown(key, kpath, SHAPE_KINDS[kind])
+        if key not in known:
+            ctx.unknown(key, kpath, known)
         values[key] = ctx.build(hints[key], vnode, _join(kpath, key))
     for key in SHAPE_KINDS[kind]:
         if key not in values:
@@ -668,27 +685,71 @@ def _build_shape(ctx: _Ctx, node: Node, path: str) -> Shape:
         for i, v in enumerate(values["size_mm"]):
             if v <= 0:
                 raise ctx.error(f"{kpath}.size_mm[{i}]", f"must be > 0, got {_num(v)}")
+    if kind == "disc" and "hole_mm" in values and not \
+            0 <= values["hole_mm"] < values["diameter_mm"]:
+        raise ctx.error(_join(kpath, "hole_mm"),
+                        f"must be >= 0 and < diameter_mm ({_num(values['diameter_mm'])}), "
+                        f"got {_num(values['hole_mm'])}")
     if kind == "polygon":
-        values["points_mm"] = _recentre(ctx, values["points_mm"], _join(kpath, "points_mm"))
+        values["points_mm"], values["holes_mm"] = _recentre(
+            ctx, values["points_mm"], values.get("holes_mm", []), kpath)
     return Shape(kind=kind, **values)
 
 
-def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], path: str
-              ) -> list[tuple[float, float]]:
-    """Move a polygon so its area centroid is the origin (the part frame of ``Shape``)."""
-    if len(pts) < 3:
-        raise ctx.error(path, f"a polygon needs at least 3 points, got {len(pts)}")
+def _ring_area(pts: list[tuple[float, float]]) -> tuple[float, float, float]:
+    """Signed area and the area-weighted centroid sums (cx·6a, cy·6a) of a closed ring."""
     a = cx = cy = 0.0
     for (x0, y0), (x1, y1) in zip(pts, pts[1:] + pts[:1], strict=True):
         cross = x0 * y1 - x1 * y0
         a += cross
         cx += (x0 + x1) * cross
         cy += (y0 + y1) * cross
-    a /= 2.0
+    return a / 2.0, cx, cy
+
+
+def _inside(p: tuple[float, float], ring: list[tuple[float, float]]) -> bool:
+    """Whether a point is strictly inside a closed ring (even-odd ray cast)."""
+    x, y = p
+    n, inside = len(ring), False
+    for i in range(n):
+        (x0, y0), (x1, y1) = ring[i], ring[(i + 1) % n]
+        if (y0 > y) != (y1 > y) and x < x0 + (y - y0) * (x1 - x0) / (y1 - y0):
+            inside = not inside
+    return inside
+
+
+def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], holes: list[list[tuple[float, float]]],
+              path: str) -> tuple[list[tuple[float, float]], list[list[tuple[float, float]]]]:
+    """Move a polygon (and its holes) so the area centroid of the region is the origin (the
+    part frame of ``Shape``); the polygon need not be convex."""
+    ppath = _join(path, "points_mm")
+    if len(pts) < 3:
+        raise ctx.error(ppath, f"a polygon needs at least 3 points, got {len(pts)}")
+    a, cx, cy = _ring_area(pts)
     if not math.isfinite(a) or abs(a) < 1e-9:
-        raise ctx.error(path, "polygon has no area (points collinear or repeated)")
-    cx, cy = cx / (6.0 * a), cy / (6.0 * a)
-    return [(x - cx, y - cy) for x, y in pts]
+        raise ctx.error(ppath, "polygon has no area (points collinear or repeated)")
+    sign = 1.0 if a > 0 else -1.0                 # either winding
+    area, sx, sy = abs(a), sign * cx, sign * cy
+    for i, hole in enumerate(holes):
+        hpath = f"{path}.holes_mm[{i}]"
+        if len(hole) < 3:
+            raise ctx.error(hpath, f"a hole needs at least 3 points, got {len(hole)}")
+        ha, hx, hy = _ring_area(hole)
+        if abs(ha) < 1e-9:
+            raise ctx.error(hpath, "hole has no area (points collinear or repeated)")
+        for p in hole:
+            if not _inside(p, pts):
+                raise ctx.error(hpath, f"point [{_num(p[0])}, {_num(p[1])}] is not inside "
+                                       f"the polygon's points_mm")
+        hsign = 1.0 if ha > 0 else -1.0
+        area -= abs(ha)
+        sx -= hsign * hx
+        sy -= hsign * hy
+    if area <= 1e-9:
+        raise ctx.error(_join(path, "holes_mm"), "the holes leave the polygon no area")
+    cx, cy = sx / (6.0 * area), sy / (6.0 * area)
+    return ([(x - cx, y - cy) for x, y in pts],
+            [[(x - cx, y - cy) for x, y in hole] for hole in holes])
 
 
 def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
@@ -911,6 +972,15 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         raise ctx.error("robot.inner_reach_mm", f"must be < robot.reach_mm "
                                                 f"({_num(r.reach_mm)}), got "
                                                 f"{_num(r.inner_reach_mm)}")
+    t = cell.camera.target
+    if t is not None:
+        if min(t.board) < 2:
+            raise ctx.error("camera.target.board", f"needs at least 2 points per row and 2 "
+                                                   f"rows, got {t.board[0]}x{t.board[1]}")
+        if t.kind == "charuco" and t.marker_mm >= t.pitch_mm:
+            raise ctx.error("camera.target.marker_mm", f"must be < pitch_mm "
+                                                       f"({_num(t.pitch_mm)}), got "
+                                                       f"{_num(t.marker_mm)}")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
         raise ctx.error("encoder.robot_start", f"must be < 2**robot_bits "
@@ -961,6 +1031,12 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
     th = sc.vision.threshold
     if th.block_px % 2 == 0:
         raise ctx.error("vision.threshold.block_px", f"must be odd, got {th.block_px}")
+    if th.method == "adaptive" and th.c >= 0:
+        raise ctx.error("vision.threshold.c",
+                        f"must be < 0, got {_num(th.c)}: as in OpenCV the threshold is the "
+                        f"local mean minus c, so c >= 0 makes flat belt foreground "
+                        f"(c: -{_num(abs(th.c) or 5)} puts it {_num(abs(th.c) or 5)} grey "
+                        f"levels above the mean)")
     for i, vc in enumerate(sc.vision.classes):
         cpath = f"vision.classes[{i}]"
         if vc.part not in sc.parts:

@@ -16,14 +16,18 @@ from pathlib import Path
 class Shape:
     """A part's outline in its own frame, origin at the outline's area centroid.
 
-    ``kind`` is ``disc`` (``diameter_mm``), ``rect`` (``size_mm``) or ``polygon``
-    (``points_mm``, recentred on the area centroid by the loader).
+    ``kind`` is ``disc`` (``diameter_mm``, optional ``hole_mm``: a washer), ``rect``
+    (``size_mm``) or ``polygon`` (``points_mm``, convex or not, optional ``holes_mm``: a
+    list of polygons inside it); the loader recentres polygons on the area centroid of
+    the region (holes taken out).
     """
 
     kind: str
     diameter_mm: float = 0.0
     size_mm: tuple[float, float] = (0.0, 0.0)
     points_mm: list[tuple[float, float]] = field(default_factory=list)
+    hole_mm: float = 0.0
+    holes_mm: list[list[tuple[float, float]]] = field(default_factory=list)
 
 
 @dataclass
@@ -60,8 +64,10 @@ class PartSpec:
 class Threshold:
     method: str = "fixed"                # fixed | otsu | adaptive
     value: float = 40.0                  # fixed: grey-level difference
-    block_px: int = 51                   # adaptive: neighbourhood
-    c: float = 5.0                       # adaptive: constant subtracted
+    block_px: int = 51                   # adaptive: neighbourhood (odd, px)
+    # adaptive: OpenCV's C, subtracted from the local mean (so < 0: foreground is that far
+    # above the mean of the image in which parts are bright)
+    c: float = -5.0
 
 
 @dataclass
@@ -85,9 +91,11 @@ class VisionClass:
 class VisionRecipe:
     backlight: bool = True
     golden_image: bool = True
+    foreground: str = "dark"             # dark | light: parts darker or brighter than the belt
     threshold: Threshold = field(default_factory=Threshold)
     morphology: Morphology = field(default_factory=Morphology)
     min_area_mm2: float = 100.0
+    min_hole_mm2: float = 3.0            # smaller holes in a blob are not counted (specks)
     classes: list[VisionClass] = field(default_factory=list)
     orientation: str = "none"            # none | cut_corner | principal_axis
     leaf: str | None = None              # "pkg.mod:Class": a locator class used instead of ours
@@ -173,11 +181,30 @@ class CameraCalibration:
 
 @dataclass
 class RenderSpec:
-    backlight: float = 225.0
-    falloff: float = 0.22
-    part_grey: float = 40.0
+    """How the simulated camera draws frames (``feeder_bt.hal.sim.render``)."""
+
+    lighting: str = "backlit"            # backlit | frontlit
+    backlight: float = 225.0             # backlit: grey of the lit, empty belt
+    falloff: float = 0.22                # vignetting: brightness lost in the corners
+    part_grey: float = 40.0              # the parts' grey (frontlit: of their lit top)
     noise_sigma: float = 3.0
     blur_px: float = 0.8
+    belt_grey: float = 35.0              # frontlit: grey of the empty belt
+    shading: float = 0.35                # frontlit: brightness a part loses at its edges
+    highlight: float = 70.0              # frontlit: grey levels a highlight adds
+
+
+@dataclass
+class TargetSpec:
+    """The cell's calibration target (``feeder calibrate camera``; see
+    ``feeder_bt.calibration.targets`` for the kinds and their points)."""
+
+    kind: str = "chessboard"             # chessboard | circles | acircles | charuco
+    board: tuple[int, int] = (8, 12)     # points per row and rows (inner corners, dots)
+    pitch_mm: float = 40.0               # square side; dots' spacing along a row
+    dot_mm: float = 14.0                 # circle grids: dot diameter
+    marker_mm: float = 0.0               # charuco: marker side (0: 0.7 of the square)
+    dictionary: str = "DICT_4X4_250"     # charuco: OpenCV's ArUco dictionary
 
 
 @dataclass
@@ -194,6 +221,7 @@ class CameraSpec:
     # real cell only: "0" (a device index), a stream URL, a folder of images or a video file
     source: str = "0"
     render: RenderSpec = field(default_factory=RenderSpec)
+    target: TargetSpec | None = None     # the calibration target (None: --target's default)
 
 
 @dataclass

@@ -4,9 +4,17 @@ On the simulated cell (``hal: sim``) each command runs its procedure against the
 simulator: it lays a target under the camera, or moves the robot onto a marker with a
 little touch noise (fixed ``--seed``). The ``--sim-*`` options set the simulator's hidden
 truth (a camera that is not where the cell file says, a belt encoder that is not quite
-``counts_per_mm``, a tool offset) so the procedure can be seen to recover it. On other
-cells the procedures need the hardware drivers, which this release does not have;
-``calibrate camera --image`` works on any cell from a saved image of the target.
+``counts_per_mm``, a tool offset) so the procedure can be seen to recover it. With
+``--hal emulated`` (or on a cell whose ``hal`` is ``emulated`` or ``real``) the belt and tool
+procedures run through the Galil and V+ drivers (``calibration.drivers``): against the
+emulators a scripted operator touches the marker; on a real cell the operator jogs the
+robot with the pendant and presses Enter. ``calibrate camera --image`` works on any cell
+from saved images of the target.
+
+The target is the cell's ``camera.target`` unless ``--target``/``--board``/``--square`` (and
+``--dot``, ``--marker``, ``--dictionary``) say otherwise; ``--no-prior`` trusts the stated
+``--pose`` alone (a first calibration, or one far off); several ``--image`` also estimate
+lens distortion (``calibration.lens``).
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ import datetime
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from ..calibration import (
     DEFAULT_TARGETS,
@@ -30,11 +39,15 @@ from ..calibration import (
     tool_procedure,
     window_error_mm,
 )
-from ..calibration.camera import TargetPose, centred_pose
+from ..calibration.camera import Target, TargetPose, centred_pose
 from ..calibration.common import CalibrationError
+from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from ..calibration.files import calibration_path, write_calibration_file
+from ..calibration.lens import LensFit, fit_lens
+from ..calibration.targets import parse_board
 from ..clock import SimClock
 from ..errors import FeederError
+from ..jobs import Job
 from ..scenario import load_cell
 from ..scenario.model import CameraCalibration, CellSpec, Scenario, VisionRecipe
 
@@ -57,17 +70,42 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
     c = sub.add_parser("camera", help="camera <-> belt frame from an image of a target")
     common(c)
-    c.add_argument("--target", default="chessboard", choices=sorted(DEFAULT_TARGETS),
-                   help="chessboard (8x12 inner corners, 40 mm) or dots (9x13, 36 mm)")
+    c.add_argument("--target", choices=sorted(DEFAULT_TARGETS),
+                   help="target kind (default: the cell's camera.target, else chessboard); "
+                        "defaults: " + "; ".join(f"{k} {t.nx}x{t.ny} {t.pitch_mm:g} mm"
+                                                 for k, t in DEFAULT_TARGETS.items()))
+    c.add_argument("--board", metavar="NXxNY",
+                   help="points per row and rows (chessboard/charuco: inner corners)")
+    c.add_argument("--square", "--pitch", dest="square", type=float, metavar="MM",
+                   help="square side (circle grids: dot spacing along a row), mm")
+    c.add_argument("--dot", type=float, metavar="MM", help="circle grids: dot diameter, mm")
+    c.add_argument("--marker", type=float, metavar="MM", help="charuco: marker side, mm")
+    c.add_argument("--dictionary", metavar="NAME", help="charuco: ArUco dictionary, e.g. "
+                   "DICT_4X4_250")
+    c.add_argument("--no-prior", action="store_true",
+                   help="a first calibration: do not use the cell's present calibration to "
+                        "tell the board's corners apart (the stated --pose is trusted)")
     c.add_argument("--pose", nargs=3, type=float, metavar=("X", "Y", "DEG"),
                    help="target centre (belt mm) and angle; default: centred in the window")
-    c.add_argument("--image", help="use this saved image of the target instead of the camera")
+    c.add_argument("--image", action="append", metavar="FILE",
+                   help="use this saved image of the target instead of the camera; repeat "
+                        "for lens distortion (the first is the one at --pose)")
+    c.add_argument("--save-image", metavar="FILE",
+                   help="simulated cell: also save the rendered image of the target (a test "
+                        "board for --image)")
     c.add_argument("--sim-truth", nargs=4, type=float, default=[0, 0, 0, 0],
                    metavar=("DX", "DY", "DEG", "PCT"),
                    help="simulated camera's error: origin shift mm, rotation, scale %%")
 
+    def hal_option(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("--hal", choices=("sim", "emulated", "real"),
+                        help="run through the simulator (sim), the drivers against the "
+                             "emulators (emulated) or the real cell's drivers (real); "
+                             "default: the cell's `hal`")
+
     b = sub.add_parser("belt", help="belt <-> robot: counts per mm and belt direction")
     common(b)
+    hal_option(b)
     b.add_argument("--noise", type=float, default=0.05, help="touch noise sigma, mm")
     b.add_argument("--sim-counts-per-mm", type=float,
                    help="simulated encoder's true counts per mm (default: the cell's)")
@@ -76,6 +114,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
     t = sub.add_parser("tool", help="tool offset from touches of one point at several angles")
     common(t)
+    hal_option(t)
     t.add_argument("--noise", type=float, default=0.05, help="touch noise sigma, mm")
     t.add_argument("--sim-tool", nargs=2, type=float, default=[0.0, 0.0],
                    metavar=("DX", "DY"), help="simulated tool's true offset, mm")
@@ -87,51 +126,96 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     cell = load_cell(args.cell, calibration_files=False)   # we may be about to write them
     if args.what == "camera":
         return _camera(args, cell)
-    _need_sim(cell, args.what)
+    kind = args.hal or cell.hal
     if args.what == "belt":
-        fit = sim_belt(cell, seed=args.seed, noise_mm=args.noise,
-                       counts_per_mm=args.sim_counts_per_mm, frame_deg=args.sim_frame_deg)
+        if kind == "sim":
+            fit = sim_belt(cell, seed=args.seed, noise_mm=args.noise,
+                           counts_per_mm=args.sim_counts_per_mm, frame_deg=args.sim_frame_deg)
+        else:
+            fit = driver_belt(cell, kind, seed=args.seed, noise_mm=args.noise)
         print(format_belt(fit))
         _write(args, cell, "belt", fit.as_dict())
     else:
-        fit_t = sim_tool(cell, tuple(args.sim_tool), seed=args.seed, noise_mm=args.noise)
+        if kind == "sim":
+            fit_t = sim_tool(cell, tuple(args.sim_tool), seed=args.seed, noise_mm=args.noise)
+        else:
+            fit_t = driver_tool(cell, kind, tuple(args.sim_tool), seed=args.seed,
+                                noise_mm=args.noise)
         print(format_tool(fit_t))
         _write(args, cell, "tool", fit_t.as_dict())
     return 0
 
 
 class HardwareNeeded(FeederError):
-    """The procedure has to move real hardware, and this cell's drivers are not there yet."""
+    """The procedure needs what this cell does not offer (a simulated camera to render)."""
 
     exit_code = 2
 
 
 def _need_sim(cell: CellSpec, what: str) -> None:
     if cell.hal != "sim":
-        raise HardwareNeeded(f"calibrate {what}: cell {cell.name!r} has hal {cell.hal!r}: the "
-                             "real-cell procedure needs the hardware drivers (not yet in this "
-                             "release)")
+        raise HardwareNeeded(f"calibrate {what}: cell {cell.name!r} has hal {cell.hal!r}: "
+                             "photograph the target lying on the belt and give the photo "
+                             "with --image (and its place with --pose)")
+
+
+def camera_target(cell: CellSpec, args: argparse.Namespace) -> Target:
+    """The target: the flags over the cell's ``camera.target`` over the kind's default."""
+    spec = cell.camera.target
+    kind = args.target or (spec.kind if spec else "chessboard")
+    if spec is not None and kind == spec.kind:
+        t = Target(spec.kind, spec.board[0], spec.board[1], spec.pitch_mm, spec.dot_mm,
+                   spec.marker_mm, spec.dictionary)
+    else:
+        t = DEFAULT_TARGETS[kind]
+    nx, ny = parse_board(args.board) if args.board else (t.nx, t.ny)
+    changes = {"nx": nx, "ny": ny}
+    for flag, field in (("square", "pitch_mm"), ("dot", "dot_mm"), ("marker", "marker_mm"),
+                        ("dictionary", "dictionary")):
+        if getattr(args, flag) is not None:
+            changes[field] = getattr(args, flag)
+    if args.square is not None and args.dot is None and kind != "charuco" \
+            and t.dot_mm >= 0.8 * args.square:
+        changes["dot_mm"] = 0.4 * args.square            # a default dot that fits
+    if args.square is not None and args.marker is None and kind == "charuco":
+        changes["marker_mm"] = 0.0                       # the default share of the square
+    return dataclasses.replace(t, **changes)
+
+
+def _read(path: str):
+    img = cv2.imread(path, cv2.IMREAD_GRAYSCALE) if Path(path).is_file() else None
+    if img is None:                             # (imread would warn on stderr)
+        raise CalibrationError(f"{path}: cannot read the image (PNG, JPG or BMP)")
+    return img
 
 
 def _camera(args: argparse.Namespace, cell: CellSpec) -> int:
-    target = DEFAULT_TARGETS[args.target]
+    target = camera_target(cell, args)
     cam = cell.camera
     pose = TargetPose(*args.pose) if args.pose else centred_pose(cam.calibration, cam.width_px,
                                                                  cam.height_px)
     truth = None
+    prior = not args.no_prior
+    lens = None
     if args.image:
-        img = (cv2.imread(args.image, cv2.IMREAD_GRAYSCALE) if Path(args.image).is_file()
-               else None)                       # imread would warn on stderr
-        if img is None:
-            raise CalibrationError(f"{args.image}: cannot read the image (PNG, JPG or BMP)")
-        fit = calibrate_camera_image(img, target, pose, cam.calibration)
+        images = [_read(p) for p in args.image]
+        fit = calibrate_camera_image(images[0], target, pose, cam.calibration, prior)
+        if len(images) > 1:
+            lens = fit_lens(images, target)
     else:
         _need_sim(cell, "camera")
         base = cam.sim_truth or cam.calibration     # the simulated camera's real pose
         truth = sim_truth(base, *args.sim_truth)
-        fit = sim_camera(cell, target, pose, truth, seed=args.seed)
+        fit = sim_camera(cell, target, pose, truth, seed=args.seed, prior=prior,
+                         save=args.save_image)
+    print(f"target: {target.describe()} at x {pose.x_mm:g}, y {pose.y_mm:g} mm, "
+          f"{pose.angle_deg:g} deg")
     print(format_camera(fit, cell, truth))
-    _write(args, cell, "camera", fit.as_dict(), default=calibration_path(cell))
+    values = fit.as_dict()
+    if lens is not None:
+        print(format_lens(lens, fit.calibration.mm_per_px))
+        values["lens"] = lens.as_dict()
+    _write(args, cell, "camera", values, default=calibration_path(cell))
     return 0
 
 
@@ -163,14 +247,20 @@ def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
 
 
 def sim_camera(cell: CellSpec, target, pose: TargetPose,
-               truth: CameraCalibration | None = None, seed: int = 1) -> CameraFit:
-    """Calibrate the simulated camera (really mapping by ``truth``) from a target at ``pose``."""
+               truth: CameraCalibration | None = None, seed: int = 1,
+               prior: bool = True, save: str | None = None) -> CameraFit:
+    """Calibrate the simulated camera (really mapping by ``truth``) from a target at ``pose``
+    (``save``: also write the image it grabbed to this file)."""
     from ..hal.sim.target import TargetCamera
 
     camera = TargetCamera(cell.camera, truth, seed=seed)
     camera.place(target, pose)
+    if save:
+        from .common import write_image
+        write_image(save, camera.grab().result.image)
+        camera.frames = 0                       # the procedure grabs the same image again
     return camera_procedure(camera, lambda job: job.result if job.ok else _raise(job),
-                            target, pose, cell.camera.calibration)
+                            target, pose, cell.camera.calibration, prior)
 
 
 def _raise(job):
@@ -222,6 +312,66 @@ def sim_tool(cell: CellSpec, tool_offset_mm: tuple[float, float] = (0.0, 0.0), s
         hal.close()
 
 
+# ------------------------------------------------------------------------------ drivers
+
+
+def _driver_hal(cell: CellSpec, kind: str, seed: int):
+    """The cell behind its drivers: the emulators (``emulated``) or the real controllers."""
+    from ..hal.factory import make_hal
+
+    empty = Scenario(name="calibration", path=Path("-"), cell_path=Path(cell.path), parts={},
+                     hopper={}, vision=VisionRecipe())
+    hal, _ = make_hal(kind, empty, cell, seed)
+    return hal
+
+
+def driver_belt(cell: CellSpec, kind: str, seed: int = 1, noise_mm: float = 0.05,
+                ask=input, operator: bool | None = None) -> BeltFit:
+    """Belt calibration through the drivers (see ``calibration.drivers``); ``operator``: an
+    operator at the terminal touches (default: on a real cell), else the emulated plant's
+    scripted one."""
+    hal = _driver_hal(cell, kind, seed)
+    try:
+        if not (kind == "real" if operator is None else operator):
+            rig = PlantToucher(hal.extras["plant"], hal.robot, noise_mm=noise_mm, seed=seed)
+            rig.put_marker(*BELT_MARKER_MM)
+            touch = rig.touch_marker
+        else:
+            print("Stick a marker on the belt within the robot's reach. At each prompt jog "
+                  "the tool tip onto the marker with the pendant; the belt then advances "
+                  "80 mm and the robot goes to its safe pose.")
+            def touch() -> Job:
+                return OperatorTouch("tool tip on the marker? press Enter ", ask)
+        return belt_procedure(hal, real_waiter(), touch, robot_bits=cell.encoder.robot_bits,
+                              settle=refresh(hal))
+    finally:
+        hal.close()
+
+
+def driver_tool(cell: CellSpec, kind: str, tool_offset_mm: tuple[float, float] = (0.0, 0.0),
+                seed: int = 1, noise_mm: float = 0.05, ask=input,
+                angles_deg=(-90.0, -30.0, 30.0, 90.0), operator: bool | None = None
+                ) -> ToolFit:
+    """Tool calibration through the drivers (see ``calibration.drivers``; ``operator`` as
+    for ``driver_belt``)."""
+    hal = _driver_hal(cell, kind, seed)
+    try:
+        if not (kind == "real" if operator is None else operator):
+            rig = PlantToucher(hal.extras["plant"], hal.robot, tool_offset_mm,
+                               noise_mm=noise_mm, seed=seed)
+            def touch(rz: float) -> Job:
+                return rig.touch(np.array(TOOL_POINT_MM), rz)
+        else:
+            print("Fix a pointed marker within the robot's reach. At each prompt jog the "
+                  "tool tip onto it with the tool turned to the angle asked.")
+            def touch(rz: float) -> Job:
+                return OperatorTouch(f"tool turned {rz:g} deg, tip on the point? press Enter ",
+                                     ask)
+        return tool_procedure(hal, real_waiter(), touch, angles_deg, settle=refresh(hal))
+    finally:
+        hal.close()
+
+
 # ------------------------------------------------------------------------------ output
 
 
@@ -242,6 +392,17 @@ def format_camera(fit: CameraFit, cell: CellSpec, truth: CameraCalibration | Non
     if fit.hint:
         lines.append(f"  hint: {fit.hint}")
     return "\n".join(lines)
+
+
+def format_lens(fit: LensFit, mm_per_px: float) -> str:
+    verdict = ("negligible for the cell's camera model (no distortion)"
+               if fit.max_shift_px < 0.5 else
+               "the cell's camera model has no distortion: positions there are off by up to "
+               "this much")
+    return (f"lens: k1 {fit.k1:.5f}, k2 {fit.k2:.5f} from {fit.views} views, {fit.points} "
+            f"points: reprojection rms {fit.rms_px:.3f} px\n"
+            f"  distortion shifts the views' area by up to {fit.max_shift_px:.2f} px "
+            f"({fit.max_shift_px * mm_per_px:.2f} mm): {verdict}")
 
 
 def format_belt(fit: BeltFit) -> str:

@@ -1,7 +1,9 @@
 """``feeder locate``: run a scenario's recipe on image files, as the cell would on a frame.
 
 For tuning a recipe on recorded or rendered images without a cell: the table shows what was
-found and why blobs were rejected; ``--annotate`` draws it (contours, centroids, orientation
+found and why blobs were rejected (and, for an image with no part, why: no foreground
+at all — with a hint when the other ``vision.foreground`` would find the parts — or the
+rejects grouped by reason); ``--annotate`` draws it (contours, centroids, orientation
 arrows, rejects with their reason); ``--json`` is for scripts and tests.
 """
 
@@ -14,11 +16,12 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from ..vision.diagnose import why_nothing
 from ..vision.locator import Detection
 from .common import check_size, load_golden, read_image, scenario_locator, write_image
 
 #: Features shown in the table (all are in the JSON).
-TABLE_FEATURES = ("area_mm2", "circularity", "aspect")
+TABLE_FEATURES = ("area_mm2", "circularity", "aspect", "holes")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -47,7 +50,8 @@ def cmd_locate(args: argparse.Namespace) -> int:
         result = locator.locate(img, all_features=True)   # the table shows every feature
         row = {"image": path, "ms": round(result.ms, 3),
                "parts": [_det_dict(d) for d in result.parts],
-               "rejected": [_det_dict(d) for d in result.rejected]}
+               "rejected": [_det_dict(d) for d in result.rejected],
+               "why": why_nothing(locator, img, result, golden)}
         if args.annotate:
             dest = Path(args.annotate) / f"{Path(path).stem}_annotated.png"
             write_image(dest, locator.annotate(img, result))
@@ -87,6 +91,7 @@ def format_table(row: dict[str, Any]) -> str:
         if d["reason"]:
             line += f"  rejected: {d['reason']}"
         lines.append(line)
+    lines += [f"  why no part: {line}" for line in row.get("why", [])]
     if "annotated" in row:
         lines.append(f"  annotated: {row['annotated']}")
     return "\n".join(lines)

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..cell import Cell, CellState
 from ..clock import SimClock
-from ..geometry import place_outline
+from ..geometry import outer, place_outline
 from ..hal.interfaces import Frame
 from ..hal.sim.devices import make_sim_hal
 from ..jobs import Job
@@ -126,7 +126,9 @@ def _truth(world: Any, cal: Calibration, size: tuple[int, int]) -> list[dict[str
     by_id = {p.id: p for p in world.on_horizontal.values()}
     for row in world.truth():
         part = by_id[row["id"]]
-        outline = place_outline(part.outline, row["x_mm"], row["y_mm"], row["angle_deg"])
+        # the outer ring: holes lie inside it (and would put NaN rows in the bounds)
+        outline = place_outline(outer(part.outline), row["x_mm"], row["y_mm"],
+                                row["angle_deg"])
         px = cal.mm_to_px(outline)
         lo, hi = px.min(axis=0), px.max(axis=0)
         if hi[0] < -0.5 or hi[1] < -0.5 or lo[0] > w - 0.5 or lo[1] > h - 0.5:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import polygon_area, pose_outline
+from ..geometry import outer, polygon_area, pose_outline, rings
 from ..scenario.model import Scenario
 from ..vision.features import FEATURES
 from ..vision.locator import Locator
@@ -30,7 +30,7 @@ MARGIN_VALUE = 0.03        # ... plus this fraction of its centre
 MAX_EXTRA = 3              # at most this many features besides the area
 #: Shape features in the order they are preferred when several separate equally well.
 PREFERRED = ("circularity", "aspect", "rectangularity", "solidity", "perimeter_mm",
-             "hu1", "hu2")
+             "hu1", "hu2", "holes", "hole_area_mm2")
 
 
 @dataclass
@@ -62,6 +62,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     s.add_argument("--bad", nargs="+", default=[], metavar="IMAGE",
                    help="images of things the class must not match")
     s.add_argument("--golden", metavar="IMAGE", help="the empty, lit belt")
+    s.add_argument("--clusters", action="store_true",
+                   help="the images show several parts or poses: propose one class per "
+                        "cluster of feature values, named after the nearest pose")
     s.add_argument("--part", help="part name (default: the scenario's only part)")
     s.add_argument("--pose", help="pose name (default: the part's first pickable pose)")
     s.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
@@ -71,12 +74,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def cmd_suggest(args: argparse.Namespace) -> int:
     scenario, _, locator = scenario_locator(args.scenario, args.cell)
-    part, pose = _part_pose(scenario, args.part, args.pose)
     golden = load_golden(locator, args.golden, "feeder recipe suggest")
     good = _samples(locator, args.good, golden)
     bad = _samples(locator, args.bad, golden)
+    if args.clusters:
+        for sug in suggest_clusters(good, bad, scenario):
+            print(f"# {sug.good} blob(s) in this cluster; the class lets through "
+                  f"{sug.bad_let_through} other blob(s)")
+            print(sug.yaml())
+        return 0
+    part, pose = _part_pose(scenario, args.part, args.pose)
     spec = scenario.parts[part]
-    nominal = polygon_area(pose_outline(spec, pose))
+    nominal = polygon_area(outer(pose_outline(spec, pose)))
     sug = suggest(good, bad, part, pose, spec.poses[pose].pickable, nominal_area=nominal)
     print(f"# {sug.good} good blob(s), {sug.bad} bad; the class lets through "
           f"{sug.bad_let_through} bad", file=sys.stderr)
@@ -103,6 +112,8 @@ def suggest(good: list[dict[str, float]], bad: list[dict[str, float]], part: str
     samples = [f for f, k in zip(good, near, strict=True) if k]
     negatives = [f for f, k in zip(good, near, strict=True) if not k] + list(bad)
     widened = {name: _widen([f[name] for f in samples]) for name in FEATURES}
+    # a count is exact: its range is the counts seen
+    widened["holes"] = (min(f["holes"] for f in samples), max(f["holes"] for f in samples))
     chosen = {"area_mm2": widened["area_mm2"]}
     through = [f for f in negatives if _inside(f, chosen)]
     for _ in range(MAX_EXTRA):
@@ -120,6 +131,66 @@ def suggest(good: list[dict[str, float]], bad: list[dict[str, float]], part: str
         chosen[shape] = widened[shape]
     return Suggestion(part, pose, pickable, chosen, good=len(samples), bad=len(negatives),
                       bad_let_through=len(through))
+
+
+#: Scales at which two blobs' features count as alike (``suggest_clusters``).
+CLUSTER_SCALE = {"area_mm2": 0.12, "aspect": 0.15, "solidity": 0.08, "holes": 0.5}
+MIN_CLUSTER = 3            # smaller clusters are odd blobs (touching parts): not a class
+
+
+def suggest_clusters(good: list[dict[str, float]], bad: list[dict[str, float]],
+                     scenario: Scenario) -> list[Suggestion]:
+    """One class per cluster of alike blobs in ``good`` (several parts or poses in one
+    image set), each named after the pose whose outline is nearest in area and holes.
+
+    Blobs are alike when their log area, log aspect, solidity and hole count all differ by
+    less than ``CLUSTER_SCALE``; clusters are the connected groups of alike blobs (single
+    linkage, so the order of the samples does not matter). Each cluster's ranges come from
+    ``suggest`` with every other blob as a bad sample.
+    """
+    if not good:
+        raise BadInput("no whole blobs in the --good images (all touch the border or are "
+                       "smaller than min_area_mm2)")
+    z = np.array([[math.log(max(f["area_mm2"], 1e-9)) / CLUSTER_SCALE["area_mm2"],
+                   math.log(max(f["aspect"], 1e-9)) / CLUSTER_SCALE["aspect"],
+                   f["solidity"] / CLUSTER_SCALE["solidity"],
+                   f["holes"] / CLUSTER_SCALE["holes"]] for f in good])
+    n = len(good)
+    label = list(range(n))
+
+    def find(i: int) -> int:
+        while label[i] != i:
+            label[i] = label[label[i]]
+            i = label[i]
+        return i
+
+    near = np.abs(z[:, None, :] - z[None, :, :]).max(axis=2) < 1.0
+    for i, j in zip(*np.nonzero(np.triu(near, 1)), strict=True):
+        label[find(int(i))] = find(int(j))
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(find(i), []).append(i)
+    clusters = sorted((g for g in groups.values() if len(g) >= MIN_CLUSTER),
+                      key=lambda g: -len(g))
+    if not clusters:
+        raise BadInput(f"no cluster of at least {MIN_CLUSTER} alike blobs in the --good images")
+    poses = [(pn, qn, polygon_area(outer(o)), len(rings(o)) - 1, spec.poses[qn].pickable)
+             for pn, spec in scenario.parts.items() for qn in spec.poses
+             for o in [pose_outline(spec, qn)]]
+    out = []
+    for g in clusters:
+        members = [good[i] for i in g]
+        area = float(np.median([f["area_mm2"] for f in members]))
+        holes = round(float(np.median([f["holes"] for f in members])))
+        part, pose, _, _, pickable = min(
+            poses, key=lambda p: (p[3] != holes, abs(p[2] - area) / max(p[2], 1e-9)))
+        others = [good[i] for i in range(n) if i not in set(g)] + list(bad)
+        sug = suggest(members, others, part, pose, pickable, nominal_area=None)
+        if any(f["holes"] for f in good) and "holes" not in sug.ranges:
+            sug.ranges["holes"] = (float(holes), float(holes))
+            sug.bad_let_through = sum(_inside(f, sug.ranges) for f in others)
+        out.append(sug)
+    return out
 
 
 def _samples(locator: Locator, paths: list[str], golden: np.ndarray | None
@@ -164,6 +235,8 @@ def _round(v: float, how) -> float:
 
 
 def _fmt(v: float) -> str:
+    if v == int(v) and abs(v) < 1e6:
+        return str(int(v))
     return f"{v:.4g}" if abs(v) >= 1e-3 else f"{v:.3e}"
 
 

@@ -1,7 +1,9 @@
 """Blob features a recipe's classes may range over (mm and mm² through the calibration)."""
 
 FEATURES: dict[str, str] = {
-    "area_mm2": "blob area in mm²",
+    "area_mm2": "blob area in mm² inside its outer contour (holes included)",
+    "holes": "number of holes (of at least min_hole_mm2)",
+    "hole_area_mm2": "total area of those holes in mm²",
     "perimeter_mm": "contour length in mm",
     "circularity": "4·π·area / perimeter², 1 for a disc",
     "aspect": "long side / short side of the minimum-area rectangle",
@@ -17,6 +19,7 @@ FEATURES: dict[str, str] = {
 #: needed; ``Locator.measure_blobs`` (recipe tuning) measures them all.
 GROUPS: tuple[tuple[str, ...], ...] = (
     ("area_mm2",),                       # the contour's moments (also the centroid)
+    ("holes", "hole_area_mm2"),          # the hole contours (found only when asked for)
     ("hu1", "hu2"),                      # the same moments
     ("perimeter_mm", "circularity"),     # the contour smoothed along itself
     ("aspect", "rectangularity"),        # the minimum-area rectangle

@@ -1,15 +1,18 @@
 """The OpenCV locator: a grey image -> poses of singulated parts in the belt frame.
 
 It sees only pixels, the cell's calibration and the recipe — never ground truth.
-Pipeline: golden-image subtraction (dark parts become bright), threshold, morphology,
-external contours; blobs touching the image border or smaller than ``min_area_mm2`` are
-rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
+Pipeline: the image in which parts are bright (``foreground: dark``: the golden image minus
+the frame, or the inverted frame; ``light``: the frame minus the golden image, or the
+frame), threshold, morphology, external contours (with their holes, ``RETR_CCOMP``, when a
+class ranges over ``holes`` or ``hole_area_mm2``); blobs touching the image border or
+smaller than ``min_area_mm2`` are rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
 calibration, corrected for pixelisation so that they are close to the physical value (a
 50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
 names the part and pose. Position is the blob's area centroid, which is the part frame's
 origin (``geometry``).
 Merged (touching) parts fall outside every class and are rejected, so they are never
-picked.
+picked; a blob that fits no class is rejected with the class nearest it by area and the
+first of that class's ranges it is outside (``Locator._no_class``).
 
 Features are measured as a cascade, cheapest first (``features.GROUPS``): every blob gets
 its area and centroid from the contour's moments; a class's other features are measured
@@ -23,7 +26,8 @@ Recipe semantics worth knowing:
 
 * ``threshold.method``: ``fixed`` (``value`` grey levels of difference), ``otsu`` (Otsu's
   level, but never below ``value``, so an empty belt does not turn noise into blobs), or
-  ``adaptive`` (``block_px``, ``c`` above the local mean).
+  ``adaptive`` (``block_px``; foreground above the local mean minus ``c``: OpenCV's
+  ``C``, so ``c`` < 0).
 * ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
   (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
   which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
@@ -48,10 +52,19 @@ import numpy as np
 from ..geometry import pose_outline, wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .calibration import Calibration
+from .chains import WINDOW as _WINDOW  # noqa: F401  (tests read it here)
+from .chains import _chain_steps, _first, _full_chain, _runs, _smooth_length, _with_holes
+from .corners import (
+    _angle,
+    _corner_signature,
+    _corner_signatures,  # noqa: F401  (tests read it here)
+    _CornerSignature,
+    _cross,
+    _densify,
+)
 from .features import FEATURES, GROUP_OF
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
-_WINDOW = 5                    # points in the moving average of the smoothed perimeter
 # the four 4-neighbours of a pixel (u, v): where the outline may cross between them
 _DU = np.array([1, -1, 0, 0])
 _DV = np.array([0, 0, 1, -1])
@@ -86,11 +99,13 @@ class _Blob:
     """One contour on its way through the cascade: what has been measured so far."""
 
     __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
-                 "face", "oriented")
+                 "face", "oriented", "holes")
 
     def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
-                 mom: dict[str, float], area_px: float, det: Detection, full: bool) -> None:
+                 mom: dict[str, float], area_px: float, det: Detection, full: bool,
+                 holes: list[np.ndarray] | None = None) -> None:
         self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
+        self.holes = holes                # its hole contours (None: not looked for)
         self.full = full                  # every boundary pixel (else the chain's corners)
         self.box = box                    # bounding box u, v, width, height
         self.mom = mom                    # its moments (cv2.moments)
@@ -103,117 +118,11 @@ class _Blob:
         self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
 
 
-# ------------------------------------------------------------------- cut-corner signature
-
-
-@dataclass
-class _CornerSignature:
-    """Where a square's cut corner is and which way its long cut leg runs.
-
-    ``corner``: unit vector from the rectangle centre towards the cut corner; ``leg``: unit
-    vector along the side on which the cut is longer, pointing away from the corner.
-    ``alpha``: the minimum-area rectangle's angle (rad, mod 90°).
-    """
-
-    corner: tuple[float, float]
-    leg: tuple[float, float]
-    alpha: float
-
-
-def _from_frame(vx: float, vy: float, c: float, s: float) -> tuple[float, float]:
-    """A vector in the rectangle's frame (cos ``c``, sin ``s`` of its angle) -> outline frame."""
-    return vx * c - vy * s, vx * s + vy * c
-
-
-_SQRT2 = math.sqrt(2.0)
-
-
-def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
-    """Cut-corner signature of one closed outline given as points in mm."""
-    return _corner_signatures([np.asarray(pts, dtype=np.float32).reshape(-1, 2)])[0]
-
-
-_CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's corners,
-_CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
-
-
-def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | None]:
-    """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
-    (at least one point each).
-
-    The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
-    from the outline is the cut one; the cut is longer along one side than the other,
-    which tells the faces apart. All of it reads only the outline's convex hull (the
-    rectangle, the points nearest the rectangle's corners and at the ends of its sides),
-    and all the hulls go through one set of array operations on complex numbers (numpy's
-    per-call cost dominates when done one by one).
-    """
-    hulls = [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
-    rects = [cv2.minAreaRect(hl) for hl in hulls]
-    n = len(hulls)
-    counts = [len(hl) for hl in hulls]
-    seg = np.repeat(np.arange(n), counts)                       # each point's outline
-    starts = np.cumsum([0] + counts[:-1])
-    z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
-    # per outline: centre, angle, half-sides
-    par = np.array([(cx, cy, math.radians(a), w / 2.0, h / 2.0)
-                    for (cx, cy), (w, h), a in rects]).reshape(n, 5)
-    half = par[:, 3:]
-    centre = par[:, 0] + 1j * par[:, 1]
-    q = (z - centre[seg]) * np.exp(-1j * par[:, 2])[seg]     # in the rectangle's frame
-    # distance of the nearest hull point to each rectangle corner (a column each)
-    corners = half[:, :1] * _CORNER_X + 1j * (half[:, 1:] * _CORNER_Y)       # (n, 4)
-    k = np.minimum.reduceat(np.abs(q[:, None] - corners[seg]), starts).argmax(axis=1)
-    sx = np.sign(half[:, 0] * _CORNER_X[k])
-    sy = np.sign(half[:, 1] * _CORNER_Y[k])
-    fx, fy = q.real * sx[seg], q.imag * sy[seg]           # cut corner now at (+, +)
-    tol = 1.5
-    # the far end of the side parallel to x (y) short of the cut: the top (right) side's
-    # points within tol of it, their largest x (y); -inf if it has none
-    top = np.maximum.reduceat(np.where(np.abs(fy - half[seg, 1]) < tol, fx, -np.inf), starts)
-    right = np.maximum.reduceat(np.where(np.abs(fx - half[seg, 0]) < tol, fy, -np.inf),
-                                starts)
-    out: list[_CornerSignature | None] = []
-    for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
-                                                      top.tolist(), right.tolist(),
-                                                      strict=True):
-        if tj == -math.inf or rj == -math.inf:
-            out.append(None)
-            continue
-        cj, sj = math.cos(aj), math.sin(aj)
-        leg_x = hxj - tj                     # cut length along the side parallel to x
-        leg_y = hyj - rj
-        corner = _from_frame(sxj / _SQRT2, syj / _SQRT2, cj, sj)
-        leg = (_from_frame(-sxj, 0.0, cj, sj) if leg_x >= leg_y
-               else _from_frame(0.0, -syj, cj, sj))
-        out.append(_CornerSignature(corner=corner, leg=leg, alpha=aj))
-    return out
-
-
-def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:
-    out = []
-    n = len(outline)
-    for i in range(n):
-        a, b = outline[i], outline[(i + 1) % n]
-        m = max(int(math.ceil(np.hypot(*(b - a)) / step)), 1)
-        t = np.arange(m)[:, None] / m
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
-
-
-def _cross(a: tuple[float, float], b: tuple[float, float]) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
-
-
-def _angle(v: tuple[float, float]) -> float:
-    return math.atan2(v[1], v[0])
-
-
 # ---------------------------------------------------------------------------- locator
 
 
 class Locator:
-    """Finds parts in backlit images with one recipe; see the module docstring."""
+    """Finds parts in images with one recipe; see the module docstring."""
 
     def __init__(self, recipe: VisionRecipe, parts: dict[str, PartSpec],
                  calibration: Calibration) -> None:
@@ -221,6 +130,7 @@ class Locator:
         self.parts = parts
         self.calibration = calibration
         self._golden: np.ndarray | None = None
+        self._light = recipe.foreground == "light"   # parts brighter than the belt
         for cls in recipe.classes:
             for name in cls.ranges:
                 if name not in FEATURES:
@@ -237,6 +147,9 @@ class Locator:
                                for cls in recipe.classes for n in cls.ranges) or (
             recipe.orientation == "cut_corner"
             and any(cls.mirrored is not None for cls in recipe.classes))
+        # hole contours are searched for only when a class ranges over them
+        self._want_holes = any(GROUP_OF[n] == GROUP_OF["holes"]
+                               for cls in recipe.classes for n in cls.ranges)
         self._signatures: dict[str, _CornerSignature] = {}
         if recipe.orientation == "cut_corner":
             for cls in recipe.classes:
@@ -271,8 +184,12 @@ class Locator:
         th = self.recipe.threshold
         self._below = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
-            # golden - img > t  <=>  img < golden - t (saturated at 0: never below 0)
-            self._below = cv2.subtract(self._golden, math.floor(th.value))
+            if self._light:
+                # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
+                self._below = cv2.add(self._golden, math.floor(th.value))
+            else:
+                # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
+                self._below = cv2.subtract(self._golden, math.floor(th.value))
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
@@ -293,10 +210,16 @@ class Locator:
         return buf
 
     def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
-        """Dark parts on a bright belt -> bright: the golden image minus the frame."""
+        """The image in which parts are bright: for dark parts the golden image minus the
+        frame (or the inverted frame), for light parts the frame minus the golden image
+        (or the frame itself)."""
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
+            if self._light:
+                return cv2.subtract(img, golden, dst=dst)
             return cv2.subtract(golden, img, dst=dst)
+        if self._light:
+            return img
         return cv2.bitwise_not(img, dst=dst)
 
     def _threshold(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, float | None]:
@@ -308,7 +231,8 @@ class Locator:
         if th.method == "fixed" and self.recipe.golden_image and self._below is not None \
                 and self._below.shape == img.shape:
             # the same mask as subtract-then-threshold, in one pass over the frame
-            return cv2.compare(img, self._below, cv2.CMP_LT, dst=mask), None, float(th.value)
+            return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
+                                dst=mask), None, float(th.value))
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
@@ -322,8 +246,10 @@ class Locator:
         elif th.method == "adaptive":
             level = None
             block = max(3, int(th.block_px) | 1)
+            # OpenCV's meaning of C: foreground where the part-bright image is above its
+            # local mean minus c (so c < 0: that far above the mean)
             cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
-                                  cv2.THRESH_BINARY, block, -th.c, dst=mask)
+                                  cv2.THRESH_BINARY, block, th.c, dst=mask)
         else:
             raise ValueError(f"unknown threshold method {th.method!r}")
         return mask, diff, level
@@ -357,8 +283,14 @@ class Locator:
         return out
 
     def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
+        """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
+        return self._contours_holes(mask, full, holes=False)[0]
+
+    def _contours_holes(self, mask: np.ndarray, full: bool, holes: bool
+                        ) -> tuple[list[np.ndarray], list[list[np.ndarray]] | None]:
         """External contours of the opened and closed ``mask``, in ``findContours``' order
-        (as on the whole frame: by first point, last found first).
+        (as on the whole frame: by first point, last found first), and with ``holes`` each
+        one's hole contours (``RETR_CCOMP``; else None).
 
         The morphology and the contour search run only on ``_rois``: inside each, every
         pixel comes out as on the whole frame, outside them nothing does. The rectangles
@@ -373,13 +305,15 @@ class Locator:
         h, w = mask.shape
         rois = self._rois(mask)
         if not rois:
-            return []
+            return [], ([] if holes else None)
+        mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
         # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
         # the morphology), which also keeps it one pixel clear of its neighbours
         pad = self._margin if morph else 1
-        out: list[tuple[int, np.ndarray]] = []    # (whole frame's raster index of 1st point, c)
+        out: list[tuple[int, np.ndarray, list[np.ndarray]]] = []   # (whole frame's raster
+        # index of the 1st point, contour, its holes)
         srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
         starts: list[int] = []
         shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
@@ -392,9 +326,9 @@ class Locator:
                 top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
                     pad * (u0 == 0), pad * (u1 == w)
                 if morph and not self._mirror:
-                    cs, _ = cv2.findContours(self._morph(src), cv2.RETR_EXTERNAL, chain,
-                                             offset=(u0, v0))
-                    out += [(c.item(1) * w + c.item(0), c) for c in cs]
+                    cs, hier = cv2.findContours(self._morph(src), mode, chain, offset=(u0, v0))
+                    out += [(c.item(1) * w + c.item(0), c, hs)
+                            for c, hs in _with_holes(cs, hier, holes)]
                     continue
                 src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
                 mirrors.append((x, top, bottom, left, right, src.shape))
@@ -418,14 +352,16 @@ class Locator:
                     packed[:, x0:x0 + left] = 0
                 if right:
                     packed[:, x0 + sw - right:x0 + sw] = 0
-            cs, _ = cv2.findContours(packed, cv2.RETR_EXTERNAL, chain)
-            for c in cs:
-                flat = c.view(np.int64)
-                flat += shifts[bisect.bisect_right(starts, c.item(0)) - 1]
-                out.append((c.item(1) * w + c.item(0), c))
+            cs, hier = cv2.findContours(packed, mode, chain)
+            for c, hs in _with_holes(cs, hier, holes):
+                shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
+                for k in (c, *hs):               # a blob's holes lie in its rectangle
+                    flat = k.view(np.int64)
+                    flat += shift
+                out.append((c.item(1) * w + c.item(0), c, hs))
         # the whole frame's findContours lists contours by first point, last found first
         out.sort(key=_first, reverse=True)
-        return [c for _, c in out]
+        return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
 
     # -------------------------------------------------------------- locate
 
@@ -439,7 +375,8 @@ class Locator:
         img = _grey(image)
         mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
-        blobs = self._blobs(self._contours(mask, full), img.shape[:2], all_features, full=full)
+        contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes)
         # classes first; the blobs that need a face wait for one batch of fine outlines
         waiting = [b for b in blobs if not b.det.reason and not self._classify(b)]
         if waiting:
@@ -463,19 +400,20 @@ class Locator:
         classification ("touches border", "too small"); ``part`` is always None.
         """
         img = _grey(image)
-        blobs = self._blobs(self._contours(self._threshold(img)[0], True), img.shape[:2],
-                            all_features=True, full=True)
+        contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
+        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
         return [b.det for b in blobs]
 
     # -------------------------------------------------------------- per blob
 
     def _blobs(self, contours: list[np.ndarray], shape: tuple[int, int], all_features: bool,
-               full: bool = True) -> list[_Blob]:
+               full: bool = True, holes: list[list[np.ndarray]] | None = None) -> list[_Blob]:
         """The contours worth reporting (not specks), measured as far as every blob is:
         area, centroid (mm), the border and size rules; with ``all_features`` every feature
         of every blob, the rejected ones too.
 
         ``full``: the contours have every boundary pixel (else only the chain's corners).
+        ``holes``: each contour's hole contours, if they were looked for.
         The centroids go to mm in one call.
         """
         h, w = shape
@@ -483,7 +421,7 @@ class Locator:
         min_px = self.recipe.min_area_mm2 / s2
         blobs: list[_Blob] = []
         centres = []
-        for c in contours:
+        for i, c in enumerate(contours):
             box = cv2.boundingRect(c)
             if box[2] * box[3] < min_px * 0.5:
                 continue
@@ -501,7 +439,8 @@ class Locator:
             touches = bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
             det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
                             "touches border" if touches else "")
-            blobs.append(_Blob(c, box, mom, area_px, det, full))
+            blobs.append(_Blob(c, box, mom, area_px, det, full,
+                               None if holes is None else holes[i]))
         if not blobs:
             return blobs
         steps = ([len(b.contour) for b in blobs] if full
@@ -537,7 +476,20 @@ class Locator:
         s = self.calibration.mm_per_px
         c, area_px = b.contour, b.area_px
         group = GROUP_OF[name]
-        if group == GROUP_OF["hu1"]:
+        if group == GROUP_OF["holes"]:
+            # A hole contour runs through the blob's pixels around the hole: by Pick's
+            # theorem the hole's pixel count is the polygon's area - boundary pixels / 2 + 1.
+            if b.holes is None:
+                raise RuntimeError("hole features asked of a blob whose holes were not found")
+            s2 = self.calibration.mm2_per_px2
+            steps = (([len(k) for k in b.holes] if b.full else _chain_steps(b.holes))
+                     if b.holes else [])
+            areas = [(abs(cv2.contourArea(k)) - 0.5 * n + 1.0) * s2
+                     for k, n in zip(b.holes, steps, strict=True)]
+            big = [a for a in areas if a >= self.recipe.min_hole_mm2]
+            feats["holes"] = float(len(big))
+            feats["hole_area_mm2"] = float(sum(big))
+        elif group == GROUP_OF["hu1"]:
             # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
             mom = b.mom
             if mom["m00"] != 0:
@@ -636,8 +588,9 @@ class Locator:
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
             g = golden.ravel()[at].astype(np.int16)
-            return np.maximum(g - img.ravel()[at], 0).astype(np.uint8)
-        return 255 - img.ravel()[at]
+            d = img.ravel()[at] - g if self._light else g - img.ravel()[at]
+            return np.maximum(d, 0).astype(np.uint8)
+        return img.ravel()[at] if self._light else 255 - img.ravel()[at]
 
     @staticmethod
     def _principal_angle(mom: dict[str, float]) -> float:
@@ -682,10 +635,29 @@ class Locator:
                 det.angle_deg = angle
                 break
         if chosen is None:
-            det.reason = "no class (face)" if looked else "touching parts / no class"
+            det.reason = "no class (face)" if looked else self._no_class(b)
         else:
             det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
         return True
+
+    def _no_class(self, b: _Blob) -> str:
+        """Why a blob fits no class: the class nearest it by area and the first of that
+        class's ranges it is outside (already measured: the cascade stopped there)."""
+        if not self._checks:
+            return "no class (the recipe has none)"
+        area = b.det.features["area_mm2"]
+
+        def far(item: tuple[VisionClass, list[tuple[str, float, float]]]) -> float:
+            lo, hi = item[0].ranges.get("area_mm2", (area, area))
+            return max(lo - area, area - hi, 0.0) / max(hi, 1e-9)
+
+        cls, checks = min(self._checks, key=far)
+        for name, lo, hi in checks:
+            v = self._feature(b, name)
+            if not lo <= v <= hi:
+                return (f"no class; nearest {cls.part}/{cls.pose}: {name} {v:.4g} not in "
+                        f"[{lo:.4g}, {hi:.4g}]")
+        return f"no class; nearest {cls.part}/{cls.pose}: its face"
 
     def _symmetric_angle(self, b: _Blob) -> float:
         """Angle of a class without a face to tell: its long axis if it has one, else 0."""
@@ -752,83 +724,6 @@ def _label(out: np.ndarray, text: str, at: tuple[int, int], dy: int,
     y = min(max(at[1] + dy, th + 2), out.shape[0] - 4)
     cv2.putText(out, text, (max(x, 0), y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
                 cv2.LINE_AA)
-
-
-def _full_chain(contour: np.ndarray) -> np.ndarray:
-    """The ``CHAIN_APPROX_NONE`` contour of a ``CHAIN_APPROX_SIMPLE`` one: each segment
-    between two corners is a straight horizontal, vertical or diagonal run of pixels."""
-    pts = contour.reshape(-1, 2)
-    step = np.roll(pts, -1, axis=0) - pts
-    n = np.abs(step).max(axis=1)
-    if len(pts) == 1 or not n.all():
-        return contour
-    at = np.repeat(np.arange(len(pts)), n)
-    k = np.arange(len(at)) - np.repeat(np.cumsum(n) - n, n)       # steps into the segment
-    return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
-
-
-def _first(item: tuple[int, np.ndarray]) -> int:
-    return item[0]
-
-
-def _chain_steps(contours: list[np.ndarray]) -> list[int]:
-    """Points of the full 8-connected chain (``CHAIN_APPROX_NONE``) of closed contours
-    given by their ``CHAIN_APPROX_SIMPLE`` vertices: each segment between two vertices is
-    a straight horizontal, vertical or diagonal run of max(|du|, |dv|) steps. All the
-    contours in one set of array operations."""
-    sizes = [len(c) for c in contours]
-    pts = np.concatenate(contours).reshape(-1, 2)
-    ends = np.cumsum(sizes)
-    nxt = np.empty_like(pts)
-    nxt[:-1] = pts[1:]
-    nxt[ends - 1] = pts[ends - sizes]             # each contour closes on its first point
-    steps = np.abs(nxt - pts).max(axis=1)
-    out = np.add.reduceat(steps, ends - sizes).tolist()
-    return [n if size > 1 else 1 for n, size in zip(out, sizes, strict=True)]
-
-
-def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
-    first, last = int(idx[0]), int(idx[-1])
-    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
-        return [(first, last)]
-    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
-    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
-    lasts = idx[cuts].tolist() + [int(idx[-1])]
-    return list(zip(firsts, lasts, strict=True))
-
-
-_STRIDES: dict[int, np.ndarray] = {}        # n -> the order visiting a closed n-chain by
-                                            # steps of _WINDOW points
-
-
-def _smooth_length(contour: np.ndarray, window: int = _WINDOW) -> float:
-    """Length of a closed pixel contour after a circular moving average of its points.
-
-    The averaged points' steps are ``(p[i + window] - p[i]) / window`` (neighbouring windows
-    differ by one point in, one out), so the length is the sum of the distances between
-    points ``window`` apart: the perimeter of the polygon that visits the contour
-    ``window`` points at a time (one closed tour when n and ``window`` are coprime, else
-    ``window`` of them), which ``cv2.arcLength`` measures in one call. A contour shorter
-    than two windows keeps its plain length.
-    """
-    uv = contour.reshape(-1, 2)
-    n = len(uv)
-    if n < 2 * window:
-        return float(cv2.arcLength(uv, True))
-    order = _STRIDES.get(n)
-    if order is None:
-        if len(_STRIDES) > 4096:
-            _STRIDES.clear()
-        if n % window:
-            order = _STRIDES[n] = np.arange(n) * window % n
-        else:                               # window tours, one a row
-            order = _STRIDES[n] = np.arange(n).reshape(-1, window).T.copy()
-    # gather (u, v) pairs as one int64 each: numpy's gather of rows is far slower
-    tours = uv.view(np.int64).ravel()[order].view(np.int32)
-    if order.ndim == 1:
-        return float(cv2.arcLength(tours.reshape(-1, 2), True)) / window
-    return sum(float(cv2.arcLength(t.reshape(-1, 2), True)) for t in tours) / window
 
 
 def _grey(image: np.ndarray) -> np.ndarray:

@@ -101,11 +101,13 @@ class SimCamera:
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sim-camera")
         self.frames = 0
         self.exposure_ms = cam.exposure_ms
+        self.front_lit = cam.render.lighting == "frontlit"
 
     def snapshot(self, t: float, index: int):
         """What the camera sees at ``t`` (read under the world's time), and a function that
         renders it — slow, so it runs off the tick on a worker."""
-        lit = self.world.io.get("backlight", True)
+        # a front-lit camera's lamp is always on: the backlight output does not light it
+        lit = self.front_lit or self.world.io.get("backlight", True)
         outlines = self.world.visible_outlines(t, self.x_range) if lit else []
         rng = np.random.default_rng([self.seed, index])
 

@@ -14,55 +14,43 @@ counts. These rigs produce them from a ground truth the procedures are not told:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from ...calibration.camera import Target, TargetPose
+from ...calibration.targets import board_rings
 from ...jobs import DoneJob, Job
 from ...scenario.model import CameraCalibration, CameraSpec
 from ..interfaces import Frame, Pose, RobotPosition
 from .render import Renderer
 from .world import World
 
-DOT_SIDES = 48           # vertices of a dot's polygon
+PAPER_GREY = 200.0       # front-lit: a printed board's white paper, grey level
+INK_GREY = 30.0          # and its ink
 
 
 def target_polygons(target: Target, pose: TargetPose) -> list[np.ndarray]:
-    """The target's dark features as belt-frame polygons (mm), for ``Renderer.render``.
-
-    A chessboard of ``nx`` x ``ny`` inner corners has ``nx + 1`` x ``ny + 1`` squares; the
-    dark ones (the corner squares among them) are returned. A dot grid returns its dots.
-    """
-    p = target.pitch_mm
-    polys: list[np.ndarray] = []
-    if target.kind == "chessboard":
-        x0 = -(target.nx + 1) / 2.0 * p
-        y0 = -(target.ny + 1) / 2.0 * p
-        for j in range(target.ny + 1):
-            for i in range(target.nx + 1):
-                if (i + j) % 2:
-                    continue
-                x, y = x0 + i * p, y0 + j * p
-                sq = np.array([[x, y], [x + p, y], [x + p, y + p], [x, y + p]], dtype=float)
-                polys.append(pose.to_belt(sq))
-    else:
-        a = np.linspace(0.0, 2 * math.pi, DOT_SIDES, endpoint=False)
-        ring = 0.5 * target.dot_mm * np.column_stack([np.cos(a), np.sin(a)])
-        for c in target.points_board().reshape(-1, 2):
-            polys.append(pose.to_belt(ring + c))
-    return polys
+    """The target's dark features as belt-frame outlines (mm), for ``Renderer.render``:
+    a chessboard's dark squares, a grid's dots, a ChArUco board's squares and markers
+    (``calibration.targets.board_rings``)."""
+    return [pose.to_belt(r) for r in board_rings(target)]
 
 
 class TargetCamera:
     """A ``Camera`` over a cleared, stopped belt on which a calibration target lies.
 
     ``truth`` is how the simulated camera really maps pixels to the belt; ``None`` means
-    the cell file's calibration is exactly right.
+    the cell file's calibration is exactly right. Under a front light the board is what
+    is printed: dark ink on white paper that fills the view (``PAPER_GREY``, ``INK_GREY``).
     """
 
     def __init__(self, camera: CameraSpec, truth: CameraCalibration | None = None,
                  seed: int = 1) -> None:
+        if camera.render.lighting == "frontlit":
+            camera = dataclasses.replace(camera, render=dataclasses.replace(
+                camera.render, lighting="backlit", backlight=PAPER_GREY, part_grey=INK_GREY))
         self.renderer = Renderer(camera, truth)
         self.seed = seed
         self.outlines: list[np.ndarray] = []

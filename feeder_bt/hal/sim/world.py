@@ -33,7 +33,15 @@ import numpy as np
 from ...clock import EPS, SimClock
 from ...encoder import diff, wrap
 from ...errors import EnvelopeError, HalError, MissedGrab
-from ...geometry import circumradius, place_outline, pose_outline, wrap_deg
+from ...geometry import (
+    circumradius,
+    is_convex,
+    near,
+    outer,
+    place_outline,
+    pose_outline,
+    wrap_deg,
+)
 from ...jobs import Job
 from ...robot_model import RobotModel
 from ...scenario.model import CellSpec, Scenario
@@ -310,6 +318,8 @@ class World:
             self.next_release = self._draw_gap(self.incline.pos(self.t))
 
     def outline(self, ptype: str, pose: str) -> np.ndarray:
+        """A part's outline in a pose (part frame; with holes, NaN rows part its rings: see
+        ``feeder_bt.geometry``), made once per part type and pose."""
         key = (ptype, pose)
         if key not in self._outlines:
             self._outlines[key] = pose_outline(self.scenario.parts[ptype], pose)
@@ -319,14 +329,21 @@ class World:
         return part.x0 + self.horizontal.pos(t), part.y
 
     def _touch(self, a: SimPart, b: SimPart, t: float) -> bool:
+        """Whether two parts on the belt are closer than ``TOUCH_GAP_MM``. Convex outlines:
+        their grown polygons intersect (exact, fast). Otherwise (concave outlines; holes do
+        not matter, only the outer rings can meet): ``geometry.near`` on a fine raster."""
         ax, ay = self.part_xy(a, t)
         bx, by = self.part_xy(b, t)
         if math.hypot(ax - bx, ay - by) > a.radius + b.radius + TOUCH_GAP_MM:
             return False
-        pa = _grown(place_outline(a.outline, ax, ay, a.angle), (ax, ay), TOUCH_GAP_MM / 2)
-        pb = _grown(place_outline(b.outline, bx, by, b.angle), (bx, by), TOUCH_GAP_MM / 2)
-        area, _ = cv2.intersectConvexConvex(pa.astype(np.float32), pb.astype(np.float32))
-        return area > 0.0
+        oa, ob = outer(a.outline), outer(b.outline)
+        if is_convex(oa) and is_convex(ob):
+            pa = _grown(place_outline(oa, ax, ay, a.angle), (ax, ay), TOUCH_GAP_MM / 2)
+            pb = _grown(place_outline(ob, bx, by, b.angle), (bx, by), TOUCH_GAP_MM / 2)
+            area, _ = cv2.intersectConvexConvex(pa.astype(np.float32), pb.astype(np.float32))
+            return area > 0.0
+        return near(place_outline(oa, ax, ay, a.angle), place_outline(ob, bx, by, b.angle),
+                    TOUCH_GAP_MM)
 
     def _untouch(self, part: SimPart) -> None:
         for oid in part.touching:

@@ -1,0 +1,102 @@
+"""Pixel contours: their full chains, lengths, and the runs the locator packs by.
+
+Helpers of ``feeder_bt.vision.locator`` that need no recipe.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+WINDOW = 5                     # points in the moving average of the smoothed perimeter
+
+
+def _full_chain(contour: np.ndarray) -> np.ndarray:
+    """The ``CHAIN_APPROX_NONE`` contour of a ``CHAIN_APPROX_SIMPLE`` one: each segment
+    between two corners is a straight horizontal, vertical or diagonal run of pixels."""
+    pts = contour.reshape(-1, 2)
+    step = np.roll(pts, -1, axis=0) - pts
+    n = np.abs(step).max(axis=1)
+    if len(pts) == 1 or not n.all():
+        return contour
+    at = np.repeat(np.arange(len(pts)), n)
+    k = np.arange(len(at)) - np.repeat(np.cumsum(n) - n, n)       # steps into the segment
+    return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
+
+
+def _first(item: tuple) -> int:
+    return item[0]
+
+
+def _with_holes(contours: tuple[np.ndarray, ...], hierarchy: np.ndarray | None, holes: bool
+                ) -> list[tuple[np.ndarray, list[np.ndarray]]]:
+    """``findContours``' outer contours, each with its holes' (``RETR_CCOMP``'s two levels:
+    an outer contour's children are its holes; without ``holes``, none)."""
+    if not holes or hierarchy is None:
+        return [(c, []) for c in contours]
+    hier = hierarchy.reshape(-1, 4)
+    kids: dict[int, list[np.ndarray]] = {}
+    for i, parent in enumerate(hier[:, 3].tolist()):
+        if parent >= 0:
+            kids.setdefault(parent, []).append(contours[i])
+    return [(c, kids.get(i, [])) for i, c in enumerate(contours) if hier[i, 3] < 0]
+
+
+def _chain_steps(contours: list[np.ndarray]) -> list[int]:
+    """Points of the full 8-connected chain (``CHAIN_APPROX_NONE``) of closed contours
+    given by their ``CHAIN_APPROX_SIMPLE`` vertices: each segment between two vertices is
+    a straight horizontal, vertical or diagonal run of max(|du|, |dv|) steps. All the
+    contours in one set of array operations."""
+    sizes = [len(c) for c in contours]
+    pts = np.concatenate(contours).reshape(-1, 2)
+    ends = np.cumsum(sizes)
+    nxt = np.empty_like(pts)
+    nxt[:-1] = pts[1:]
+    nxt[ends - 1] = pts[ends - sizes]             # each contour closes on its first point
+    steps = np.abs(nxt - pts).max(axis=1)
+    out = np.add.reduceat(steps, ends - sizes).tolist()
+    return [n if size > 1 else 1 for n, size in zip(out, sizes, strict=True)]
+
+
+def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
+    first, last = int(idx[0]), int(idx[-1])
+    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
+        return [(first, last)]
+    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
+    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
+    lasts = idx[cuts].tolist() + [int(idx[-1])]
+    return list(zip(firsts, lasts, strict=True))
+
+
+_STRIDES: dict[int, np.ndarray] = {}        # n -> the order visiting a closed n-chain by
+                                            # steps of WINDOW points
+
+
+def _smooth_length(contour: np.ndarray, window: int = WINDOW) -> float:
+    """Length of a closed pixel contour after a circular moving average of its points.
+
+    The averaged points' steps are ``(p[i + window] - p[i]) / window`` (neighbouring windows
+    differ by one point in, one out), so the length is the sum of the distances between
+    points ``window`` apart: the perimeter of the polygon that visits the contour
+    ``window`` points at a time (one closed tour when n and ``window`` are coprime, else
+    ``window`` of them), which ``cv2.arcLength`` measures in one call. A contour shorter
+    than two windows keeps its plain length.
+    """
+    uv = contour.reshape(-1, 2)
+    n = len(uv)
+    if n < 2 * window:
+        return float(cv2.arcLength(uv, True))
+    order = _STRIDES.get(n)
+    if order is None:
+        if len(_STRIDES) > 4096:
+            _STRIDES.clear()
+        if n % window:
+            order = _STRIDES[n] = np.arange(n) * window % n
+        else:                               # window tours, one a row
+            order = _STRIDES[n] = np.arange(n).reshape(-1, window).T.copy()
+    # gather (u, v) pairs as one int64 each: numpy's gather of rows is far slower
+    tours = uv.view(np.int64).ravel()[order].view(np.int32)
+    if order.ndim == 1:
+        return float(cv2.arcLength(tours.reshape(-1, 2), True)) / window
+    return sum(float(cv2.arcLength(t.reshape(-1, 2), True)) for t in tours) / window

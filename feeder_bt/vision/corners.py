@@ -1,0 +1,116 @@
+"""The cut-corner signature of a square with one corner cut: its angle and face.
+
+Used by the locator's ``orientation: cut_corner`` (``Locator._faces``, ``Locator._orient``)
+on outlines in mm.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass
+class _CornerSignature:
+    """Where a square's cut corner is and which way its long cut leg runs.
+
+    ``corner``: unit vector from the rectangle centre towards the cut corner; ``leg``: unit
+    vector along the side on which the cut is longer, pointing away from the corner.
+    ``alpha``: the minimum-area rectangle's angle (rad, mod 90°).
+    """
+
+    corner: tuple[float, float]
+    leg: tuple[float, float]
+    alpha: float
+
+
+def _from_frame(vx: float, vy: float, c: float, s: float) -> tuple[float, float]:
+    """A vector in the rectangle's frame (cos ``c``, sin ``s`` of its angle) -> outline frame."""
+    return vx * c - vy * s, vx * s + vy * c
+
+
+_SQRT2 = math.sqrt(2.0)
+
+
+def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
+    """Cut-corner signature of one closed outline given as points in mm."""
+    return _corner_signatures([np.asarray(pts, dtype=np.float32).reshape(-1, 2)])[0]
+
+
+_CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's corners,
+_CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
+
+
+def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | None]:
+    """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
+    (at least one point each).
+
+    The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
+    from the outline is the cut one; the cut is longer along one side than the other,
+    which tells the faces apart. All of it reads only the outline's convex hull (the
+    rectangle, the points nearest the rectangle's corners and at the ends of its sides),
+    and all the hulls go through one set of array operations on complex numbers (numpy's
+    per-call cost dominates when done one by one).
+    """
+    hulls = [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
+    rects = [cv2.minAreaRect(hl) for hl in hulls]
+    n = len(hulls)
+    counts = [len(hl) for hl in hulls]
+    seg = np.repeat(np.arange(n), counts)                       # each point's outline
+    starts = np.cumsum([0] + counts[:-1])
+    z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
+    # per outline: centre, angle, half-sides
+    par = np.array([(cx, cy, math.radians(a), w / 2.0, h / 2.0)
+                    for (cx, cy), (w, h), a in rects]).reshape(n, 5)
+    half = par[:, 3:]
+    centre = par[:, 0] + 1j * par[:, 1]
+    q = (z - centre[seg]) * np.exp(-1j * par[:, 2])[seg]     # in the rectangle's frame
+    # distance of the nearest hull point to each rectangle corner (a column each)
+    corners = half[:, :1] * _CORNER_X + 1j * (half[:, 1:] * _CORNER_Y)       # (n, 4)
+    k = np.minimum.reduceat(np.abs(q[:, None] - corners[seg]), starts).argmax(axis=1)
+    sx = np.sign(half[:, 0] * _CORNER_X[k])
+    sy = np.sign(half[:, 1] * _CORNER_Y[k])
+    fx, fy = q.real * sx[seg], q.imag * sy[seg]           # cut corner now at (+, +)
+    tol = 1.5
+    # the far end of the side parallel to x (y) short of the cut: the top (right) side's
+    # points within tol of it, their largest x (y); -inf if it has none
+    top = np.maximum.reduceat(np.where(np.abs(fy - half[seg, 1]) < tol, fx, -np.inf), starts)
+    right = np.maximum.reduceat(np.where(np.abs(fx - half[seg, 0]) < tol, fy, -np.inf),
+                                starts)
+    out: list[_CornerSignature | None] = []
+    for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
+                                                      top.tolist(), right.tolist(),
+                                                      strict=True):
+        if tj == -math.inf or rj == -math.inf:
+            out.append(None)
+            continue
+        cj, sj = math.cos(aj), math.sin(aj)
+        leg_x = hxj - tj                     # cut length along the side parallel to x
+        leg_y = hyj - rj
+        corner = _from_frame(sxj / _SQRT2, syj / _SQRT2, cj, sj)
+        leg = (_from_frame(-sxj, 0.0, cj, sj) if leg_x >= leg_y
+               else _from_frame(0.0, -syj, cj, sj))
+        out.append(_CornerSignature(corner=corner, leg=leg, alpha=aj))
+    return out
+
+
+def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:
+    out = []
+    n = len(outline)
+    for i in range(n):
+        a, b = outline[i], outline[(i + 1) % n]
+        m = max(int(math.ceil(np.hypot(*(b - a)) / step)), 1)
+        t = np.arange(m)[:, None] / m
+        out.append(a + t * (b - a))
+    return np.concatenate(out)
+
+
+def _cross(a: tuple[float, float], b: tuple[float, float]) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _angle(v: tuple[float, float]) -> float:
+    return math.atan2(v[1], v[0])

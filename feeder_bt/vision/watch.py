@@ -1,0 +1,90 @@
+"""No silent zero: notice when the recipe stops matching what the camera shows.
+
+A recipe whose class ranges were measured at another threshold, on another camera or for
+another part finds blobs on every frame and classes none of them: the cell runs, locates
+nothing and would stop at the end with nothing said. ``RecipeWatch`` sees every frame's
+result; when frames have shown blobs that fit no class, and no part at all, for
+``after_s`` of the run's time, it emits a ``vision_no_match`` event (the live view and
+the event log show it; again every ``repeat_s`` while it lasts) naming the class nearest
+the blobs and the feature most often out of range, and keeps a summary for the report.
+A frame with a part in it ends the spell (``vision_matches`` if an alarm was raised).
+Empty frames and blobs rejected for the border or their size are not evidence either way.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .locator import LocateResult
+
+AFTER_S = 30.0              # blobs and no match for this long: say so
+REPEAT_S = 30.0             # and again this often while it lasts
+
+# "no class; nearest lens/flat: area_mm2 4118 not in [1800, 2300]"
+_REASON = re.compile(r"^no class; nearest (?P<cls>\S+): (?P<feature>\S+)")
+
+
+class RecipeWatch:
+    """Counts frames whose blobs fit no class; raises the alarm described above."""
+
+    def __init__(self, after_s: float = AFTER_S, repeat_s: float = REPEAT_S) -> None:
+        self.after_s, self.repeat_s = after_s, repeat_s
+        self.since: float | None = None       # start of the present spell of no matches
+        self.last_alarm: float | None = None
+        self.alarms = 0
+        self.frames_no_match = 0              # frames with unmatched blobs and no part
+        self.longest_s = 0.0
+        self.nearest: Counter[tuple[str, str]] = Counter()   # (class, feature) over the run
+        self.example = ""
+
+    def feed(self, t: float, result: LocateResult, stats: Any) -> None:
+        """One frame's result at time ``t``; events go to ``stats.emit``."""
+        if result.parts:
+            if self.since is not None and self.last_alarm is not None:
+                stats.emit(t, "vision_matches", after_s=round(t - self.since, 1))
+            self.since = self.last_alarm = None
+            return
+        unmatched = [d.reason for d in result.rejected if d.reason.startswith("no class")]
+        if not unmatched:
+            return
+        self.frames_no_match += 1
+        spell = Counter()
+        for reason in unmatched:
+            m = _REASON.match(reason)
+            key = (m["cls"], m["feature"]) if m else ("-", reason)
+            spell[key] += 1
+            self.nearest[key] += 1
+        if self.since is None:
+            self.since = t
+        self.example = unmatched[0]
+        lasted = t - self.since
+        self.longest_s = max(self.longest_s, lasted)
+        if lasted >= self.after_s and (self.last_alarm is None
+                                       or t - self.last_alarm >= self.repeat_s):
+            self.last_alarm = t
+            self.alarms += 1
+            (cls, feature), _ = spell.most_common(1)[0]
+            stats.emit(t, "vision_no_match", seconds=round(lasted, 1), nearest=cls,
+                       feature=feature, example=self.example,
+                       hint=f"{len(unmatched)} blob(s) in the last frame fit no class; "
+                            f"check the ranges of {cls} ({feature}) with `feeder locate`")
+
+    def summary(self) -> dict[str, Any]:
+        """For the run report: how long the recipe matched nothing, and why."""
+        out: dict[str, Any] = {"alarms": self.alarms, "frames_no_match": self.frames_no_match,
+                               "longest_s": round(self.longest_s, 1)}
+        if self.nearest:
+            (cls, feature), n = self.nearest.most_common(1)[0]
+            out.update(nearest=cls, feature=feature, blobs=n, example=self.example)
+        return out
+
+
+def recipe_watch(extras: dict[str, Any]) -> RecipeWatch:
+    """The cell's one watch, kept in ``Ctx.extras`` (made on first use)."""
+    watch = extras.get("recipe_watch")
+    if watch is None:
+        watch = extras["recipe_watch"] = RecipeWatch()
+    return watch
