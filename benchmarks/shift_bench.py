@@ -40,14 +40,23 @@ def exit_code(report: dict) -> int:
     return 3 if report["fault"] else 0
 
 
+#: kinds of which each injection fails one call: a second one striking the retry of the
+#: first is reported as an attempt of the same episode (``retried``), not a new fault; a
+#: dropped link fails many calls in one outage, so its attempts are not injections
+ONE_CALL_KINDS = ("servo_timeout", "grab_failed", "missed_grab")
+
+
 def unrecovered(report: dict) -> dict[str, int]:
-    """Injected faults, by kind, that the cell neither recovered nor reported as its
-    FAULT (a fault nobody met cannot be recovered and is not counted against the run)."""
+    """Injected faults, by kind, that the cell neither recovered nor reported (as a
+    retry of the same episode, or as its FAULT). A fault nobody met cannot be recovered
+    and is not counted against the run."""
     out = {}
     unseen = report.get("unseen", {})
     for kind, n in report.get("injected", {}).items():
         k = ERROR_KINDS[kind]
         missing = n - unseen.get(kind, 0) - report["recoveries"].get(k, 0)
+        if kind in ONE_CALL_KINDS:
+            missing -= report.get("retried", {}).get(k, 0)
         if report["fault"] and missing > 0:
             missing -= 1                       # the one that ended the run, reported
         if missing > 0:
@@ -67,7 +76,8 @@ def _one(job: tuple[str, str | None, int, float]) -> dict:
             "duplicated": p["duplicated"], "misplaced": p["misplaced"],
             "accounting": p.get("accounting", []), "injected": r.get("injected", {}),
             "unseen": r.get("unseen", {}), "cell_faults": r["faults"],
-            "recoveries": r["recoveries"], "unrecovered": unrecovered(r),
+            "recoveries": r["recoveries"], "retried": r.get("retried", {}),
+            "unrecovered": unrecovered(r),
             "wall_seconds": r["wall_seconds"]}
 
 

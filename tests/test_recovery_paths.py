@@ -97,6 +97,7 @@ def test_grab_failure_ladder_retry_then_new_golden_image_then_fault():
     tick(root, ctx, n=2)
     assert bb_get("/faults/escalate") == "camera or vision failed: camera gone"
     assert ctx.stats.faults["grab_failed"] == 1     # one fault, three attempts
+    assert ctx.stats.retried["grab_failed"] >= 1    # the later ones: attempts, reported
     assert ctx.stats.recoveries["grab_failed"] == 0
 
 

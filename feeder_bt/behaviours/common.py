@@ -50,6 +50,9 @@ class Stats:
         self.pending: dict[str, str] = {}
         self.counted: dict[str, object] = {}      # key -> the error CountFault last counted
         self.attempts: Counter[str] = Counter()
+        #: failures met while a branch retried through the same fault, by kind: each one
+        #: an attempt of the same episode (``retry_failed`` events), not a new fault
+        self.retried: Counter[str] = Counter()
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n
@@ -249,6 +252,7 @@ class CountFault(Leaf):
         stats = self.ctx.stats
         stats.counted[self.key] = err
         if stats.pending.get(self.key) == kind:     # the same fault, still being retried
+            stats.retried[kind] += 1
             stats.emit(self.ctx.now(), "retry_failed", kind=kind, message=str(err),
                        attempt=stats.attempts[self.key])
             return Status.SUCCESS
@@ -329,6 +333,7 @@ class Escalate(Leaf):
             if stats.counted.get(self.key) is not err:
                 stats.counted[self.key] = err
                 if stats.pending.get(self.key) == err.kind:     # the same outage, still
+                    stats.retried[err.kind] += 1
                     stats.emit(self.ctx.now(), "retry_failed", kind=err.kind,
                                message=str(err), attempt=stats.attempts[self.key])
                 else:
