@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
 import os
 import sys
 from pathlib import Path
@@ -92,18 +91,25 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
                                 faults=args.faults))
-    p = report["parts"]
-    print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
-          f"({report['wall_seconds']:.1f} s wall): retrieved "
-          f"{sum(p['retrieved'].values())} {json.dumps(p['retrieved'])}, "
-          f"{report['parts_per_minute']:.1f} parts/min, located {p['located']}, "
-          f"missed {p['missed']}, lost {p['lost']}")
+    print(summary(report))
     if report["fault"]:
         print(f"FAULT: {report['fault']}", file=sys.stderr)
         return 3
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def summary(report: dict) -> str:
+    """The run's summary, two lines that fit 80 columns; its parts/min is the report's and
+    the live view's last."""
+    p = report["parts"]
+    how = " (interrupted by Ctrl-C)" if report.get("interrupted") else ""
+    kinds = ", ".join(f"{k} {v}" for k, v in p["retrieved"].items())
+    return (f"{report['scenario']}: {report['state']}{how} after {report['feed_seconds']:.0f} s"
+            f", {report['parts_per_minute']:.1f} parts/min ({report['wall_seconds']:.1f} s "
+            f"wall)\n  retrieved {sum(p['retrieved'].values())} ({kinds}), located "
+            f"{p['located']}, missed {p['missed']}, lost {p['lost']}")
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

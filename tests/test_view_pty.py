@@ -1,0 +1,157 @@
+"""``feeder run`` in a pseudo-terminal of 80 x 24, read through a terminal emulator
+(pyte): the header and the status line stay on screen in every frame, the view follows a
+resize, and after Ctrl-C the summary says so and agrees with the last status line.
+
+These run the cell in real time (the live view is for real-time runs). The short one runs
+by default; the whole minute of the README's first command is a soak test
+(``python -m pytest -m soak``)."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import termios
+import time
+from pathlib import Path
+
+import pytest
+
+pyte = pytest.importorskip("pyte")
+
+ROOT = Path(__file__).resolve().parents[1]
+STATES = ("STOPPED", "STARTING", "RUNNING", "PAUSED", "STOPPING", "FAULTING", "FAULT")
+
+
+def _winsize(fd: int, cols: int, rows: int) -> None:
+    fcntl.ioctl(fd, termios.TIOCSWINSZ, struct.pack("HHHH", rows, cols, 0, 0))
+
+
+class Terminal:
+    """A child process on a pty of ``cols`` x ``rows``, its output fed to pyte."""
+
+    def __init__(self, argv: list[str], cols: int = 80, rows: int = 24) -> None:
+        self.master, slave = os.openpty()
+        _winsize(slave, cols, rows)
+        env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+        env.update(TERM="xterm-256color", PYTHONPATH=str(ROOT))
+        self.proc = subprocess.Popen(argv, stdin=slave, stdout=slave, stderr=slave, cwd=ROOT,
+                                     env=env, close_fds=True)
+        os.close(slave)
+        self.screen = pyte.Screen(cols, rows)
+        self.stream = pyte.ByteStream(self.screen)
+        self.frames = 0
+
+    def resize(self, cols: int, rows: int) -> None:
+        _winsize(self.master, cols, rows)
+        self.screen.resize(rows, cols)
+        self.proc.send_signal(signal.SIGWINCH)
+
+    def settle(self, quiet: float = 0.05, limit: float = 10.0) -> bool:
+        """Read until the child has drawn and then been quiet for ``quiet`` s (a whole frame
+        drawn); False when the child has closed the terminal."""
+        end = time.monotonic() + limit
+        got = False
+        while time.monotonic() < end:
+            ready, _, _ = select.select([self.master], [], [], quiet)
+            if not ready:
+                if got:
+                    break
+                continue
+            try:
+                data = os.read(self.master, 65536)
+            except OSError:             # EIO: the child is gone
+                return False
+            if not data:
+                return False
+            self.stream.feed(data)
+            got = True
+        self.frames += got
+        return True
+
+    def lines(self) -> list[str]:
+        return [s.rstrip() for s in self.screen.display]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait(timeout=30)
+        os.close(self.master)
+
+
+def _check_frame(term: Terminal) -> list[str]:
+    lines = term.lines()
+    assert lines[0].startswith("feeder_bt · lenses on "), "\n".join(lines)
+    assert lines[1].split(" ")[0] in STATES and "parts/min" in lines[1], "\n".join(lines)
+    return lines
+
+
+def _ppm(text: str) -> str:
+    return re.search(r"([\d.]+) parts/min", text).group(1)
+
+
+def _run(tmp_path: Path, *extra: str) -> Terminal:
+    return Terminal([sys.executable, "-m", "feeder_bt.cli", "run", "scenarios/lenses.yaml",
+                     "--db", str(tmp_path / "r.db"), *extra])
+
+
+def test_status_line_stays_on_screen_resize_and_ctrl_c(tmp_path):
+    term = _run(tmp_path, "--duration", "600")
+    try:
+        waiting = retrieved = False
+        resized = False
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 90:
+            assert term.settle()
+            lines = _check_frame(term)
+            assert len(lines[1]) <= term.screen.columns
+            waiting |= any(s.startswith("waiting for the first parts") for s in lines)
+            if re.search(r"retrieved [1-9]", lines[1]):
+                retrieved = True
+                if resized:
+                    break
+                term.resize(60, 18)           # smaller: the next frame fits it
+                resized = True
+                assert term.settle()
+                lines = _check_frame(term)
+                assert all(len(s) <= 60 for s in lines)
+                term.resize(80, 24)           # back, for the summary's sake
+        assert waiting and retrieved and resized and term.frames > 20
+        term.proc.send_signal(signal.SIGINT)
+        while term.settle():
+            pass
+        term.proc.wait(timeout=60)
+        assert term.proc.returncode == 0
+        screen = "\n".join(term.lines())
+        status = next(s for s in term.lines() if s.startswith("STOPPED "))
+        summary = next(s for s in term.lines() if s.startswith("lenses: "))
+        assert "interrupted by Ctrl-C" in summary, screen
+        assert _ppm(status) == _ppm(summary), screen
+    finally:
+        term.close()
+
+
+@pytest.mark.soak
+def test_the_readme_minute_keeps_its_status_line_on_screen(tmp_path):
+    """The README's first command as a newcomer types it: a minute of lenses, 80 x 24."""
+    term = _run(tmp_path)
+    try:
+        last = ""
+        while term.settle():
+            if term.proc.poll() is not None:
+                continue
+            last = _check_frame(term)[1]
+        term.proc.wait(timeout=60)
+        assert term.proc.returncode == 0
+        assert term.frames > 200           # four frames a second for a minute
+        summary = next(s for s in term.lines() if s.startswith("lenses: "))
+        status = next(s for s in term.lines() if s.startswith("STOPPED "))
+        assert "after 60 s" in summary and _ppm(status) == _ppm(summary)
+        assert float(_ppm(summary)) > 20 and last
+    finally:
+        term.close()
