@@ -182,15 +182,16 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def summary(report: dict) -> str:
-    """The run's summary, two lines that fit 80 columns; its parts/min is the report's and
-    the live view's last."""
+    """The run's summary, lines that fit 80 columns; its parts/min is the report's and the
+    live view's last."""
     p = report["parts"]
-    how = " (interrupted by Ctrl-C)" if report.get("interrupted") else ""
+    how = " (interrupted)" if report.get("interrupted") else ""
     kinds = ", ".join(f"{k} {v}" for k, v in p["retrieved"].items())
     return (f"{report['scenario']}: {report['state']}{how} after {report['feed_seconds']:.0f} s"
-            f", {report['parts_per_minute']:.1f} parts/min ({report['wall_seconds']:.1f} s "
-            f"wall)\n  retrieved {sum(p['retrieved'].values())} ({kinds}), located "
-            f"{p['located']}, missed {p['missed']}, lost {p['lost']}")
+            f" ({report['wall_seconds']:.1f} s wall)\n"
+            f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
+            f"{sum(p['retrieved'].values())} ({kinds})\n"
+            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}")
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

@@ -280,7 +280,7 @@ class LiveView:
     def _on_resize(self, signum, frame) -> None:
         self._resized = True
 
-    def close(self, spare: int = 3) -> None:
+    def close(self, spare: int = 4) -> None:
         """The last screen, leaving ``spare`` rows for the summary under it."""
         if self.live is None:
             return

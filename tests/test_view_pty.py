@@ -95,6 +95,13 @@ def _ppm(text: str) -> str:
     return re.search(r"([\d.]+) parts/min", text).group(1)
 
 
+def _status_and_summary(lines: list[str]) -> tuple[str, str]:
+    """The last frame's status line and the summary under it (its first two lines)."""
+    status = next(s for s in lines if s.startswith("STOPPED "))
+    i = next(i for i, s in enumerate(lines) if s.startswith("lenses: "))
+    return status, lines[i] + lines[i + 1]
+
+
 def _run(tmp_path: Path, *extra: str) -> Terminal:
     return Terminal([sys.executable, "-m", "feeder_bt.cli", "run", "scenarios/lenses.yaml",
                      "--db", str(tmp_path / "r.db"), *extra])
@@ -127,10 +134,9 @@ def test_status_line_stays_on_screen_resize_and_ctrl_c(tmp_path):
             pass
         term.proc.wait(timeout=60)
         assert term.proc.returncode == 0
-        screen = "\n".join(term.lines())
-        status = next(s for s in term.lines() if s.startswith("STOPPED "))
-        summary = next(s for s in term.lines() if s.startswith("lenses: "))
-        assert "interrupted by Ctrl-C" in summary, screen
+        screen = term.lines()
+        status, summary = _status_and_summary(screen)
+        assert "STOPPED (interrupted)" in summary, screen
         assert _ppm(status) == _ppm(summary), screen
     finally:
         term.close()
@@ -149,8 +155,7 @@ def test_the_readme_minute_keeps_its_status_line_on_screen(tmp_path):
         term.proc.wait(timeout=60)
         assert term.proc.returncode == 0
         assert term.frames > 200           # four frames a second for a minute
-        summary = next(s for s in term.lines() if s.startswith("lenses: "))
-        status = next(s for s in term.lines() if s.startswith("STOPPED "))
+        status, summary = _status_and_summary(term.lines())
         assert "after 60 s" in summary and _ppm(status) == _ppm(summary)
         assert float(_ppm(summary)) > 20 and last
     finally:
