@@ -208,10 +208,12 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    """Each file is read as the kind its keys say; one line per file, problems on stderr."""
+    """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
+    one is the loader's first problem, then every other one the kind's schema finds (keys,
+    types, values), one line each on stderr."""
     from .errors import ConfigError
     from .scenario.loader import load_cell, load_fault_plan, load_scenario
-    from .scenario.schema import describe, file_kind
+    from .scenario.schema import describe, file_kind, problems
     loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
     bad = 0
     for path in args.files:
@@ -221,6 +223,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         except ConfigError as e:
             bad += 1
             print(f"{e} (read as {describe(kind)})", file=sys.stderr)
+            for more in problems(path, kind):      # only when the loader refused the file
+                if (more.line, more.key) != (e.line, e.key):
+                    print(more, file=sys.stderr)
         else:
             print(f"ok: {path} ({describe(kind)})")
     return 2 if bad else 0

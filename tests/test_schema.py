@@ -142,3 +142,37 @@ def test_the_schema_never_refuses_what_the_loader_takes(kind, path, tmp_path):
             refused_keys += 1
             assert not loader_ok, (where, change)
     assert refused_keys >= 10
+
+
+def test_check_lists_every_problem_of_a_file(tmp_path, capsys):
+    """The loader stops at the first problem; the schema finds the others, each on its line."""
+    text = (ROOT / "scenarios/lenses.yaml").read_text()
+    for old, new in [("tick_hz: 200", "tick_hzz: 200"),
+                     ("method: fixed, value: 80", "method: fixd, value: 800"),
+                     ("horizontal_mm_s: 150", "horizontal_mm_s: fast"),
+                     ("size_mm: [50.8, 14.0]", "size_mm: [50.8, 14.0, 3]")]:
+        assert old in text
+        text = text.replace(old, new)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text.replace("cell: ../cells/sim.yaml",
+                                f"cell: {ROOT / 'cells' / 'sim.yaml'}"))
+    lines = text.splitlines()
+
+    def line_of(needle: str) -> int:
+        return next(i for i, s in enumerate(lines, 1) if needle in s)
+
+    assert main(["check", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[0].endswith("(read as a scenario)")
+    want = [
+        (line_of("tick_hzz"), "tick_hzz: unknown key 'tick_hzz' (did you mean 'tick_hz'?)"),
+        (line_of("size_mm"), "size_mm: expected a list of 2 values, got 3"),
+        (line_of("fixd"), "vision.threshold.method: must be one of fixed, otsu, adaptive, "
+                          "got 'fixd' (did you mean 'fixed'?)"),
+        (line_of("fixd"), "vision.threshold.value: must be <= 255, got 800"),
+        (line_of("horizontal_mm_s"), "present.horizontal_mm_s: expected a number, got "
+                                     "string 'fast'"),
+    ]
+    assert len(err) == len(want), err
+    for got, (line, what) in zip(err, want, strict=True):
+        assert got.startswith(f"{bad}:{line}: ") and what in got, (got, line, what)

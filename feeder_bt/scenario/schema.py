@@ -275,3 +275,115 @@ _FIELD_SCHEMAS = {(Scenario, "hopper"): _hopper, (CellSpec, "conveyors"): _conve
 _EXTRA_SCHEMAS = {(Scenario, "cell"): {
     "type": "string", "minLength": 1,
     "description": "the cell description file, relative to this scenario"}}
+
+
+# ---------------------------------------------------------------------------- all problems
+
+
+def problems(path: str | Path, kind: str) -> list[L.ConfigError]:
+    """Every problem the schema finds in a file, each a ``FILE:LINE: key: what`` error, in
+    file order (``feeder check`` lists them after the loader's first). Empty when the file
+    is not YAML or the validator is not installed: the loader's own message then stands."""
+    try:
+        import jsonschema
+    except ImportError:
+        return []
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+        data = yaml.safe_load(text)
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except Exception:  # noqa: BLE001 - the loader reports it in one line
+        return []
+    if not isinstance(data, dict) or not isinstance(root, MappingNode):
+        return []
+    validator = jsonschema.Draft7Validator(schema(kind))
+    found: dict[tuple[int, str], str] = {}
+    for err in validator.iter_errors(data):
+        for e in _leaves(err):
+            key, line, what = _explain(e, root)
+            found.setdefault((line, key), what)
+    return [L.ConfigError(what, file=str(path), line=line, key=key or None)
+            for (line, key), what in sorted(found.items())]
+
+
+def _leaves(err: Any) -> list[Any]:
+    """The errors worth showing: for a value that may be null, the non-null branch's."""
+    if err.validator == "anyOf" and err.context:
+        branches = [e for e in err.context if e.schema.get("type") != "null"]
+        if len(branches) < len(err.context) and branches:
+            return [b for e in branches for b in _leaves(e)]
+    return [err]
+
+
+def _node_at(root: Any, steps: list[Any]) -> tuple[Any, Any]:
+    """(key node, value node) at a data path, following the composed YAML."""
+    key, node = None, root
+    for step in steps:
+        if isinstance(node, MappingNode):
+            nxt = next(((k, v) for k, v in node.value
+                        if isinstance(k, ScalarNode) and k.value == str(step)), None)
+            if nxt is None:
+                break
+            key, node = nxt
+        elif isinstance(node, yaml.SequenceNode) and isinstance(step, int) \
+                and step < len(node.value):
+            key, node = None, node.value[step]
+        else:
+            break
+    return key, node
+
+
+def _dotted(steps: list[Any]) -> str:
+    out = ""
+    for s in steps:
+        out += f"[{s}]" if isinstance(s, int) else (f".{s}" if out else str(s))
+    return out
+
+
+def _explain(e: Any, root: Any) -> tuple[str, int, str]:
+    """(dotted key, line, what is wrong) in the loader's words."""
+    steps = list(e.absolute_path)
+    v, s = e.validator, e.schema
+    knode, vnode = _node_at(root, steps)
+    line = (vnode.start_mark.line if vnode is not None else root.start_mark.line) + 1
+    if v == "additionalProperties":
+        known = sorted(s.get("properties", {}))
+        extra = sorted(set(e.instance) - set(known))
+        bad = extra[0] if extra else "?"
+        kn, _ = _node_at(root, steps + [bad])
+        line = kn.start_mark.line + 1 if kn is not None else line
+        hint = L._suggest(bad, known) or (f" (known: {', '.join(known)})" if known else "")
+        return _dotted(steps + [bad]), line, f"unknown key {bad!r}{hint}"
+    if v == "required":
+        missing = e.message.split("'")[1] if "'" in e.message else "?"
+        if knode is not None:
+            line = knode.start_mark.line + 1
+        where = f" in {_dotted(steps)}" if steps else ""
+        return _dotted(steps + [missing]), line, f"missing required key {missing!r}{where}"
+    got = L._describe(e.instance) if not isinstance(e.instance, dict | list) else (
+        "a mapping" if isinstance(e.instance, dict) else "a list")
+    if v == "type":
+        want = {"number": "a number", "integer": "an integer", "string": "a string",
+                "boolean": "true or false", "object": "a mapping", "array": "a list",
+                "null": "null"}
+        return _dotted(steps), line, f"expected {want.get(str(e.validator_value), 'a value')}" \
+                                     f", got {got}"
+    if v == "enum":
+        allowed = ", ".join(map(str, e.validator_value))
+        return _dotted(steps), line, (f"must be one of {allowed}, got {e.instance!r}"
+                                      f"{L._suggest(str(e.instance), e.validator_value)}")
+    if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        sign = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">",
+                "exclusiveMaximum": "<"}[v]
+        return _dotted(steps), line, (f"must be {sign} {L._num(e.validator_value)}, got "
+                                      f"{L._num(e.instance)}")
+    if v in ("minItems", "maxItems", "additionalItems") and isinstance(e.instance, list):
+        n = len(s["items"]) if v == "additionalItems" else e.validator_value
+        return _dotted(steps), line, f"expected a list of {n} values, got {len(e.instance)}"
+    if v == "pattern":
+        return _dotted(steps), line, f"must be an import path 'package.module:Class', got {got}"
+    return _dotted(steps), line, _one_line(e.message)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())[:200]
