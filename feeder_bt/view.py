@@ -12,6 +12,7 @@ from __future__ import annotations
 import shutil
 import signal
 import sys
+import textwrap
 import time
 from collections.abc import Callable
 from typing import TextIO
@@ -62,23 +63,42 @@ def ppm(retrieved: int, feed_seconds: float) -> float:
     return round(retrieved * 60.0 / feed_seconds, 3) if feed_seconds > 0 else 0.0
 
 
-def status_lines(cell: Cell, feed_seconds: float | None = None) -> tuple[str, str]:
-    """The two status lines, each under 80 columns for any realistic run: the state and
-    the output; then the vision and the speeds."""
+def status_fields(cell: Cell, feed_seconds: float | None = None
+                  ) -> tuple[list[str], list[str]]:
+    """The status in two groups of fields: the state and the output; then the vision and
+    the speeds. Each group is one line of under 80 columns for any realistic run."""
     f = figures(cell, feed_seconds)
     by_type = ", ".join(f"{k} {v}" for k, v in cell.stats.retrieved.items())
     kinds = f" ({by_type})" if by_type and len(cell.stats.retrieved) > 1 else ""
-    first = (f"{f['state']:<8} t {f['t']:6.1f} s  retrieved {f['retrieved']}{kinds}  "
-             f"{f['ppm']:.1f} parts/min  queue {f['queue']}")
-    second = (f"located {f['located']}  missed {f['missed']}  too far {f['too_far']}  "
-              f"belt {f['horizontal']:.0f} mm/s  incline {f['incline']:.0f}%  "
-              f"robot {f['robot']:.0f}%")
+    first = [f"{f['state']:<8} t {f['t']:6.1f} s", f"retrieved {f['retrieved']}{kinds}",
+             f"{f['ppm']:.1f} parts/min", f"queue {f['queue']}"]
+    second = [f"located {f['located']}", f"missed {f['missed']}", f"too far {f['too_far']}",
+              f"belt {f['horizontal']:.0f} mm/s", f"incline {f['incline']:.0f}%",
+              f"robot {f['robot']:.0f}%"]
     return first, second
 
 
+def status_lines(cell: Cell, feed_seconds: float | None = None, width: int = 1000
+                 ) -> list[str]:
+    """The status lines for a terminal ``width`` wide: two, or more in a narrow one."""
+    return [line for group in status_fields(cell, feed_seconds) for line in _pack(group, width)]
+
+
 def status_line(cell: Cell, feed_seconds: float | None = None) -> str:
-    """Both status lines as one (for a pipe or a log)."""
-    return "  ".join(status_lines(cell, feed_seconds))
+    """The whole status as one line (for a pipe or a log)."""
+    return "  ".join("  ".join(group) for group in status_fields(cell, feed_seconds))
+
+
+def _pack(fields: list[str], width: int, sep: str = "  ") -> list[str]:
+    """Fields joined by ``sep`` into lines of at most ``width`` (a field is never split,
+    only cut when it alone is wider)."""
+    lines: list[str] = []
+    for field in fields:
+        if lines and len(lines[-1]) + len(sep) + len(field) <= width:
+            lines[-1] += sep + field
+        else:
+            lines.append(_fit(field, width))
+    return lines
 
 
 def waiting_for(cell: Cell) -> str:
@@ -208,14 +228,12 @@ class LiveView:
         header and status first, then the waiting line, the trees, the latest events."""
         cell = self.cell
         name = cell.scenario.name if cell.scenario else "-"
-        head = [f"feeder_bt · {name} on {cell.cell.name} · Ctrl-C stops the cell in order",
-                *status_lines(cell, self._feed())]
-        if self.note:
-            head.append(self.note)
-        wait = waiting_for(cell)
-        if wait:
-            head.append(wait)
-        head = [_fit(s, width) for s in head]
+        head = _pack([f"feeder_bt · {name} on {cell.cell.name}",
+                      "Ctrl-C stops the cell in order"], width, sep=" · ")[:2]
+        head += status_lines(cell, self._feed(), width)
+        for extra in (self.note, waiting_for(cell)):
+            if extra:
+                head += textwrap.wrap(extra, width, max_lines=2, placeholder=" …")
         if height <= len(head):
             return head[: max(height, 2)]
         rest = height - len(head) - 1              # a blank line under the header
