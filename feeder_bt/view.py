@@ -116,7 +116,7 @@ def waiting_for(cell: Cell) -> str:
     if state is CellState.PAUSED:
         return "paused by an operator"
     if state is CellState.STOPPED:
-        return "stopped" if s.started_at is not None else "waiting for an operator to start"
+        return "" if s.started_at is not None else "waiting for an operator to start"
     if state is CellState.STARTING:
         return f"setting the cell up (robot home, conveyors, camera): {since}"
     if s.total_retrieved == 0:

@@ -45,7 +45,6 @@ class Terminal:
         os.close(slave)
         self.screen = pyte.Screen(cols, rows)
         self.stream = pyte.ByteStream(self.screen)
-        self.frames = 0
 
     def resize(self, cols: int, rows: int) -> None:
         _winsize(self.master, cols, rows)
@@ -71,7 +70,6 @@ class Terminal:
                 return False
             self.stream.feed(data)
             got = True
-        self.frames += got
         return True
 
     def lines(self) -> list[str]:
@@ -84,11 +82,22 @@ class Terminal:
         os.close(self.master)
 
 
-def _check_frame(term: Terminal) -> list[str]:
+def _check_frame(term: Terminal, times: list[float] | None = None) -> list[str]:
+    """The header and the status line are where they belong; ``times`` collects the
+    status line's clock time, to show the checks covered the whole run."""
     lines = term.lines()
     assert lines[0].startswith("feeder_bt · lenses on "), "\n".join(lines)
-    assert lines[1].split(" ")[0] in STATES and "parts/min" in lines[1], "\n".join(lines)
+    i = 2 if lines[1].startswith("Ctrl-C") else 1     # narrower than 64: a second header line
+    assert lines[i].split(" ")[0] in STATES and "parts/min" in lines[i], "\n".join(lines)
+    if times is not None:
+        times.append(float(re.search(r" t +([\d.]+) s", lines[i]).group(1)))
     return lines
+
+
+def _covered(times: list[float], start: float, end: float) -> bool:
+    """Checked from ``start`` to ``end`` s of the run, never more than 5 s apart."""
+    return (bool(times) and times[0] <= start and times[-1] >= end
+            and all(b - a < 5.0 for a, b in zip(times, times[1:], strict=False)))
 
 
 def _ppm(text: str) -> str:
@@ -112,10 +121,11 @@ def test_status_line_stays_on_screen_resize_and_ctrl_c(tmp_path):
     try:
         waiting = retrieved = False
         resized = False
+        times: list[float] = []
         t0 = time.monotonic()
-        while time.monotonic() - t0 < 90:
+        while time.monotonic() - t0 < 120:       # only a net against a hung child
             assert term.settle()
-            lines = _check_frame(term)
+            lines = _check_frame(term, times)
             assert len(lines[1]) <= term.screen.columns
             waiting |= any(s.startswith("waiting for the first parts") for s in lines)
             if re.search(r"retrieved [1-9]", lines[1]):
@@ -128,7 +138,7 @@ def test_status_line_stays_on_screen_resize_and_ctrl_c(tmp_path):
                 lines = _check_frame(term)
                 assert all(len(s) <= 60 for s in lines)
                 term.resize(80, 24)           # back, for the summary's sake
-        assert waiting and retrieved and resized and term.frames > 20
+        assert waiting and retrieved and resized and _covered(times, 5.0, times[-1])
         term.proc.send_signal(signal.SIGINT)
         while term.settle():
             pass
@@ -147,16 +157,15 @@ def test_the_readme_minute_keeps_its_status_line_on_screen(tmp_path):
     """The README's first command as a newcomer types it: a minute of lenses, 80 x 24."""
     term = _run(tmp_path)
     try:
-        last = ""
+        times: list[float] = []
         while term.settle():
-            if term.proc.poll() is not None:
-                continue
-            last = _check_frame(term)[1]
+            if term.proc.poll() is None:
+                _check_frame(term, times)
         term.proc.wait(timeout=60)
         assert term.proc.returncode == 0
-        assert term.frames > 200           # four frames a second for a minute
+        assert _covered(times, 5.0, 58.0), times          # the whole minute
         status, summary = _status_and_summary(term.lines())
         assert "after 60 s" in summary and _ppm(status) == _ppm(summary)
-        assert float(_ppm(summary)) > 20 and last
+        assert float(_ppm(summary)) > 20
     finally:
         term.close()
