@@ -259,8 +259,6 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         hal.close()
         if log:
             log.flush()               # even when interrupted: nothing buffered is lost
-    if t_stop is None:
-        t_stop = clock.now()
     report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
                           sim_seconds=clock.now() - t_start,
                           feed_seconds=feed_seconds(),
