@@ -225,7 +225,12 @@ class LiveView:
 
     def lines(self, width: int, height: int) -> list[str]:
         """The screen as lines of at most ``width`` characters, at most ``height`` of them:
-        header and status first, then the waiting line, the trees, the latest events."""
+        header and status first, then the waiting line, the trees, the latest events.
+        With ``fmt`` ascii, only ASCII characters (for a terminal that shows no more)."""
+        out = self._lines(width, height)
+        return [s.translate(_TO_ASCII) for s in out] if self.fmt == "ascii" else out
+
+    def _lines(self, width: int, height: int) -> list[str]:
         cell = self.cell
         name = cell.scenario.name if cell.scenario else "-"
         head = _pack([f"feeder_bt · {name} on {cell.cell.name}",
@@ -308,6 +313,9 @@ class LiveView:
         if self._old_winch is not None:
             signal.signal(signal.SIGWINCH, self._old_winch)
             self._old_winch = None
+
+
+_TO_ASCII = str.maketrans({"·": "-", "…": "~", "²": "2"})
 
 
 def _fit(text: str, width: int) -> str:

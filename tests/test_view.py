@@ -94,3 +94,13 @@ def test_on_a_pipe_one_status_line_every_ten_seconds():
     assert lines[-1] == status_line(cell, cell.clock.now())
     assert all(s.split()[0] in ("STARTING", "RUNNING") for s in lines)
     cell.hal.close()
+
+
+def test_the_ascii_view_is_ascii():
+    cell, ticker = _cell()
+    view = LiveView(cell, fmt="ascii", out=io.StringIO())
+    cell.start()
+    ticker.run(until=30.0)
+    text = "\n".join(view.lines(80, 23))
+    assert text.isascii() and "[*]" in text and "- Ctrl-C stops" in text
+    cell.hal.close()
