@@ -180,7 +180,12 @@ def test_check_takes_every_kind_and_says_which(tmp_path, capsys):
     bad.write_text(Path("faults/shift.yaml").read_text().replace("per_pick", "per_pik"))
     assert main(["check", str(bad), "cells/sim.yaml"]) == 2
     captured = capsys.readouterr()
-    assert "per_pik" in captured.err and captured.err.strip().endswith("(read as a fault plan)")
+    first, *more = captured.err.strip().splitlines()
+    assert "per_pik" in first and first.endswith("(read as a fault plan)")
+    line = next(i for i, s in enumerate(bad.read_text().splitlines(), 1)
+                if "servo_timeout: {per_pik" in s)
+    assert more == [f"{bad}:{line}: rates.servo_timeout.per_pick: missing required key "
+                    "'per_pick' in rates.servo_timeout"]    # the schema's: every problem
     assert "ok: cells/sim.yaml" in captured.out
 
 

@@ -76,7 +76,7 @@ def schema(kind: str) -> dict[str, Any]:
     """The JSON Schema (draft 7) of one file kind."""
     cls, what = KINDS[kind]
     body = _dataclass(cls)
-    return {"$schema": DRAFT, "$id": f"feeder_bt:{kind}",
+    return {"$schema": DRAFT, "$id": f"urn:feeder-bt:schema:{kind}",
             "title": f"feeder_bt {kind}", "description": f"{what} for feeder_bt. "
             + (cls.__doc__ or "").strip().split("\n")[0], **body}
 
