@@ -217,12 +217,13 @@ def cmd_check(args: argparse.Namespace) -> int:
     loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
     bad = 0
     for path in args.files:
-        kind = file_kind(path) or "scenario"
+        told = file_kind(path)          # None: not a mapping of keys (the loader says why)
+        kind = told or "scenario"
         try:
             loaders[kind](path)
         except ConfigError as e:
             bad += 1
-            print(f"{e} (read as {describe(kind)})", file=sys.stderr)
+            print(f"{e} (read as {describe(kind)})" if told else str(e), file=sys.stderr)
             for more in problems(path, kind):      # only when the loader refused the file
                 if (more.line, more.key) != (e.line, e.key):
                     print(more, file=sys.stderr)
