@@ -260,8 +260,9 @@ class LiveView:
         width, height = self.console.size
         text = Text("\n".join(self.lines(width, max(height - 1 - spare, 2))),
                     no_wrap=True, overflow="crop")
-        text.highlight_regex(r"^(RUNNING|STARTING)\b", "bold green")
-        text.highlight_regex(r"^(FAULT\w*|STOPP\w+|PAUSED)\b|^FAULT: .*$", "bold red")
+        text.highlight_regex(r"(?m)^(RUNNING|STARTING)\b", "bold green")
+        text.highlight_regex(r"(?m)^(STOPP\w+|PAUSED)\b", "bold yellow")
+        text.highlight_regex(r"(?m)^FAULT: .*$|^FAULT\w*\b", "bold red")
         text.highlight_regex(r"\[\*\]", "bold yellow")
         text.highlight_regex(r"\[(✕|x)\]", "red")
         return text
