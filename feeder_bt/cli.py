@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from .scenario.schema import KINDS
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
-                       "that checks YAML as you type (docs/scenarios.md)")
+                       "that checks YAML as you type (docs/getting-started.md)")
     s.add_argument("kind", choices=list(KINDS))
     s.add_argument("-o", "--output", help="write to this file instead of standard output")
 

@@ -1,7 +1,7 @@
 """JSON Schemas of the YAML file kinds, generated from what the loader itself follows.
 
 ``feeder schema scenario|cell|faults`` prints one; an editor with a YAML language server
-then checks a file as it is typed (docs/scenarios.md). The schema is built from the same
+then checks a file as it is typed (docs/getting-started.md). The schema is built from the same
 sources as ``loader.py``: the dataclasses and type hints of ``model.py`` and ``faults.py``
 (a field with a default is an optional key), the tables of allowed values (``ENUMS``,
 ``RANGES``, ``ADJUST_PARAMS``, ``SHAPE_KINDS``, ``FEATURES``) and the few places where the
