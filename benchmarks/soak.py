@@ -46,7 +46,7 @@ def main() -> int:
                           "outcome": outcome, "seconds": round(float(case.get("time", 0)), 1)})
         junit.unlink()
     Path(args.out).write_text(json.dumps({
-        "command": "python -m pytest -m soak", "exit_code": rc,
+        "command": " ".join(["python -m pytest -m soak", *extra]), "exit_code": rc,
         "wall_seconds": round(time.monotonic() - t0, 1), "tests": tests,
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                     "load_after": os.getloadavg()},
