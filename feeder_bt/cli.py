@@ -32,11 +32,55 @@ def _positive(text: str) -> float:
     return v
 
 
+class UsageError(FeederError):
+    """A command-line mistake found after parsing (options that do not go together)."""
+
+    exit_code = 2
+
+
 class _Parser(argparse.ArgumentParser):
-    """One line for a usage mistake, like every other error (``feeder X --help`` for more)."""
+    """One line for a usage mistake, like every other error (``feeder X --help`` for more),
+    with a "did you mean" for a misspelt option, sub-command or choice."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: {message}{_did_you_mean(self, message)} "
+                     f"(see {self.prog} --help)\n")
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        """Unknown options are reported by the sub-command that was given them, so the
+        suggestion comes from that sub-command's options."""
+        ns, extras = super().parse_known_args(args, namespace)
+        unknown = [a for a in extras if a.startswith("-")]
+        sub = _subparser(self, getattr(ns, "command", None))
+        if unknown and sub is not None and sub is not self:
+            sub.error(f"unrecognized arguments: {' '.join(extras)}")
+        return ns, extras
+
+
+def _subparser(parser: argparse.ArgumentParser, name: str | None
+               ) -> argparse.ArgumentParser | None:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction) and name is not None:
+            return action.choices.get(name)
+    return None
+
+
+def _did_you_mean(parser: argparse.ArgumentParser, message: str) -> str:
+    """' (did you mean --fast?)' for an unknown option or choice close to a known one."""
+    import difflib
+    import re
+
+    m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+    if m:
+        word, known = m.group(1), re.findall(r"'([^']*)'", m.group(2))
+    else:
+        m = re.search(r"unrecognized arguments: (\S+)", message)
+        if not m or not m.group(1).startswith("-"):
+            return ""
+        word = m.group(1).split("=")[0]
+        known = [o for a in parser._actions for o in a.option_strings if o.startswith("--")]
+    close = difflib.get_close_matches(word, known, n=1, cutoff=0.6)
+    return f" (did you mean {close[0]}?)" if close else ""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,35 +122,67 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--part", default="feeding", choices=["feeding", "setup", "cleanup"],
                    help="which tree (default: the four feeding trees)")
 
-    c = sub.add_parser("check", help="validate scenario and cell YAML files")
+    c = sub.add_parser("check", help="validate scenarios, cell descriptions and fault plans "
+                       "(each file's kind is told by its keys)")
     c.add_argument("files", nargs="+")
     c.add_argument("--images", metavar="DIR", help="also run each scenario's recipe on the "
                    "images in DIR (golden.png there: the golden image) and report the finds")
 
+    from .scenario.schema import KINDS
+    s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
+                       "that checks YAML as you type (docs/getting-started.md)")
+    s.add_argument("kind", choices=list(KINDS))
+    s.add_argument("-o", "--output", help="write to this file instead of standard output")
+
     r.set_defaults(handler=cmd_run)
     t.set_defaults(handler=cmd_tree)
     c.set_defaults(handler=cmd_check)
+    s.set_defaults(handler=cmd_schema)
     for tool in TOOLS:                  # each tool module adds its own sub-command
         importlib.import_module(f".tools.{tool}", __package__).add_parser(sub)
     return p
 
 
+def _check_run_args(args: argparse.Namespace) -> None:
+    """Options that do not go together, and files of the wrong kind: one line, exit 2."""
+    if args.fast and args.hal != "sim":
+        raise UsageError("--fast needs the simulated cell (--hal sim): real hardware runs "
+                         "in real time")
+    if args.ui and args.fast:
+        raise UsageError("--ui serves operators in real time: drop --fast")
+    for path, kind, how in ((args.scenario, "scenario", ""),
+                            (args.cell, "cell", "--cell"),
+                            (args.faults, "faults", "--faults")):
+        if path is not None:
+            expect_kind(path, kind, how)
+
+
+def expect_kind(path: str, kind: str, how: str) -> None:
+    """A file given where another kind was expected is named as what it is."""
+    from .errors import ConfigError
+    from .scenario.schema import describe, file_kind
+    found = file_kind(path)
+    if found is None or found == kind:
+        return                    # the loader reports anything else in its own words
+    where = {"scenario": "give it as the first argument of `feeder run`",
+             "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
+             "faults": f"give it with --faults after a scenario "
+                       f"(feeder run SCENARIO --faults {path})"}
+    how = f" ({how})" if how else ""
+    raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
+                      f"{where[found]}", file=path)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .run import RunOptions, plant_options, run_job
-    if args.fast and args.hal != "sim":
-        raise FeederError("--fast needs the simulated cell (--hal sim): real hardware runs "
-                          "in real time")
+    _check_run_args(args)
     report = run_job(RunOptions(scenario=args.scenario, cell=args.cell, duration=args.duration,
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
                                 faults=args.faults, plant=plant_options(args)))
+    print(summary(report))
     p = report["parts"]
-    print(f"{report['scenario']}: {report['state']} after {report['feed_seconds']:.0f} s "
-          f"({report['wall_seconds']:.1f} s wall): retrieved "
-          f"{sum(p['retrieved'].values())} {json.dumps(p['retrieved'])}, "
-          f"{report['parts_per_minute']:.1f} parts/min, located {p['located']}, "
-          f"missed {p['missed']}, lost {p['lost']}")
     nm = report["vision"].get("no_match") or {}
     if nm.get("alarms"):
         print(f"WARNING: for up to {nm['longest_s']:.0f} s frames showed blobs but no part: "
@@ -126,6 +202,19 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def summary(report: dict) -> str:
+    """The run's summary, lines that fit 80 columns; its parts/min is the report's and the
+    live view's last."""
+    p = report["parts"]
+    how = " (interrupted)" if report.get("interrupted") else ""
+    kinds = ", ".join(f"{k} {v}" for k, v in p["retrieved"].items())
+    return (f"{report['scenario']}: {report['state']}{how} after {report['feed_seconds']:.0f} s"
+            f" ({report['wall_seconds']:.1f} s wall)\n"
+            f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
+            f"{sum(p['retrieved'].values())} ({kinds})\n"
+            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}")
+
+
 def cmd_tree(args: argparse.Namespace) -> int:
     from .treeview import render_tree
     out = render_tree(args.scenario, args.format, args.part)
@@ -140,16 +229,45 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .scenario import check_files
-    errors = check_files(args.files)
-    for line in errors:
-        print(line, file=sys.stderr)
-    if not errors:
-        print(f"ok: {len(args.files)} file(s)")
-    if errors or not args.images:
-        return 2 if errors else 0
+    """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
+    one is the loader's first problem, then every other one the kind's schema finds (keys,
+    types, values), one line each on stderr."""
+    from .errors import ConfigError
+    from .scenario.loader import load_cell, load_fault_plan, load_scenario
+    from .scenario.schema import describe, file_kind, problems
+    loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
+    bad = 0
+    for path in args.files:
+        told = file_kind(path)          # None: not a mapping of keys (the loader says why)
+        kind = told or "scenario"
+        try:
+            loaders[kind](path)
+        except ConfigError as e:
+            bad += 1
+            print(f"{e} (read as {describe(kind)})" if told else str(e), file=sys.stderr)
+            for more in problems(path, kind):      # only when the loader refused the file
+                if (more.line, more.key) != (e.line, e.key):
+                    print(more, file=sys.stderr)
+        else:
+            print(f"ok: {path} ({describe(kind)})")
+    if bad or not args.images:
+        return 2 if bad else 0
     from .tools.check_images import check_images
-    return max(check_images(f, args.images) for f in args.files)
+    scenarios = [f for f in args.files if (file_kind(f) or "scenario") == "scenario"]
+    if not scenarios:
+        raise UsageError("--images runs a scenario's recipe: give a scenario file")
+    return max(check_images(f, args.images) for f in scenarios)
+
+
+def cmd_schema(args: argparse.Namespace) -> int:
+    from .scenario.schema import schema
+    text = json.dumps(schema(args.kind), indent=2) + "\n"
+    if args.output:
+        Path(args.output).write_text(text)
+        print(f"wrote {args.output}")
+    else:
+        sys.stdout.write(text)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -156,15 +156,6 @@ class _FeedSpan:
         return self.done + (t_end - self.since if self.since is not None else 0.0)
 
 
-class _UiLiveView(LiveView):
-    """The live view with the operator UI's address under it."""
-
-    url = ""
-
-    def screen(self) -> str:
-        return super().screen() + f"\n\noperator UI: {self.url}"
-
-
 def _chain(*fns: Callable[[], None] | None) -> Callable[[], None] | None:
     """One after-tick callback calling each of ``fns`` in order."""
     todo = [f for f in fns if f is not None]
@@ -280,11 +271,20 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     if log:
         _start_log(log, opts, scenario, cell)
     ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
+    t_start = clock.now()
+    t_stop: float | None = None     # set when feeding ends: the report's feed time stops
+    feed = _FeedSpan(cell) if opts.ui or (opts.plant and opts.plant.opcua) else None
+
+    def feed_seconds() -> float:
+        """The feeding time the report counts, so far: the view's parts/min is the report's."""
+        t = clock.now() if t_stop is None else t_stop
+        return feed.seconds(t) if feed else t - t_start
+
     show: LiveView | Progress | None = None
     if opts.fast:
-        show = Progress(cell, duration or 0.0)
+        show = Progress(cell, duration or 0.0, feed_seconds=feed_seconds)
     elif opts.view != "none":
-        show = (_UiLiveView if opts.ui else LiveView)(cell, fmt=opts.view)
+        show = LiveView(cell, fmt=opts.view, feed_seconds=feed_seconds)
     every = show.update if show else None
     if log:     # after each tick: the view, then the log's batch (cheap when not due)
         every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
@@ -293,11 +293,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     old = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
     wall0 = time.monotonic()
     interrupted = False
-    t_start = clock.now()
-    t_stop = t_start
     ui = None
     plant = None
-    feed = _FeedSpan(cell) if opts.ui or (opts.plant and opts.plant.opcua) else None
     try:
         cell.load(scenario)
         if opts.ui:             # commands run and snapshots are taken in the tick thread
@@ -306,8 +303,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
                             *_bind(opts.ui), users_path=opts.users, t0=t_start)
             url = ui.start()
             print(f"operator UI: {url}", file=sys.stderr, flush=True)
-            if isinstance(show, _UiLiveView):
-                show.url = url
+            if isinstance(show, LiveView):
+                show.note = f"operator UI: {url}"
             every = _chain(every, ui.pump)
         plant = _open_plant(opts, cell, scenario)
         if plant is not None:
@@ -338,9 +335,9 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
                    every=_chain(ui.pump if ui else None, plant.pump if plant else None))
         if show:
             show.update(force=True)
-            if isinstance(show, Progress):
-                show.close()
     finally:
+        if show:
+            show.close()        # the terminal back as it was, even after an error
         for sig, handler in old.items():
             signal.signal(sig, handler)
         if ui:
@@ -352,7 +349,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             log.flush()               # even when interrupted: nothing buffered is lost
     report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
                           sim_seconds=clock.now() - t_start,
-                          feed_seconds=feed.seconds(t_stop) if feed else t_stop - t_start,
+                          feed_seconds=feed_seconds(),
                           wall_seconds=time.monotonic() - wall0, interrupted=interrupted)
     report["speeds"] = final_speeds()
     if injector is not None:

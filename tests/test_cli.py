@@ -122,4 +122,87 @@ def test_sigint_stops_in_order_and_still_reports(tmp_path):
     assert proc.returncode == 0, stderr
     rep = json.loads(out.read_text())
     assert rep["interrupted"] is True and rep["state"] == "STOPPED"
+    assert "STOPPED (interrupted)" in stdout
     assert rep["parts"]["lost"] == 0
+
+
+# ---------------------------------------------------------------------------- polish
+
+
+@pytest.mark.parametrize("argv,hint", [
+    (["run", "scenarios/lenses.yaml", "--fsat"], "did you mean --fast?"),
+    (["run", "scenarios/lenses.yaml", "--duraton=5"], "did you mean --duration?"),
+    (["rnu", "scenarios/lenses.yaml"], "did you mean run?"),
+    (["tree", "scenarios/lenses.yaml", "--format", "asci"], "did you mean ascii?"),
+    (["check", "--imgaes"], None),
+])
+def test_a_misspelt_option_gets_a_did_you_mean(argv, hint, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    if hint:
+        assert hint in err[0]
+
+
+@pytest.mark.parametrize("argv,needle", [
+    (["run", "scenarios/lenses.yaml", "--ui", "127.0.0.1:0", "--fast"], "drop --fast"),
+    (["run", "scenarios/lenses.yaml", "--hal", "emulated", "--fast"], "--fast needs"),
+])
+def test_options_that_do_not_go_together_exit_2(argv, needle, capsys):
+    assert main([*argv, "--no-db"]) == 2         # docs/getting-started.md: usage mistakes
+    assert needle in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv,what", [
+    (["run", "cells/sim.yaml"], "cells/sim.yaml: this is a cell description, not a scenario"),
+    (["run", "faults/shift.yaml"], "faults/shift.yaml: this is a fault plan, not a scenario"),
+    (["run", "scenarios/lenses.yaml", "--cell", "scenarios/squares.yaml"],
+     "this is a scenario, not a cell description (--cell)"),
+    (["run", "scenarios/lenses.yaml", "--faults", "cells/sim.yaml"],
+     "this is a cell description, not a fault plan (--faults)"),
+])
+def test_a_file_of_the_wrong_kind_is_named_as_what_it_is(argv, what, capsys):
+    assert main([*argv, "--no-db"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and what in err[0], err
+
+
+def test_check_takes_every_kind_and_says_which(tmp_path, capsys):
+    files = ["scenarios/lenses.yaml", "cells/sim.yaml", "faults/shift.yaml"]
+    assert main(["check", *files]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == ["ok: scenarios/lenses.yaml (a scenario)",
+                   "ok: cells/sim.yaml (a cell description)",
+                   "ok: faults/shift.yaml (a fault plan)"]
+    bad = tmp_path / "plan.yaml"
+    bad.write_text(Path("faults/shift.yaml").read_text().replace("per_pick", "per_pik"))
+    assert main(["check", str(bad), "cells/sim.yaml"]) == 2
+    captured = capsys.readouterr()
+    first, *more = captured.err.strip().splitlines()
+    assert "per_pik" in first and first.endswith("(read as a fault plan)")
+    line = next(i for i, s in enumerate(bad.read_text().splitlines(), 1)
+                if "servo_timeout: {per_pik" in s)
+    assert more == [f"{bad}:{line}: rates.servo_timeout.per_pick: missing required key "
+                    "'per_pick' in rates.servo_timeout"]    # the schema's: every problem
+    assert "ok: cells/sim.yaml" in captured.out
+
+
+def test_the_dot_graph_is_named_after_the_scenario(capsys):
+    assert main(["tree", "scenarios/lenses.yaml", "--format", "dot"]) == 0
+    assert capsys.readouterr().out.startswith("digraph lenses_feeding {")
+    assert main(["tree", "scenarios/squares.yaml", "--format", "dot", "--part", "setup"]) == 0
+    assert capsys.readouterr().out.startswith("digraph squares_setup {")
+
+
+def test_the_summary_fits_80_columns_and_says_interrupted():
+    from feeder_bt.cli import summary
+    report = {"scenario": "lenses_and_squares", "state": "STOPPED", "interrupted": True,
+              "feed_seconds": 3600.0, "wall_seconds": 3600.4, "parts_per_minute": 104.567,
+              "parts": {"retrieved": {"lens": 3000, "square": 3274}, "located": 7000,
+                        "missed": 12, "lost": 0}}
+    lines = summary(report).splitlines()
+    assert "STOPPED (interrupted) after 3600 s" in lines[0]
+    assert lines[1] == "  104.6 parts/min, retrieved 6274 (lens 3000, square 3274)"
+    assert all(len(s) <= 80 for s in lines)

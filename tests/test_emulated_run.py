@@ -1,6 +1,7 @@
 """The main job through the real Galil and V+ drivers, against the emulators on loopback
 (``--hal emulated``): it feeds like the simulated cell, and keeps feeding when the
-controllers' connections are cut. These run in real time."""
+controllers' connections are cut. These run in real time; the ten-minute cable pull is a
+soak run (``python -m pytest -m soak``)."""
 
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ def test_emulated_run_feeds_like_the_simulated_cell():
     assert abs(got - want) <= 0.25 * want, (got, want)
 
 
-@pytest.mark.slow
+@pytest.mark.soak
 def test_cut_connections_are_survived_without_losing_a_part(monkeypatch):
     """Ten minutes; every 75 s the test cuts the Galil's or the Adept's TCP connections
     from the server side (a pulled cable). Feeding goes on after each cut."""

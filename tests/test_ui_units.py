@@ -168,7 +168,7 @@ def test_run_ui_refuses_bad_set_ups_in_one_line(tmp_path, capsys):
     users = UsersFile(tmp_path / "users.json")
     users.add("alice", "alice-secret-1")
     assert main(["run", str(LENSES), "--ui", "127.0.0.1:0", "--users", str(users.path),
-                 "--fast", "--no-db"]) == 1
+                 "--fast", "--no-db"]) == 2
     assert "drop --fast" in capsys.readouterr().err
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))

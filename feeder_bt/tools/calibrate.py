@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import os
 from pathlib import Path
 
 import cv2
@@ -233,6 +234,9 @@ def _write(args: argparse.Namespace, cell: CellSpec, what: str, values: dict,
                  "belt": "Copy counts_per_mm into encoder.counts_per_mm of the cell.",
                  "tool": "Copy tool_offset_mm into the scenario's parts.*.tool_offset."}[what])
     print(f"wrote {write_calibration_file(dest, values, header)}")
+    if what == "camera" and dest != default:    # a path in a file is relative to that file
+        rel = os.path.relpath(dest.resolve(), Path(cell.path).resolve().parent)
+        print(f"to use it, name it in {cell.path}:  camera: {{calibration_file: {rel}}}")
 
 
 # ------------------------------------------------------------------------------ simulator

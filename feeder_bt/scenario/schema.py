@@ -1,0 +1,389 @@
+"""JSON Schemas of the YAML file kinds, generated from what the loader itself follows.
+
+``feeder schema scenario|cell|faults`` prints one; an editor with a YAML language server
+then checks a file as it is typed (docs/getting-started.md). The schema is built from the same
+sources as ``loader.py``: the dataclasses and type hints of ``model.py`` and ``faults.py``
+(a field with a default is an optional key), the tables of allowed values (``ENUMS``,
+``RANGES``, ``ADJUST_PARAMS``, ``SHAPE_KINDS``, ``FEATURES``) and the few places where the
+YAML is not a mirror of the model (the shape, a vision class, the hopper, the conveyors,
+the fault rates). What needs more than one key at a time (pose probabilities summing to 1,
+speeds against the cell's conveyors, the camera window) is left to ``feeder check``.
+
+``file_kind`` tells the kinds apart by their top-level keys, for ``feeder check`` and for
+the one-line "this is a cell description, not a scenario".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from pathlib import Path
+from typing import Any
+
+import yaml
+from yaml.nodes import MappingNode, ScalarNode
+
+from feeder_bt.scenario import loader as L
+from feeder_bt.scenario.faults import _ONLY_FOR, RATE_UNITS, FaultPlanSpec, FaultRate
+from feeder_bt.scenario.model import CellSpec, ConveyorSpec, Scenario, Shape, VisionClass
+from feeder_bt.vision.features import FEATURES
+
+DRAFT = "http://json-schema.org/draft-07/schema#"
+
+#: The file kinds: the name ``feeder schema`` takes, the model's root class, what to call it.
+KINDS: dict[str, tuple[type, str]] = {
+    "scenario": (Scenario, "a scenario"),
+    "cell": (CellSpec, "a cell description"),
+    "faults": (FaultPlanSpec, "a fault plan"),
+}
+
+
+# ---------------------------------------------------------------------------- the kinds
+
+
+def top_keys(kind: str) -> frozenset[str]:
+    """The keys the loader accepts at the top of a file of ``kind``."""
+    cls = KINDS[kind][0]
+    return frozenset(_fields(cls)) | L._EXTRA_KEYS.get(cls, frozenset())
+
+
+def file_kind(path: str | Path) -> str | None:
+    """Which kind a file is, from its top-level keys: the kind whose keys it uses most
+    (a scenario on a tie, since ``name`` is both a scenario's and a cell's); None when the
+    file cannot be read as a mapping or uses no key of any kind (the loader says why)."""
+    try:
+        root = yaml.compose(Path(path).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+    except Exception:  # noqa: BLE001 - the real load reports it in one line
+        return None
+    if not isinstance(root, MappingNode):
+        return None
+    keys = {k.value for k, _ in root.value if isinstance(k, ScalarNode)}
+    score = {kind: len(keys & top_keys(kind) - {"name"}) for kind in KINDS}
+    best = max(score.values())
+    if best == 0:
+        return "scenario" if "name" in keys else None
+    return next(kind for kind in KINDS if score[kind] == best)
+
+
+def describe(kind: str) -> str:
+    return KINDS[kind][1]
+
+
+# ---------------------------------------------------------------------------- the schema
+
+
+def schema(kind: str) -> dict[str, Any]:
+    """The JSON Schema (draft 7) of one file kind."""
+    cls, what = KINDS[kind]
+    body = _dataclass(cls)
+    return {"$schema": DRAFT, "$id": f"urn:feeder-bt:schema:{kind}",
+            "title": f"feeder_bt {kind}", "description": f"{what} for feeder_bt. "
+            + (cls.__doc__ or "").strip().split("\n")[0], **body}
+
+
+def _fields(cls: type) -> dict[str, dataclasses.Field]:
+    """The fields of ``cls`` that are YAML keys (as ``_Ctx.dataclass`` takes them)."""
+    hints = L._hints(cls)
+    implied = L._IMPLIED_FIELDS.get(cls, frozenset())
+    return {f.name: f for f in dataclasses.fields(cls)
+            if hints[f.name] is not Path and f.name not in implied}
+
+
+def _dataclass(cls: type, keyed: bool = False) -> dict[str, Any]:
+    """An object with one property per field; ``keyed``: its ``name`` is the mapping key."""
+    hints = L._hints(cls)
+    props: dict[str, Any] = {}
+    required: list[str] = []
+    for name, f in _fields(cls).items():
+        if keyed and name == "name":
+            continue
+        builder = _FIELD_SCHEMAS.get((cls, name))
+        if builder is not None:
+            props.update(builder())
+            if L._required(f):
+                required.append(name)
+            continue
+        props[name] = _field(cls, name, hints[name], f)
+        if L._required(f):
+            required.append(name)
+    for extra in L._EXTRA_KEYS.get(cls, frozenset()):
+        props[extra] = _EXTRA_SCHEMAS[(cls, extra)]
+    out: dict[str, Any] = {"type": "object", "properties": props,
+                           "additionalProperties": False}
+    if required:
+        out["required"] = required
+    doc = (cls.__doc__ or "").strip()
+    if doc and not doc.startswith(f"{cls.__name__}("):
+        out["description"] = " ".join(doc.split("\n\n")[0].split())
+    if cls is L.AdjustParams:
+        out["allOf"] = _adjust_rules()
+    return out
+
+
+def _field(cls: type, name: str, tp: Any, f: dataclasses.Field | None = None) -> dict[str, Any]:
+    s = _type(tp)
+    allowed = L.ENUMS.get((cls, name))
+    if allowed is not None:
+        s = {**s, "enum": list(allowed)}
+    rng = L.RANGES.get((cls, name))
+    if rng is not None:
+        s = _with_range(s, rng)
+    if name == "leaf":
+        s = {"anyOf": [{"type": "string", "pattern": L.LEAF_RE.pattern}, {"type": "null"}],
+             "description": "a class used instead: 'package.module:Class'"}
+    default = _default(f) if f is not None else None
+    if default is not None:
+        s = {**s, "default": default}
+    if cls is L.AdjustParams and name == "params":
+        s = {"type": "object", "additionalProperties": {"type": "number"}}
+    return s
+
+
+def _type(tp: Any) -> dict[str, Any]:
+    """The schema of a model type, as ``_Ctx.build`` reads it."""
+    nullable, tp = L._optional_of(tp)
+    if nullable:
+        return {"anyOf": [_type(tp), {"type": "null"}]}
+    special = _SPECIAL_SCHEMAS.get(tp)
+    if special is not None:
+        return special()
+    if dataclasses.is_dataclass(tp):
+        return _dataclass(tp)
+    if tp is bool:
+        return {"type": "boolean"}
+    if tp is float:
+        return {"type": "number"}
+    if tp is int:
+        return {"type": "integer"}
+    if tp is str:
+        return {"type": "string"}
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is tuple:
+        return {"type": "array", "items": [_type(a) for a in args], "additionalItems": False,
+                "minItems": len(args), "maxItems": len(args)}
+    if origin is list:
+        return {"type": "array", "items": _type(args[0])}
+    if origin is dict:
+        vt = args[1]
+        named = dataclasses.is_dataclass(vt) and "name" in {
+            f.name for f in dataclasses.fields(vt)}
+        return {"type": "object",
+                "additionalProperties": _dataclass(vt, keyed=True) if named else _type(vt)}
+    raise TypeError(f"schema cannot map model type {tp!r}")
+
+
+def _with_range(s: dict[str, Any], rng: L.Range) -> dict[str, Any]:
+    s = dict(s)
+    if rng.lo is not None:
+        s["exclusiveMinimum" if rng.lo_open else "minimum"] = rng.lo
+    if rng.hi is not None:
+        s["exclusiveMaximum" if rng.hi_open else "maximum"] = rng.hi
+    return s
+
+
+def _default(f: dataclasses.Field) -> Any:
+    v = f.default if f.default is not dataclasses.MISSING else None
+    if isinstance(v, tuple):
+        v = list(v)
+    return v if isinstance(v, bool | int | float | str | list) else None
+
+
+# ---------------------------------------------------------------------------- special cases
+
+
+def _shape() -> dict[str, Any]:
+    """``{disc: {diameter_mm}}`` | ``{rect: {size_mm: [w, h]}}`` | ``{polygon: {points_mm}}``."""
+    hints = L._hints(Shape)
+    inner = {"diameter_mm": {"type": "number", "exclusiveMinimum": 0},
+             "size_mm": {"type": "array", "items": [{"type": "number", "exclusiveMinimum": 0}] * 2,
+                         "additionalItems": False, "minItems": 2, "maxItems": 2},
+             "points_mm": {**_type(hints["points_mm"]), "minItems": 3}}
+    return {"type": "object", "description": "the part's outline: exactly one shape kind",
+            "minProperties": 1, "maxProperties": 1, "additionalProperties": False,
+            "properties": {kind: {"type": "object", "additionalProperties": False,
+                                  "required": list(keys),
+                                  "properties": {k: inner[k] for k in keys}}
+                           for kind, keys in L.SHAPE_KINDS.items()}}
+
+
+def _vision_class() -> dict[str, Any]:
+    """``{part, pose, pickable, mirrored?, <feature>: [lo, hi], ...}``."""
+    hints = L._hints(VisionClass)
+    props = {f.name: _type(hints[f.name]) for f in dataclasses.fields(VisionClass)
+             if f.name != "ranges"}
+    pair = {"type": "array", "items": [{"type": "number"}] * 2, "additionalItems": False,
+            "minItems": 2, "maxItems": 2}
+    for feat, what in FEATURES.items():
+        props[feat] = {**pair, "description": f"[lo, hi] of the {what}"}
+    required = [f.name for f in dataclasses.fields(VisionClass)
+                if f.name != "ranges" and L._required(f)]
+    return {"type": "object", "properties": props, "additionalProperties": False,
+            "required": required, "anyOf": [{"required": [f]} for f in FEATURES],
+            "description": "a feature box: a blob whose features all fall in the ranges is "
+                           "this part in this pose (at least one feature range)"}
+
+
+def _hopper() -> dict[str, Any]:
+    return {"hopper": {"type": "object", "required": ["parts"], "additionalProperties": False,
+                       "properties": {"parts": {
+                           "type": "object", "minProperties": 1,
+                           "additionalProperties": {"type": "integer", "minimum": 0},
+                           "description": "how many of each part the hopper holds"}}}}
+
+
+def _conveyors() -> dict[str, Any]:
+    belt = _dataclass(ConveyorSpec)
+    transit = _with_range({"type": "number"}, L.RANGES[(CellSpec, "return_transit_s")])
+    props = {name: belt for name in L.CONVEYOR_NAMES}
+    props["return"] = {"type": "object", "additionalProperties": False,
+                       "properties": {"transit_s": transit}}
+    return {"conveyors": {"type": "object", "properties": props,
+                          "additionalProperties": False}}
+
+
+def _rates() -> dict[str, Any]:
+    hints = L._hints(FaultRate)
+    fields = {f.name: f for f in dataclasses.fields(FaultRate)}
+    kinds = {}
+    for kind, unit in RATE_UNITS.items():
+        keys = [unit] + [k for k, only in _ONLY_FOR.items() if kind in only and k in fields]
+        kinds[kind] = {"type": "object", "required": [unit], "additionalProperties": False,
+                       "properties": {k: _field(FaultRate, k, hints[k], fields[k])
+                                      for k in keys}}
+        kinds[kind]["properties"][unit] = _with_range(
+            {"type": "number"}, L.RANGES[(FaultRate, unit)])
+    return {"rates": {"type": "object", "properties": kinds, "additionalProperties": False}}
+
+
+def _adjust_rules() -> list[dict[str, Any]]:
+    """``adjust.params`` by algorithm (each takes its own keys; ``none`` takes none)."""
+    rules = []
+    for algo, params in L.ADJUST_PARAMS.items():
+        cond: dict[str, Any] = {"properties": {"algorithm": {"const": algo}}}
+        if algo != "none":
+            cond["required"] = ["algorithm"]
+        rules.append({"if": cond, "then": {"properties": {"params": {
+            "type": "object", "additionalProperties": False,
+            "properties": {k: _with_range({"type": "number"}, r)
+                           for k, r in params.items()}}}}})
+    return rules
+
+
+_SPECIAL_SCHEMAS = {Shape: _shape, VisionClass: _vision_class}
+_FIELD_SCHEMAS = {(Scenario, "hopper"): _hopper, (CellSpec, "conveyors"): _conveyors,
+                  (FaultPlanSpec, "rates"): _rates}
+_EXTRA_SCHEMAS = {(Scenario, "cell"): {
+    "type": "string", "minLength": 1,
+    "description": "the cell description file, relative to this scenario"}}
+
+
+# ---------------------------------------------------------------------------- all problems
+
+
+def problems(path: str | Path, kind: str) -> list[L.ConfigError]:
+    """Every problem the schema finds in a file, each a ``FILE:LINE: key: what`` error, in
+    file order (``feeder check`` lists them after the loader's first). Empty when the file
+    is not YAML or the validator is not installed: the loader's own message then stands."""
+    try:
+        import jsonschema
+    except ImportError:
+        return []
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+        data = yaml.safe_load(text)
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except Exception:  # noqa: BLE001 - the loader reports it in one line
+        return []
+    if not isinstance(data, dict) or not isinstance(root, MappingNode):
+        return []
+    validator = jsonschema.Draft7Validator(schema(kind))
+    found: dict[tuple[int, str], str] = {}
+    for err in validator.iter_errors(data):
+        for e in _leaves(err):
+            key, line, what = _explain(e, root)
+            found.setdefault((line, key), what)
+    return [L.ConfigError(what, file=str(path), line=line, key=key or None)
+            for (line, key), what in sorted(found.items())]
+
+
+def _leaves(err: Any) -> list[Any]:
+    """The errors worth showing: for a value that may be null, the non-null branch's."""
+    if err.validator == "anyOf" and err.context:
+        branches = [e for e in err.context if e.schema.get("type") != "null"]
+        if len(branches) < len(err.context) and branches:
+            return [b for e in branches for b in _leaves(e)]
+    return [err]
+
+
+def _node_at(root: Any, steps: list[Any]) -> tuple[Any, Any]:
+    """(key node, value node) at a data path, following the composed YAML."""
+    key, node = None, root
+    for step in steps:
+        if isinstance(node, MappingNode):
+            nxt = next(((k, v) for k, v in node.value
+                        if isinstance(k, ScalarNode) and k.value == str(step)), None)
+            if nxt is None:
+                break
+            key, node = nxt
+        elif isinstance(node, yaml.SequenceNode) and isinstance(step, int) \
+                and step < len(node.value):
+            key, node = None, node.value[step]
+        else:
+            break
+    return key, node
+
+
+def _dotted(steps: list[Any]) -> str:
+    out = ""
+    for s in steps:
+        out += f"[{s}]" if isinstance(s, int) else (f".{s}" if out else str(s))
+    return out
+
+
+def _explain(e: Any, root: Any) -> tuple[str, int, str]:
+    """(dotted key, line, what is wrong) in the loader's words."""
+    steps = list(e.absolute_path)
+    v, s = e.validator, e.schema
+    knode, vnode = _node_at(root, steps)
+    line = (vnode.start_mark.line if vnode is not None else root.start_mark.line) + 1
+    if v == "additionalProperties":
+        known = sorted(s.get("properties", {}))
+        extra = sorted(set(e.instance) - set(known))
+        bad = extra[0] if extra else "?"
+        kn, _ = _node_at(root, steps + [bad])
+        line = kn.start_mark.line + 1 if kn is not None else line
+        hint = L._suggest(bad, known) or (f" (known: {', '.join(known)})" if known else "")
+        return _dotted(steps + [bad]), line, f"unknown key {bad!r}{hint}"
+    if v == "required":
+        missing = e.message.split("'")[1] if "'" in e.message else "?"
+        if knode is not None:
+            line = knode.start_mark.line + 1
+        where = f" in {_dotted(steps)}" if steps else ""
+        return _dotted(steps + [missing]), line, f"missing required key {missing!r}{where}"
+    got = L._describe(e.instance) if not isinstance(e.instance, dict | list) else (
+        "a mapping" if isinstance(e.instance, dict) else "a list")
+    if v == "type":
+        want = {"number": "a number", "integer": "an integer", "string": "a string",
+                "boolean": "true or false", "object": "a mapping", "array": "a list",
+                "null": "null"}
+        return _dotted(steps), line, f"expected {want.get(str(e.validator_value), 'a value')}" \
+                                     f", got {got}"
+    if v == "enum":
+        allowed = ", ".join(map(str, e.validator_value))
+        return _dotted(steps), line, (f"must be one of {allowed}, got {e.instance!r}"
+                                      f"{L._suggest(str(e.instance), e.validator_value)}")
+    if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        sign = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">",
+                "exclusiveMaximum": "<"}[v]
+        return _dotted(steps), line, (f"must be {sign} {L._num(e.validator_value)}, got "
+                                      f"{L._num(e.instance)}")
+    if v in ("minItems", "maxItems", "additionalItems") and isinstance(e.instance, list):
+        n = len(s["items"]) if v == "additionalItems" else e.validator_value
+        return _dotted(steps), line, f"expected a list of {n} values, got {len(e.instance)}"
+    if v == "pattern":
+        return _dotted(steps), line, f"must be an import path 'package.module:Class', got {got}"
+    return _dotted(steps), line, _one_line(e.message)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())[:200]
