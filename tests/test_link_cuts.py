@@ -175,8 +175,8 @@ def test_a_whole_run_survives_a_cut_at_each_step(tmp_path, phase, device):
     assert r["recoveries"].get("comms_lost") == 1
     after = [e for e in events if e[1] == "retrieved" and e[0] > cut[0] + 3.0]
     assert len(after) > 20                               # feeding resumed
-    if device == "adept":
-        found = [e[2]["found"] for e in events if e[1] == "reconciled"]
+    if device == "adept":       # (the clean-up may settle a pick the stop cut short, too)
+        found = [e[2]["found"] for e in events if e[1] == "reconciled" and e[0] < 150.0]
         expect = {"before_pick": "on the belt (never gripped)",
                   "after_grip": "in the gripper",
                   "during_place": "placed (its reply was lost)",
@@ -213,9 +213,11 @@ def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monk
     assert r["parts"]["misplaced"] == {}
     assert r["faults"].get("comms_lost") == 4 and r["recoveries"].get("comms_lost") == 4
     found = [e[2]["found"] for e in _events(db) if e[1] == "reconciled"]
-    assert found == ["on the belt (never gripped)", "in the gripper",
-                     "placed (its reply was lost)", "placed (its reply was lost)"]
+    assert found[:4] == ["on the belt (never gripped)", "in the gripper",
+                         "placed (its reply was lost)", "placed (its reply was lost)"]
+    assert len(found) <= 5              # and perhaps the clean-up's, for a motion the stop cut
     # every part the world placed, the cell counted (none counted twice, none missed)
     assert r["world"]["placed"].get("lens", 0) == r["parts"]["retrieved"]["lens"]
+    settled = [e[0] for e in _events(db) if e[1] == "reconciled"]
     retrieved = [e for e in _events(db) if e[1] == "retrieved"]
-    assert retrieved[-1][0] > max(e[0] for e in _events(db) if e[1] == "reconciled")
+    assert any(e[0] > settled[3] + 0.5 for e in retrieved)      # feeding went on

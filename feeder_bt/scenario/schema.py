@@ -192,17 +192,23 @@ def _default(f: dataclasses.Field) -> Any:
 
 
 def _shape() -> dict[str, Any]:
-    """``{disc: {diameter_mm}}`` | ``{rect: {size_mm: [w, h]}}`` | ``{polygon: {points_mm}}``."""
+    """``{disc: {diameter_mm, hole_mm?}}`` | ``{rect: {size_mm: [w, h]}}`` |
+    ``{polygon: {points_mm, holes_mm?}}``."""
     hints = L._hints(Shape)
     inner = {"diameter_mm": {"type": "number", "exclusiveMinimum": 0},
+             "hole_mm": {"type": "number", "minimum": 0,
+                         "description": "a round hole in the middle (a washer), < diameter_mm"},
              "size_mm": {"type": "array", "items": [{"type": "number", "exclusiveMinimum": 0}] * 2,
                          "additionalItems": False, "minItems": 2, "maxItems": 2},
-             "points_mm": {**_type(hints["points_mm"]), "minItems": 3}}
+             "points_mm": {**_type(hints["points_mm"]), "minItems": 3},
+             "holes_mm": {"type": "array", "items": {**_type(hints["points_mm"]), "minItems": 3},
+                          "description": "polygon holes, each a list of [x, y] points"}}
     return {"type": "object", "description": "the part's outline: exactly one shape kind",
             "minProperties": 1, "maxProperties": 1, "additionalProperties": False,
             "properties": {kind: {"type": "object", "additionalProperties": False,
                                   "required": list(keys),
-                                  "properties": {k: inner[k] for k in keys}}
+                                  "properties": {k: inner[k] for k in
+                                                 keys + L.SHAPE_OPTIONAL.get(kind, ())}}
                            for kind, keys in L.SHAPE_KINDS.items()}}
 
 

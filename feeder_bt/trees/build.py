@@ -13,7 +13,7 @@ from py_trees.decorators import SuccessIsRunning
 from ..behaviours.common import Ctx, ErrorIs, Wait
 from ..behaviours.locate import GrabGolden
 from ..behaviours.present import StopConveyors
-from ..behaviours.retrieve import MoveSafe, Recover, SetRobotSpeed
+from ..behaviours.retrieve import MoveSafe, PhaseIs, Reconcile, Recover, SetRobotSpeed
 from ..behaviours.setup import ClearWindow, SetSignal, SyncEncoders
 from . import adjust, locate, present, retrieve
 
@@ -86,8 +86,18 @@ def build_cleanup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     if ctx.scenario.vision.backlight:
         steps.append(_patiently(lambda: SetSignal("backlight off", ctx, "backlight", False),
                                 ctx))
+    steps.append(_patiently(lambda: _settle_part(ctx), ctx))
     steps.append(_patiently(lambda: _robot_to_safe(ctx), ctx))
     return Sequence("clean-up", memory=True, children=steps)
+
+
+def _settle_part(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    """A pick or place cut short by the stop: the controller finishes a motion it has
+    started, so ask it where the part went (placed: counted; still held: the next start
+    places it first)."""
+    return Selector("settle the part", memory=True, children=[
+        PhaseIs("nothing pending?", ctx, None),
+        Reconcile("what does the gripper hold?", ctx)])
 
 
 def _robot_to_safe(ctx: Ctx) -> py_trees.behaviour.Behaviour:
