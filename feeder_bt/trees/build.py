@@ -52,20 +52,22 @@ def build_feeding(ctx: Ctx) -> py_trees.behaviour.Behaviour:
                     children=[Loop(f"{b.name} loop", b) for b in branches])
 
 
-def build_setup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
+    """``robot=False``: the robot is its own master (the part server) and is left alone."""
     vision = ctx.scenario.vision
     steps: list[py_trees.behaviour.Behaviour] = [
         SetRobotSpeed("robot speed", ctx),
         MoveSafe("robot clear of the belt", ctx),
-        StopConveyors("stop conveyors", ctx),
-    ]
+    ] if robot else []
+    steps.append(StopConveyors("stop conveyors", ctx))
     if vision.backlight:
         steps.append(SetSignal("backlight on", ctx, "backlight", True))
     if vision.golden_image:
         steps += [ClearWindow("clear the window", ctx), GrabGolden("golden image", ctx)]
     # the belt must be at rest, and a real controller's cached counts fresh, for the sync
     steps += [Wait("belt at rest", ctx, SETTLE_S), SyncEncoders("sync encoders", ctx)]
-    return Sequence("set-up", memory=True, children=steps)
+    return Sequence("set-up" if robot else "set-up (part server)", memory=True,
+                    children=steps)
 
 
 def _patiently(make, ctx: Ctx, waits: tuple[float, ...] = (1.0, 2.0, 4.0)
@@ -80,12 +82,15 @@ def _patiently(make, ctx: Ctx, waits: tuple[float, ...] = (1.0, 2.0, 4.0)
     return Selector(first.name, memory=True, children=tries)
 
 
-def build_cleanup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+def build_cleanup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
+    """``robot=False``: the robot is its own master (the part server) and is left alone."""
     steps: list[py_trees.behaviour.Behaviour] = [
         _patiently(lambda: StopConveyors("stop conveyors", ctx), ctx)]
     if ctx.scenario.vision.backlight:
         steps.append(_patiently(lambda: SetSignal("backlight off", ctx, "backlight", False),
                                 ctx))
+    if not robot:
+        return Sequence("clean-up (part server)", memory=True, children=steps)
     steps.append(_patiently(lambda: _settle_part(ctx), ctx))
     steps.append(_patiently(lambda: _robot_to_safe(ctx), ctx))
     return Sequence("clean-up", memory=True, children=steps)

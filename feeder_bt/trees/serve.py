@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import py_trees
 from py_trees.common import ParallelPolicy
-from py_trees.composites import Parallel, Sequence
+from py_trees.composites import Parallel
 
-from ..behaviours.common import Ctx, Wait
-from ..behaviours.locate import GrabGolden
-from ..behaviours.present import StopConveyors
+from ..behaviours.common import Ctx
 from ..behaviours.serve import Desk, ServeRobots
-from ..behaviours.setup import ClearWindow, SetSignal, SyncEncoders
 from . import adjust, locate, present
-from .build import SETTLE_S, Loop, _patiently
+from .build import Loop, build_cleanup, build_setup
 
 
 def build_serving(ctx: Ctx, desk: Desk) -> py_trees.behaviour.Behaviour:
@@ -32,21 +29,9 @@ def build_serving(ctx: Ctx, desk: Desk) -> py_trees.behaviour.Behaviour:
 
 def build_serving_setup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     """``build_setup`` without the robot steps."""
-    vision = ctx.scenario.vision
-    steps: list[py_trees.behaviour.Behaviour] = [StopConveyors("stop conveyors", ctx)]
-    if vision.backlight:
-        steps.append(SetSignal("backlight on", ctx, "backlight", True))
-    if vision.golden_image:
-        steps += [ClearWindow("clear the window", ctx), GrabGolden("golden image", ctx)]
-    steps += [Wait("belt at rest", ctx, SETTLE_S), SyncEncoders("sync encoders", ctx)]
-    return Sequence("set-up (part server)", memory=True, children=steps)
+    return build_setup(ctx, robot=False)
 
 
 def build_serving_cleanup(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     """``build_cleanup`` without the robot steps."""
-    steps: list[py_trees.behaviour.Behaviour] = [
-        _patiently(lambda: StopConveyors("stop conveyors", ctx), ctx)]
-    if ctx.scenario.vision.backlight:
-        steps.append(_patiently(lambda: SetSignal("backlight off", ctx, "backlight", False),
-                                ctx))
-    return Sequence("clean-up (part server)", memory=True, children=steps)
+    return build_cleanup(ctx, robot=False)
