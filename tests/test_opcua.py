@@ -316,3 +316,32 @@ def test_a_user_removed_while_logged_in_can_no_longer_command(live):
             finally:
                 users.add(*BOB)
     asyncio.run(go())
+
+
+def test_guesses_from_elsewhere_do_not_keep_the_rightful_user_out(tmp_path):
+    """Issue 19's rule on the OPC UA surface: lock-outs count per address and per
+    name-and-address, so a guesser elsewhere slows itself, not alice; every failure and
+    lock-out is recorded."""
+    from feeder_bt.plant.ua_security import PEER, UaUsers
+    users = UsersFile(tmp_path / "users.json")
+    users.add(*ALICE)
+    heard: list[tuple[str, str, dict]] = []
+    ua_users = UaUsers(users, lambda kind, user="-", **data: heard.append((kind, user, data)))
+
+    def login(ip: str, password: str):
+        token = PEER.set(ip)
+        try:
+            return ua_users.get_user(None, username=ALICE[0], password=password)
+        finally:
+            PEER.reset(token)
+
+    for _ in range(12):
+        assert login("10.9.8.7", "wrong guess") is None
+    assert login("10.9.8.7", ALICE[1]) is None           # the guesser is locked out ...
+    user = login("127.0.0.1", ALICE[1])                   # ... alice at her desk is not
+    assert user is not None and user.name == ALICE[0]
+    kinds = [k for k, _, _ in heard]
+    assert kinds.count("login_failed") >= 3 and "login_locked" in kinds
+    assert "login_refused" in kinds
+    assert all(d["surface"] == "opcua" for _, _, d in heard)
+    assert {d["ip"] for _, _, d in heard} == {"10.9.8.7"}

@@ -35,6 +35,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID
 
 from ..cell import Cell
 from ..errors import FeederError
+from ..ui.access import AccessRecorder
 from ..ui.bridge import Bridge, Outcome
 from ..ui.control import Control, Session
 from ..ui.operate import SPEED_KEYS, CellOps
@@ -140,7 +141,10 @@ class CellUaServer:
     async def _serve(self) -> None:
         self.loop = asyncio.get_running_loop()
         self.stopping, self.dirty = asyncio.Event(), asyncio.Event()
-        server = self.server = Server(user_manager=UaUsers(self.users))
+        # failed logins, lock-outs and refusals go to the event log as the dashboard's do
+        record = AccessRecorder(
+            lambda kind, user, data: self.bridge.submit("access", {"kind": kind, **data}, user))
+        server = self.server = Server(user_manager=UaUsers(self.users, record))
         await server.init()
         CLOSED[id(server.iserver)] = self._session_closed
         server.set_endpoint(self.url)

@@ -1,7 +1,9 @@
 """Who may talk to the cell's OPC UA server, and who is calling (plant/opcua.py).
 
-- ``UaUsers``: user name and password against the users file of ``feeder users``, with the
-  dashboard's failed-login limiter; anonymous and certificate-only identities are refused;
+- ``UaUsers``: user name and password against the users file of ``feeder users``, judged
+  by the dashboard's ``LoginGuard`` (per address and per name-and-address, a name under
+  attack slowed, never a lock-out of the rightful user's own address) and recorded like
+  the dashboard's logins; anonymous and certificate-only identities are refused;
 - the session hooks: asyncua hands a method callback only the object and the arguments,
   so the session making a call is put in a context variable around
   ``InternalSession.call`` (the callback runs in the same task), and
@@ -20,11 +22,13 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
 
-from ..ui.control import LoginLimiter
+from ..ui.guard import Attempt, LoginGuard
 from ..ui.users import UsersFile, default_path
 
 SESSION: contextvars.ContextVar[InternalSession | None] = contextvars.ContextVar(
     "feeder_ua_session", default=None)
+#: the client address of the session being activated (asyncua does not tell get_user)
+PEER: contextvars.ContextVar[str] = contextvars.ContextVar("feeder_ua_peer", default="?")
 CLOSED: dict[int, Any] = {}            # id(InternalServer) -> callback(session)
 
 
@@ -32,6 +36,15 @@ def install_session_hooks() -> None:
     if getattr(InternalSession, "_feeder_hooks", False):
         return
     call, close = InternalSession.call, InternalSession.close_session
+    activate = InternalSession.activate_session
+
+    def activate_with_peer(self, params, peer_certificate):
+        peer = self.name if isinstance(self.name, tuple) else (str(self.name),)
+        token = PEER.set(str(peer[0]))
+        try:
+            return activate(self, params, peer_certificate)
+        finally:
+            PEER.reset(token)
 
     async def call_with_session(self, params):
         token = SESSION.set(self)
@@ -48,31 +61,50 @@ def install_session_hooks() -> None:
 
     InternalSession.call = call_with_session
     InternalSession.close_session = close_and_tell
+    InternalSession.activate_session = activate_with_peer
     InternalSession._feeder_hooks = True
 
 
 class UaUsers(UserManager):
-    """User name and password against the users file; failures slow the next try down."""
+    """User name and password against the users file, judged by the dashboard's rules:
+    guesses from elsewhere never lock the rightful user's own address out. ``record(kind,
+    user, **data)`` receives the same access events as the dashboard's (failed logins,
+    lock-outs, refusals)."""
 
-    def __init__(self, users: UsersFile) -> None:
+    def __init__(self, users: UsersFile, record: Any = None) -> None:
         self.users = users
-        self.limiter = LoginLimiter()
+        self.record = record or (lambda kind, user="-", **data: None)
+        self.guard = LoginGuard(self._secret_of)
+
+    def _secret_of(self, name: str) -> str | None:
+        entry = self.users.load_or_empty().get(name)
+        return None if entry is None else str(entry.get("hash", ""))
 
     def get_user(self, iserver, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:
         if not username or password is None:
+            self.record("login_refused", "-", ip=PEER.get(), surface="opcua",
+                        locked_by="anonymous")
             return None                    # anonymous, or a certificate alone: refused
-        keys = (f"user:{username}",)
-        if self.limiter.locked_for(keys) > 0 or not self.limiter.begin(keys):
+        attempt = Attempt(username[:64], PEER.get())
+        shown = username if self.users.exists(username) else "(unknown name)"
+        verdict = self.guard.check(attempt)
+        if verdict.wait_s > 0 or not self.guard.begin(attempt, False):
+            self.record("login_refused", shown, ip=attempt.ip, surface="opcua",
+                        locked_by=verdict.why or "busy", wait_s=round(verdict.wait_s, 1))
             return None
         try:
             ok = self.users.verify(username, password)
         finally:
-            self.limiter.end(keys)
+            self.guard.end(attempt, False)
         if not ok:
-            self.limiter.failure(keys)
+            locks = self.guard.failure(attempt, False)
+            self.record("login_failed", shown, ip=attempt.ip, surface="opcua")
+            for why, secs in locks:
+                self.record("login_locked", shown, ip=attempt.ip, surface="opcua", by=why,
+                            seconds=round(secs, 1))
             return None
-        self.limiter.success(keys)
+        self.guard.success(attempt, False)
         return User(role=UserRole.User, name=username)
 
 
