@@ -197,9 +197,9 @@ def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monk
 
     plan = FaultPlan()
     plan.add("drop", "adept", "PICK", nth=2)
-    plan.add("drop_after", "adept", "PICK", nth=5)
-    plan.add("drop_during", "adept", "PLACE", nth=8, after_s=0.15)
-    plan.add("drop_after", "adept", "PLACE", nth=11)
+    plan.add("drop_after", "adept", "PICK", nth=4)
+    plan.add("drop_during", "adept", "PLACE", nth=6, after_s=0.15)
+    plan.add("drop_after", "adept", "PLACE", nth=8)
     monkeypatch.setattr(run_mod, "make_hal",
                         lambda kind, scenario, cell, seed: start_emulated(scenario, cell, seed,
                                                                           faults=plan))
