@@ -88,3 +88,50 @@ class EncoderSync:
         if counts_per_mm == 0:
             raise ValueError("counts_per_mm must be non-zero")
         return self.robot_diff(a_robot, b_robot) / counts_per_mm
+
+
+class DriftWatch:
+    """Re-checks, during a run, that the two controllers still count the same belt.
+
+    The sync is anchored once, at rest (``EncoderSync.reset``); a counter that drops or gains
+    pulses afterwards (noise on a long encoder cable, a loose shield) moves every pick by
+    the difference, and nothing else notices until grips miss. Each ``sample`` compares the
+    robot's count with the conveyor's translated through the sync. The two counts are
+    cached reads taken at different moments (``ages``), so the conveyor's count is carried
+    forward by the belt's measured speed to the moment of the robot's read; a read older
+    than ``max_age_s`` (a link down, a stalled poller) gives no sample. The verdict is the
+    median of the last ``window`` samples: one read caught mid-acceleration moves nothing.
+    """
+
+    def __init__(self, sync: EncoderSync, counts_per_mm: float, window: int = 9,
+                 max_age_s: float = 0.25) -> None:
+        if window < 1:
+            raise ValueError("window must be at least 1")
+        self.sync, self.counts_per_mm = sync, counts_per_mm
+        self.window, self.max_age_s = window, max_age_s
+        self.samples: list[float] = []
+        self._prev: tuple[float, int] | None = None      # (time of read, conveyor count)
+        self.max_abs_mm = 0.0
+        self.taken = 0
+
+    def sample(self, now: float, conveyor: int, conveyor_age: float | None, robot: int,
+               robot_age: float | None) -> float | None:
+        """Feed one pair of cached reads; the filtered drift in mm (robot ahead of the
+        conveyor is positive) once the window is full, else None."""
+        if (not self.sync.is_reset or conveyor_age is None or robot_age is None
+                or conveyor_age > self.max_age_s or robot_age > self.max_age_s):
+            return None
+        t_conv, t_robot = now - conveyor_age, now - robot_age
+        prev, self._prev = self._prev, (t_conv, conveyor)
+        if prev is None or t_conv - prev[0] <= 1e-6:
+            return None                                  # no speed yet to carry it forward
+        speed = diff(conveyor, prev[1], self.sync.conveyor_bits) / (t_conv - prev[0])
+        predicted = self.sync.to_robot(conveyor) + round(speed * (t_robot - t_conv))
+        self.samples.append(self.sync.robot_diff(robot, predicted) / self.counts_per_mm)
+        self.taken += 1
+        del self.samples[:-self.window]
+        if len(self.samples) < self.window:
+            return None
+        drift = sorted(self.samples)[len(self.samples) // 2]
+        self.max_abs_mm = max(self.max_abs_mm, abs(drift))
+        return drift

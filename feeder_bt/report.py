@@ -91,6 +91,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "faults": dict(s.faults),
         "recoveries": dict(s.recoveries),
         "retried": dict(s.retried),
+        "encoder_drift": dict(s.drift),
         "tick": ticker.stats.summary(),
         "vision": {"frames": s.counts["frames"], "p50_ms": _pct(s.vision_ms, 50),
                    "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell)},

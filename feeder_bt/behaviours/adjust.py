@@ -6,6 +6,7 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from ..adjusters import AdjustInputs
+from ..encoder import DriftWatch
 from .common import Ctx, Leaf, client
 
 SPEED_KEYS = ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct")
@@ -32,4 +33,53 @@ class Adjust(Leaf):
                            "incline_pct": new[1], "robot_speed_pct": new[2],
                            "retrieved": inp.retrieved})
         self.feedback_message = f"horizontal {new[0]:.0f} mm/s, queue {inp.queue_len}"
+        return Status.SUCCESS
+
+
+class CheckDrift(Leaf):
+    """Re-checks during the run that the Galil's and the robot's belt counts still agree
+    (issue 15, finding 11): commissioning checks it once, but a counter that loses pulses
+    later moves every pick by the difference. Reads only cached counts, so it never
+    blocks; samples every ``encoder.drift_check_s``. Past ``drift_warn_mm`` it records an
+    ``encoder_drift`` event; past ``drift_limit_mm`` it asks the cell to go to FAULT (the
+    operator's reset re-anchors the sync with the belt at rest)."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        enc = ctx.cell.encoder
+        self.spec = enc
+        self.watch = DriftWatch(ctx.encoder, enc.counts_per_mm)
+        self.bb = client(self, write=("/faults/escalate",), read=("/faults/escalate",))
+        self._next = 0.0
+        self._warned = False
+
+    def update(self) -> Status:
+        now = self.ctx.now()
+        if self.spec.drift_check_s <= 0 or now < self._next:
+            return Status.SUCCESS
+        self._next = now + self.spec.drift_check_s
+        conv = self.ctx.hal.conveyors["horizontal"]
+        pos = self.ctx.hal.robot_position
+        conv_age = getattr(conv, "position_age", lambda: None)()
+        robot_age = getattr(pos, "age", lambda: None)()
+        drift = self.watch.sample(now, conv.position(), conv_age, pos.belt_encoder(),
+                                  robot_age)
+        stats = self.ctx.stats
+        stats.drift = {"last_mm": drift, "max_abs_mm": round(self.watch.max_abs_mm, 2),
+                       "samples": self.watch.taken}
+        if drift is None:
+            return Status.SUCCESS
+        self.feedback_message = f"encoder drift {drift:+.2f} mm"
+        if abs(drift) > self.spec.drift_limit_mm:
+            if self.bb.get("/faults/escalate") is None:
+                stats.emit(now, "encoder_drift", mm=round(drift, 2), level="fault")
+                stats.faults["encoder_drift"] += 1
+                self.bb.set("/faults/escalate",
+                            f"belt encoders disagree by {drift:+.1f} mm (limit "
+                            f"{self.spec.drift_limit_mm:g} mm): the Galil's and the robot's "
+                            "counts of the belt drifted apart; check the encoder cable and "
+                            "its shield, then reset (the reset re-syncs at rest)")
+        elif abs(drift) > self.spec.drift_warn_mm and not self._warned:
+            self._warned = True
+            stats.emit(now, "encoder_drift", mm=round(drift, 2), level="warning")
         return Status.SUCCESS

@@ -53,6 +53,8 @@ class Stats:
         #: failures met while a branch retried through the same fault, by kind: each one
         #: an attempt of the same episode (``retry_failed`` events), not a new fault
         self.retried: Counter[str] = Counter()
+        #: the in-run encoder re-check (``CheckDrift``): last and largest drift, samples
+        self.drift: dict[str, Any] = {}
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n

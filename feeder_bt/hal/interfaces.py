@@ -102,6 +102,10 @@ class Conveyor(Protocol):
     def position(self) -> int:
         """Encoder count now (the controller's own representation)."""
 
+    def position_age(self) -> float | None:
+        """Seconds since ``position()``'s count was read from the controller; None while
+        no fresh read exists (a link down). Lets a check carry a cached count forward."""
+
     def travelled(self, distance_mm: float) -> Job:
         """A notification: ends when the belt has moved ``distance_mm`` from now."""
 
@@ -156,6 +160,9 @@ class RobotPosition(Protocol):
 
     def belt_encoder(self) -> int:
         """The robot controller's count of the belt encoder (24-bit signed)."""
+
+    def age(self) -> float | None:
+        """Seconds since ``belt_encoder()`` and ``pose()`` were read; None: no fresh read."""
 
     def pose(self) -> Pose: ...
 

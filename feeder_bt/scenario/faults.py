@@ -18,7 +18,8 @@ from typing import Any
 
 #: Every fault kind a plan may name.
 FAULT_KINDS: tuple[str, ...] = (
-    "servo_timeout", "comms_lost", "grab_failed", "conveyor_jam", "missed_grab", "estop")
+    "servo_timeout", "comms_lost", "grab_failed", "conveyor_jam", "missed_grab", "estop",
+    "encoder_slip")
 
 #: The one rate key each kind takes under ``rates`` (``estop`` is scripted only).
 RATE_UNITS: dict[str, str] = {
@@ -27,6 +28,7 @@ RATE_UNITS: dict[str, str] = {
     "grab_failed": "per_frame",
     "conveyor_jam": "per_hour",
     "missed_grab": "per_pick",
+    "encoder_slip": "per_hour",
 }
 RATE_KEYS: tuple[str, ...] = ("per_pick", "per_frame", "per_hour")
 
@@ -49,6 +51,7 @@ ERROR_KINDS: dict[str, str] = {
     "conveyor_jam": "conveyor",
     "missed_grab": "missed_grab",
     "estop": "estop",
+    "encoder_slip": "encoder_drift",
 }
 
 
@@ -61,6 +64,7 @@ class FaultRate:
     per_hour: float | None = None        # mean arrivals per hour of virtual time (Poisson)
     device: str = "alternate"            # comms_lost: galil | adept | camera | alternate
     outage_s: float = 2.0                # comms_lost: how long the link stays down
+    counts: int = 200                    # encoder_slip: counts the robot's counter gains
 
     def rate(self) -> tuple[str, float]:
         """(unit, value) of the one rate that is set (0 per hour if none)."""
@@ -81,6 +85,7 @@ class ScriptedFault:
     device: str = "alternate"            # comms_lost: as FaultRate.device
     outage_s: float = 2.0                # comms_lost: as FaultRate.outage_s
     phase: str | None = None             # comms_lost: at this step of the next pick (PHASES)
+    counts: int = 200                    # encoder_slip: as FaultRate.counts
 
 
 @dataclass
@@ -99,6 +104,7 @@ _ONLY_FOR: dict[str, tuple[str, ...]] = {
     "outage_s": ("comms_lost",),
     "phase": ("comms_lost",),
     "release_after_s": ("estop",),
+    "counts": ("encoder_slip",),
 }
 
 

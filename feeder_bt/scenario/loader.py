@@ -183,6 +183,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (EncoderSpec, "counts_per_mm"): POSITIVE,
     (EncoderSpec, "conveyor_bits"): Range(8, 64),
     (EncoderSpec, "robot_bits"): Range(8, 64),
+    (EncoderSpec, "drift_check_s"): Range(0, 60),
+    (EncoderSpec, "drift_warn_mm"): POSITIVE,
+    (EncoderSpec, "drift_limit_mm"): POSITIVE,
     (EncoderSpec, "robot_start"): NON_NEGATIVE,
     (HopperSpec, "release_per_mm"): NON_NEGATIVE,
     (HopperSpec, "nominal_fill"): Range(lo=1),
@@ -985,6 +988,9 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
     if e.robot_start >= 2 ** e.robot_bits:
         raise ctx.error("encoder.robot_start", f"must be < 2**robot_bits "
                                                f"({2 ** e.robot_bits}), got {e.robot_start}")
+    if e.drift_warn_mm > e.drift_limit_mm:
+        raise ctx.error("encoder.drift_warn_mm", f"must be <= drift_limit_mm "
+                                                 f"({_num(e.drift_limit_mm)}), got {_num(e.drift_warn_mm)}")
     _check_galil(cell, ctx)
 
 

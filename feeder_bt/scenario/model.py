@@ -249,6 +249,10 @@ class EncoderSpec:
     conveyor_bits: int = 32
     robot_bits: int = 24
     robot_start: int = 0
+    # the in-run re-check of the two counters (encoder.DriftWatch); 0 s turns it off
+    drift_check_s: float = 1.0          # seconds between samples
+    drift_warn_mm: float = 1.0          # an ``encoder_drift`` warning event
+    drift_limit_mm: float = 3.0         # the cell faults: picks land this far off
 
 
 @dataclass

@@ -1,11 +1,12 @@
-"""adjust: every period_s, the scenario's adjuster writes new speeds."""
+"""adjust: every period_s, the scenario's adjuster writes new speeds, and the two belt
+counters are re-checked against each other."""
 
 from __future__ import annotations
 
 import py_trees
 from py_trees.composites import Sequence
 
-from ..behaviours.adjust import Adjust
+from ..behaviours.adjust import Adjust, CheckDrift
 from ..behaviours.common import Ctx, Wait
 
 
@@ -13,4 +14,5 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     return Sequence("adjust", memory=True, children=[
         Wait("period", ctx, ctx.scenario.adjust.period_s),
         Adjust(f"adjust ({ctx.scenario.adjust.algorithm})", ctx),
+        CheckDrift("belt encoders agree?", ctx),
     ])

@@ -61,6 +61,9 @@ class MockConveyor(_Device):
     def position(self) -> int:
         return self.count
 
+    def position_age(self) -> float | None:
+        return 0.0
+
     def travelled(self, distance_mm: float) -> Job:
         return self._job("travelled", distance_mm)
 
@@ -144,6 +147,9 @@ class MockRobotPosition:
 
     def belt_encoder(self) -> int:
         return self.encoder
+
+    def age(self) -> float | None:
+        return 0.0
 
     def pose(self) -> Pose:
         return self.at

@@ -76,6 +76,9 @@ class SimConveyor:
     def position(self) -> int:
         return self.world.galil_count()
 
+    def position_age(self) -> float | None:
+        return 0.0                      # read now, from the world
+
     def fault(self) -> HalError | None:
         return None
 
@@ -222,6 +225,9 @@ class SimRobotPosition:
 
     def belt_encoder(self) -> int:
         return self.world.robot_count()
+
+    def age(self) -> float | None:
+        return 0.0
 
     def pose(self) -> Pose:
         return self.world.robot_pose

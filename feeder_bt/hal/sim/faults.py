@@ -157,7 +157,7 @@ class FaultInjector:
         gap = float(self._rngs[kind].exponential(3600.0 / rate.per_hour))
 
         def arrive(t: float) -> None:
-            self._fire(kind, t, rate.device, rate.outage_s)
+            self._fire(kind, t, rate.device, rate.outage_s, rate.counts)
             self._next_arrival(kind, rate, t)
 
         self._at(after + gap, arrive)
@@ -170,13 +170,17 @@ class FaultInjector:
         elif sf.kind == "estop":
             self._estop(t, sf.release_after_s)
         else:
-            self._fire(sf.kind, t, sf.device, sf.outage_s)
+            self._fire(sf.kind, t, sf.device, sf.outage_s, sf.counts)
 
-    def _fire(self, kind: str, t: float, device: str, outage_s: float) -> None:
+    def _fire(self, kind: str, t: float, device: str, outage_s: float,
+              counts: int = 0) -> None:
         if kind == "comms_lost":
             self._drop(device if device != "alternate" else next(self._alternate), t, outage_s)
         elif kind == "conveyor_jam":
             self._jam(t)
+        elif kind == "encoder_slip":
+            self.world.robot_slip += counts    # pulses the robot's counter gained (noise)
+            self._record(t, kind, "adept", f"robot belt counter +{counts} counts")
 
     def _draw(self, kind: str) -> bool:
         """Whether this pick or frame gets a fault of ``kind`` (a scripted one first)."""
@@ -486,6 +490,9 @@ class FaultyRobotPosition(_Wrapper):
             return self._inner.belt_encoder()
         return self._frozen[0]
 
+    def age(self) -> float | None:
+        return self._inner.age() if self._live() else None
+
     def pose(self) -> Pose:
         if self._live() or self._frozen is None:
             return self._inner.pose()
@@ -539,6 +546,9 @@ class FaultyConveyor(_Tracking):
         if not self._inj.is_down("galil") or self._frozen is None:
             return self._inner.position()
         return self._frozen[1]
+
+    def position_age(self) -> float | None:
+        return None if self._inj.is_down("galil") else self._inner.position_age()
 
     def fault(self) -> HalError | None:
         self._inj.world.now()

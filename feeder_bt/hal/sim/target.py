@@ -93,6 +93,9 @@ class RobotFrameView:
     def belt_encoder(self) -> int:
         return self.world.robot_count()
 
+    def age(self) -> float | None:
+        return 0.0
+
     def pose(self) -> Pose:
         p = self.world.robot_pose
         x, y = self.to_robot(np.array([p.x, p.y]))

@@ -90,6 +90,10 @@ class Notification:
 class World:
     """Ground truth of the simulated cell, advanced by ``step(now)``."""
 
+    #: pulses the robot controller's belt counter gained or lost (an ``encoder_slip``
+    #: fault): the robot tracks the belt by its own counter, so a pick lands this far off
+    robot_slip: int = 0
+
     def __init__(self, scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> None:
         self.scenario, self.cell, self.clock, self.seed = scenario, cell, clock, seed
         self.rng = np.random.default_rng(seed)
@@ -358,7 +362,8 @@ class World:
     def robot_count(self, t: float | None = None) -> int:
         t = self.now() if t is None else t
         enc = self.cell.encoder
-        return wrap(enc.robot_start + round(self.horizontal.pos(t) * self.cpm), enc.robot_bits)
+        return wrap(enc.robot_start + self.robot_slip + round(self.horizontal.pos(t) * self.cpm),
+                    enc.robot_bits)
 
     def visible_outlines(self, t: float, x_range: tuple[float, float]) -> list[np.ndarray]:
         """Outlines (belt frame, mm) of parts near the camera window at ``t``, for rendering."""
