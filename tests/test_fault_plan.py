@@ -186,9 +186,10 @@ def _load_or_config_error(path: Path) -> None:
     try:
         plan = load_fault_plan(path)
     except ConfigError as e:
-        msg = str(e)
-        assert msg and "\n" not in msg and "\r" not in msg, msg
-        assert msg.startswith(str(path)), msg
+        for problem in e.problems:            # every problem is one line naming the file
+            msg = str(problem)
+            assert msg and "\n" not in msg and "\r" not in msg, msg
+            assert msg.startswith(str(path)), msg
     else:
         assert isinstance(plan, FaultPlanSpec)
 

@@ -1,6 +1,9 @@
 """Checks that need more than one key at a time: inside a cell description (reach, target,
 encoder, Galil wiring), inside a scenario (pose probabilities, names of parts and poses,
 adjuster parameters) and of a scenario against the cell it runs on (speeds, camera window).
+
+Each problem is listed with ``ctx.add_problem`` and the checks go on, so every mistake of a
+file is reported at once; a check that still raises ``ctx.error(...)`` stops only itself.
 """
 
 from __future__ import annotations
@@ -18,21 +21,21 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
     """Cross-field checks inside a cell description."""
     r = cell.robot
     if r.inner_reach_mm >= r.reach_mm:
-        raise ctx.error("robot.inner_reach_mm", f"must be < robot.reach_mm "
+        ctx.add_problem("robot.inner_reach_mm", f"must be < robot.reach_mm "
                                                 f"({_num(r.reach_mm)}), got "
                                                 f"{_num(r.inner_reach_mm)}")
     t = cell.camera.target
     if t is not None:
         if min(t.board) < 2:
-            raise ctx.error("camera.target.board", f"needs at least 2 points per row and 2 "
+            ctx.add_problem("camera.target.board", f"needs at least 2 points per row and 2 "
                                                    f"rows, got {t.board[0]}x{t.board[1]}")
         if t.kind == "charuco" and t.marker_mm >= t.pitch_mm:
-            raise ctx.error("camera.target.marker_mm", f"must be < pitch_mm "
+            ctx.add_problem("camera.target.marker_mm", f"must be < pitch_mm "
                                                        f"({_num(t.pitch_mm)}), got "
                                                        f"{_num(t.marker_mm)}")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
-        raise ctx.error("encoder.robot_start", f"must be < 2**robot_bits "
+        ctx.add_problem("encoder.robot_start", f"must be < 2**robot_bits "
                                                f"({2 ** e.robot_bits}), got {e.robot_start}")
     _check_galil(cell, ctx)
 
@@ -50,14 +53,15 @@ def _check_galil(cell: CellSpec, ctx: _Ctx) -> None:
             continue
         top = GALIL_MAX_INPUT if sig.dir == "in" else GALIL_MAX_OUTPUT
         if not 1 <= sig.bit <= top:
-            raise ctx.error(f"io.{name}.bit", f"Galil {'inputs' if sig.dir == 'in' else 'outputs'}"
+            ctx.add_problem(f"io.{name}.bit", f"Galil {'inputs' if sig.dir == 'in' else 'outputs'}"
                                               f" are numbered 1-{top}, got {sig.bit}")
     axis = str(g.latch_axis).upper()
     if len(axis) != 1 or axis not in "ABCDEFGH":
-        raise ctx.error("galil.latch_axis", f"one axis letter A-H, got {g.latch_axis!r}")
+        ctx.add_problem("galil.latch_axis", f"one axis letter A-H, got {g.latch_axis!r}")
+        return
     fixed = "ABCDEFGH".index(axis) + 1
     if g.latch_input is not None and g.latch_input != fixed:
-        raise ctx.error("galil.latch_input", f"the DMC-21x3 latches axis {axis} from input "
+        ctx.add_problem("galil.latch_input", f"the DMC-21x3 latches axis {axis} from input "
                                              f"{fixed} only (fixed per axis); wire the camera "
                                              f"trigger there, got {g.latch_input}")
 
@@ -67,21 +71,22 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
     for pname, part in sc.parts.items():
         ppath = f"parts.{pname}.poses"
         if not part.poses:
-            raise ctx.error(ppath, "a part needs at least one stable pose")
+            ctx.add_problem(ppath, "a part needs at least one stable pose")
+            continue
         total = math.fsum(p.probability for p in part.poses.values())
         if abs(total - 1.0) > PROBABILITY_TOLERANCE:
             terms = " + ".join(f"{n} {_num(p.probability)}" for n, p in part.poses.items())
-            raise ctx.error(ppath, f"pose probabilities must sum to 1, got {total:.6g} "
+            ctx.add_problem(ppath, f"pose probabilities must sum to 1, got {total:.6g} "
                                    f"({terms})")
         if not any(p.pickable for p in part.poses.values()):
-            raise ctx.error(ppath, "a part needs at least one pickable pose")
+            ctx.add_problem(ppath, "a part needs at least one pickable pose")
     if not sc.parts:
-        raise ctx.error("parts", "a scenario needs at least one part")
+        ctx.add_problem("parts", "a scenario needs at least one part")
     th = sc.vision.threshold
     if th.block_px % 2 == 0:
-        raise ctx.error("vision.threshold.block_px", f"must be odd, got {th.block_px}")
+        ctx.add_problem("vision.threshold.block_px", f"must be odd, got {th.block_px}")
     if th.method == "adaptive" and th.c >= 0:
-        raise ctx.error("vision.threshold.c",
+        ctx.add_problem("vision.threshold.c",
                         f"must be < 0, got {_num(th.c)}: as in OpenCV the threshold is the "
                         f"local mean minus c, so c >= 0 makes flat belt foreground "
                         f"(c: -{_num(abs(th.c) or 5)} puts it {_num(abs(th.c) or 5)} grey "
@@ -89,23 +94,24 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
     for i, vc in enumerate(sc.vision.classes):
         cpath = f"vision.classes[{i}]"
         if vc.part not in sc.parts:
-            raise ctx.error(f"{cpath}.part", f"unknown part {vc.part!r}"
+            ctx.add_problem(f"{cpath}.part", f"unknown part {vc.part!r}"
                                              f"{_suggest(vc.part, sc.parts)}; parts: "
                                              f"{', '.join(sc.parts)}")
+            continue
         poses = sc.parts[vc.part].poses
         if vc.pose not in poses:
-            raise ctx.error(f"{cpath}.pose", f"part {vc.part!r} has no pose {vc.pose!r}"
+            ctx.add_problem(f"{cpath}.pose", f"part {vc.part!r} has no pose {vc.pose!r}"
                                              f"{_suggest(vc.pose, poses)}; poses: "
                                              f"{', '.join(poses)}")
     for name in sc.hopper:
         if name not in sc.parts:
-            raise ctx.error(f"hopper.parts.{name}", f"unknown part {name!r}"
+            ctx.add_problem(f"hopper.parts.{name}", f"unknown part {name!r}"
                                                     f"{_suggest(name, sc.parts)}; parts: "
                                                     f"{', '.join(sc.parts)}",
                             line=ctx.key_lines.get(f"hopper.parts.{name}"))
     for i, name in enumerate(sc.retrieve.sequence):
         if name not in sc.parts:
-            raise ctx.error(f"retrieve.sequence[{i}]", f"unknown part {name!r}"
+            ctx.add_problem(f"retrieve.sequence[{i}]", f"unknown part {name!r}"
                                                        f"{_suggest(name, sc.parts)}")
     ctx.adjust_params = _check_adjust(sc.adjust, ctx)
 
@@ -117,15 +123,20 @@ def _check_adjust(adj: AdjustParams, ctx: _Ctx) -> dict[str, float]:
     speeds left at a default are still checked against the cell.
     """
     allowed = ADJUST_PARAMS[adj.algorithm]
+    listed = len(ctx.problems)
     for key, v in adj.params.items():
         sub = f"adjust.params.{key}"
         if key not in allowed:
             if not allowed:
-                raise ctx.error(sub, f"algorithm {adj.algorithm!r} takes no params, got "
-                                     f"{key!r}", line=ctx.key_lines.get(sub))
-            ctx.unknown(key, "adjust.params", allowed, what=f"{adj.algorithm} parameter")
+                ctx.add_problem(sub, f"algorithm {adj.algorithm!r} takes no params, got "
+                                     f"{', '.join(map(repr, adj.params))}",
+                                line=ctx.key_lines.get(sub))
+                break
+            ctx.note(ctx.unknown_error(key, "adjust.params", allowed,
+                                       what=f"{adj.algorithm} parameter"))
+            continue
         if not allowed[key].contains(v):
-            raise ctx.error(sub, f"must be {allowed[key].describe()}, got {_num(v)}")
+            ctx.add_problem(sub, f"must be {allowed[key].describe()}, got {_num(v)}")
     cls = ADJUSTERS.get(adj.algorithm)
     effective = dict(cls.PARAMS) if cls is not None else {}
     effective.update(adj.params)
@@ -135,15 +146,15 @@ def _check_adjust(adj: AdjustParams, ctx: _Ctx) -> dict[str, float]:
         a, b = effective[small], effective[large]
         if a > b or (strict and a == b):
             given = "" if large in adj.params else " (its default)"
-            raise ctx.error(f"adjust.params.{small}",
+            ctx.add_problem(f"adjust.params.{small}",
                             f"must be {'<' if strict else '<='} {large} ({_num(b)}{given}), "
                             f"got {_num(a)}")
-    if cls is not None:
+    if cls is not None and len(ctx.problems) == listed:   # not the same mistake twice
         try:
             effective = dict(cls(adj.params).params)
         except AdjusterParamError as e:
             what = str(e).removeprefix(f"{e.key}: ")
-            raise ctx.error(f"adjust.params.{e.key}", what) from None
+            ctx.add_problem(f"adjust.params.{e.key}", what)
     return effective
 
 
@@ -156,18 +167,18 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
 
     def speed(path: str, v: float, note: str = "") -> None:
         if v > hmax:
-            raise ctx.error(path, f"{_num(v)} mm/s{note} is above the horizontal conveyor's "
+            ctx.add_problem(path, f"{_num(v)} mm/s{note} is above the horizontal conveyor's "
                                   f"max_mm_s {_num(hmax)} ({cfile})")
-        if v * pct / 100.0 > imax:
-            raise ctx.error(path, f"{_num(v)} mm/s{note} at incline_pct {_num(pct)} gives "
+        elif v * pct / 100.0 > imax:
+            ctx.add_problem(path, f"{_num(v)} mm/s{note} at incline_pct {_num(pct)} gives "
                                   f"{_num(v * pct / 100.0)} mm/s on the incline, above its "
                                   f"max_mm_s {_num(imax)} ({cfile})")
 
     h = sc.present.horizontal_mm_s
     if h > hmax:
         speed("present.horizontal_mm_s", h)
-    if h * pct / 100.0 > imax:
-        raise ctx.error("present.incline_pct", f"incline speed {_num(h)} * {_num(pct)}% = "
+    elif h * pct / 100.0 > imax:
+        ctx.add_problem("present.incline_pct", f"incline speed {_num(h)} * {_num(pct)}% = "
                                                f"{_num(h * pct / 100.0)} mm/s is above the "
                                                f"incline conveyor's max_mm_s {_num(imax)} "
                                                f"({cfile})")
@@ -176,13 +187,15 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
             speed(f"adjust.params.{key}", v,
                   "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
 
+    if not sc.parts:
+        return                                # listed by _check_scenario
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
                         key=lambda t: t[1])
     limit = window - size
     fs = sc.locate.frame_spacing_mm
     if fs >= limit:
-        raise ctx.error("locate.frame_spacing_mm",
+        ctx.add_problem("locate.frame_spacing_mm",
                         f"must be < {_num(limit)} (camera window {_num(window)} mm along the "
                         f"belt minus the largest part, {biggest!r} {size:.1f} mm), got "
                         f"{_num(fs)}")

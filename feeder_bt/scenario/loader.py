@@ -21,8 +21,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import yaml
-from yaml.nodes import MappingNode, ScalarNode
+from yaml.nodes import MappingNode
 
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.checks import (  # noqa: F401 - re-exported
@@ -90,7 +89,7 @@ __all__ = [
     "ADJUST_ALGORITHMS", "ADJUST_ORDER", "ADJUST_PARAMS", "CELL_HALS", "CONVEYOR_NAMES",
     "ENUMS", "FOREGROUNDS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
     "PROBABILITY_TOLERANCE", "RANGES", "RETRIEVE_POLICIES", "SHAPE_KINDS", "THRESHOLD_METHODS",
-    "Range", "check_files", "load_cell", "load_fault_plan", "load_scenario", "part_size_mm",
+    "LOADERS", "Range", "check_file", "check_files", "load_cell", "load_fault_plan", "load_scenario", "part_size_mm",
 ]
 
 
@@ -100,8 +99,10 @@ __all__ = [
 def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _Ctx]:
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
-    cell = ctx.dataclass(CellSpec, root, "", fill={"path": path})
-    _check_cell(cell, ctx)
+    cell = ctx.collect(ctx.dataclass, CellSpec, root, "", fill={"path": path})
+    if cell is not None:
+        ctx.collect(_check_cell, cell, ctx)
+    ctx.raise_problems()
     if calibration_files:
         from ..calibration.files import apply_calibration_file  # local: avoids a cycle
         cell = apply_calibration_file(cell, line=ctx.line("camera.calibration_file"))
@@ -126,6 +127,25 @@ def load_scenario(path: str | Path, cell: str | Path | None = None
     path = Path(path)
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
+    cell_path = ctx.collect(_cell_path, path, root, ctx, cell)
+    scenario = ctx.collect(ctx.dataclass, Scenario, root, "",
+                           fill={"path": path, "cell_path": cell_path or Path()})
+    if scenario is not None:
+        ctx.collect(_check_scenario, scenario, ctx)
+    cell_spec, cell_problems = None, []
+    if cell_path is not None:
+        try:
+            cell_spec, _ = _load_cell(cell_path)
+        except ConfigError as e:      # listed after the scenario's own
+            cell_problems = e.problems
+    if scenario is not None and cell_spec is not None:
+        ctx.collect(_check_against_cell, scenario, ctx, cell_spec)
+    ctx.raise_problems(more=cell_problems)
+    return scenario, cell_spec
+
+
+def _cell_path(path: Path, root: MappingNode, ctx: _Ctx, cell: str | Path | None) -> Path:
+    """The cell file a scenario runs on: ``cell`` when given, else its ``cell:`` key."""
     cell_node = next((v for k, _, v in ctx.entries(root, "") if k == "cell"), None)
     if cell is not None:
         cell_path = Path(cell)
@@ -142,11 +162,7 @@ def load_scenario(path: str | Path, cell: str | Path | None = None
         if not cell_path.is_file():
             what = "is not a file" if cell_path.exists() else "not found"
             raise ctx.error("cell", f"cell file {rel!r} {what} (looked for {cell_path})")
-    scenario = ctx.dataclass(Scenario, root, "", fill={"path": path, "cell_path": cell_path})
-    _check_scenario(scenario, ctx)
-    cell_spec, _ = _load_cell(cell_path)
-    _check_against_cell(scenario, ctx, cell_spec)
-    return scenario, cell_spec
+    return cell_path
 
 
 def load_fault_plan(path: str | Path) -> FaultPlanSpec:
@@ -154,36 +170,32 @@ def load_fault_plan(path: str | Path) -> FaultPlanSpec:
     path = Path(path)
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
-    plan = ctx.dataclass(FaultPlanSpec, root, "", fill={"path": path})
-    check_fault_plan(plan, ctx)
+    plan = ctx.collect(ctx.dataclass, FaultPlanSpec, root, "", fill={"path": path})
+    if plan is not None:
+        ctx.collect(check_fault_plan, plan, ctx)
+    ctx.raise_problems()
     return plan
 
 
-def check_files(paths: list[str]) -> list[str]:
-    """Validate scenario and cell files for ``feeder check``: one error line per bad file.
-
-    A file with a ``parts`` or ``cell`` key is a scenario (and its cell is checked with it);
-    anything else is read as a cell description.
-    """
-    errors = []
-    for p in paths:
-        try:
-            if _looks_like_scenario(Path(p)):
-                load_scenario(p)
-            else:
-                load_cell(p)
-        except ConfigError as e:
-            errors.append(str(e))
-    return errors
+LOADERS = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
 
 
-def _looks_like_scenario(path: Path) -> bool:
+def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:
+    """Validate one file of any kind, told by its keys (``schema.file_kind``): (the kind it
+    was read as, that kind when its keys told it or None when it was a guess, every
+    problem). A scenario is checked with its cell."""
+    from feeder_bt.scenario.schema import file_kind  # local: the schema reads this module
+
+    told = file_kind(path)
+    kind = told or "scenario"
     try:
-        root = yaml.compose(path.read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
-    except Exception:  # noqa: BLE001 - the real load reports it properly
-        return False
-    if not isinstance(root, MappingNode):
-        return False
-    keys = {k.value for k, _ in root.value if isinstance(k, ScalarNode)}
-    return bool(keys & {"parts", "cell"})
+        LOADERS[kind](path)
+    except ConfigError as e:
+        return kind, told, e.problems
+    return kind, told, []
+
+
+def check_files(paths: list[str]) -> list[str]:
+    """Validate files of any kind: one line per problem, every problem of every file."""
+    return [str(e) for p in paths for e in check_file(p)[2]]
 

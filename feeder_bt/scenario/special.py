@@ -64,13 +64,18 @@ def _build_shape(ctx: _Ctx, node: Node, path: str) -> Shape:
     hints = _hints(Shape)
     values: dict[str, Any] = {}
     known = SHAPE_KINDS[kind] + SHAPE_OPTIONAL.get(kind, ())
-    for key, _, vnode in ctx.entries(inner, kpath):
-        if key not in known:
-            ctx.unknown(key, kpath, known)
-        values[key] = ctx.build(hints[key], vnode, _join(kpath, key))
+    entries = ctx.entries(inner, kpath)
+    g, given = ctx.gather(inner), set()
+    for key, _, vnode in entries:
+        given.add(key)
+        with g.step(breaks=key in known):
+            if key not in known:
+                ctx.unknown(key, kpath, known)
+            values[key] = ctx.build(hints[key], vnode, _join(kpath, key))
     for key in SHAPE_KINDS[kind]:
-        if key not in values:
-            raise ctx.missing(kpath, key, inner)
+        if key not in given:
+            g.fail(ctx.missing(kpath, key, inner))
+    g.done()
     if kind == "disc" and values["diameter_mm"] <= 0:
         raise ctx.error(_join(kpath, "diameter_mm"),
                         f"must be > 0, got {_num(values['diameter_mm'])}")
@@ -151,23 +156,31 @@ def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
     plain = {f.name: f for f in dataclasses.fields(VisionClass) if f.name != "ranges"}
     kwargs: dict[str, Any] = {}
     ranges: dict[str, tuple[float, float]] = {}
-    for key, _, vnode in ctx.entries(node, path):
+    given, stray = set(), None
+    entries = ctx.entries(node, path)
+    g = ctx.gather(node)
+    for key, _, vnode in entries:
         sub = _join(path, key)
-        if key in plain:
-            kwargs[key] = ctx.build(hints[key], vnode, sub)
-        elif key in FEATURES:
-            lo, hi = ctx.build(tuple[float, float], vnode, sub)
-            if lo > hi:
-                raise ctx.error(sub, f"range [lo, hi] has lo > hi: [{_num(lo)}, {_num(hi)}]")
-            ranges[key] = (lo, hi)
-        else:
-            ctx.unknown(key, path, list(plain) + list(FEATURES), what="class key or feature")
+        given.add(key)
+        if key not in plain and key not in FEATURES:   # listed; the class may still be whole
+            stray = ctx.note(ctx.unknown_error(key, path, list(plain) + list(FEATURES),
+                                               what="class key or feature"))
+            continue
+        with g.step():
+            if key in plain:
+                kwargs[key] = ctx.build(hints[key], vnode, sub)
+            else:
+                lo, hi = ctx.build(tuple[float, float], vnode, sub)
+                if lo > hi:
+                    raise ctx.error(sub, f"range [lo, hi] has lo > hi: [{_num(lo)}, {_num(hi)}]")
+                ranges[key] = (lo, hi)
     for fname, f in plain.items():
-        if fname not in kwargs and _required(f):
-            raise ctx.missing(path, fname, node)
-    if not ranges:
-        raise ctx.error(path, f"a class needs at least one feature range "
-                              f"({', '.join(FEATURES)})")
+        if fname not in given and _required(f):
+            g.fail(ctx.missing(path, fname, node))
+    if not given & set(FEATURES):             # a misspelt feature is that mistake already
+        g.fail(stray or ctx.error(path, f"a class needs at least one feature range "
+                                        f"({', '.join(FEATURES)})"))
+    g.done()
     return VisionClass(ranges=ranges, **kwargs)
 
 
@@ -182,9 +195,11 @@ def _build_hopper(ctx: _Ctx, node: Node, path: str) -> dict[str, Any]:
         raise ctx.missing(path, "parts", node)
     ppath = _join(path, "parts")
     counts = ctx.build(dict[str, int], parts_node, ppath)
+    g = ctx.gather()
     for name, n in counts.items():
         if n < 0:
-            raise ctx.error(_join(ppath, name), f"count must be >= 0, got {n}")
+            g.fail(ctx.error(_join(ppath, name), f"count must be >= 0, got {n}"))
+    g.done()
     if not any(n > 0 for n in counts.values()):
         raise ctx.error(ppath, "the hopper needs at least one part with a count > 0")
     return {"hopper": counts}
@@ -194,19 +209,23 @@ def _build_conveyors(ctx: _Ctx, node: Node, path: str) -> dict[str, Any]:
     """Cell ``conveyors``: ``horizontal`` and ``incline`` belts, ``return: {transit_s}``."""
     conveyors = CellSpec(name="", path=Path()).conveyors   # the model's defaults
     out: dict[str, Any] = {}
-    for key, _, vnode in ctx.entries(node, path):
+    entries = ctx.entries(node, path)
+    g = ctx.gather(node)
+    for key, _, vnode in entries:
         sub = _join(path, key)
-        if key == "return":
-            for rkey, _, rnode in ctx.entries(vnode, sub):
-                if rkey != "transit_s":
-                    ctx.unknown(rkey, sub, ["transit_s"])
-                v = ctx.number(rnode, _join(sub, rkey))
-                ctx.check_field(CellSpec, "return_transit_s", v, _join(sub, rkey))
-                out["return_transit_s"] = v
-        elif key in CONVEYOR_NAMES:
-            conveyors[key] = ctx.dataclass(ConveyorSpec, vnode, sub)
-        else:
-            ctx.unknown(key, path, (*CONVEYOR_NAMES, "return"), what="conveyor")
+        with g.step(breaks=key in (*CONVEYOR_NAMES, "return")):
+            if key == "return":
+                for rkey, _, rnode in ctx.entries(vnode, sub):
+                    if rkey != "transit_s":
+                        ctx.unknown(rkey, sub, ["transit_s"])
+                    v = ctx.number(rnode, _join(sub, rkey))
+                    ctx.check_field(CellSpec, "return_transit_s", v, _join(sub, rkey))
+                    out["return_transit_s"] = v
+            elif key in CONVEYOR_NAMES:
+                conveyors[key] = ctx.dataclass(ConveyorSpec, vnode, sub)
+            else:
+                ctx.unknown(key, path, (*CONVEYOR_NAMES, "return"), what="conveyor")
+    g.done()
     out["conveyors"] = conveyors
     return out
 

@@ -15,9 +15,10 @@ import inspect
 import math
 import types
 import typing
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
@@ -101,11 +102,44 @@ def _optional_of(tp: Any) -> tuple[bool, Any]:
         raise TypeError(f"unsupported union in model: {tp}")
     return False, tp
 
+
 # ============================================================================ the walker
 
 
+class _Gather:
+    """Runs independent steps (the keys of a mapping, the items of a list): each failure is
+    noted in the file's problems and the next step still runs; ``done`` then raises the
+    first failure, so the enclosing value is known to be broken."""
+
+    def __init__(self, ctx: _Ctx, node: Node | None = None) -> None:
+        self.ctx = ctx
+        # a duplicate or unreadable key of the mapping walked: an entry was left out, so
+        # what is built from the rest is not what the file says
+        self.failed: ConfigError | None = ctx.bad_keys.get(id(node))
+
+    @contextmanager
+    def step(self, breaks: bool = True) -> Iterator[None]:
+        """``breaks=False``: a failure is listed but leaves the enclosing value whole."""
+        try:
+            yield
+        except ConfigError as e:
+            self.ctx.note(e)
+            if breaks and self.failed is None:
+                self.failed = e
+
+    def fail(self, e: ConfigError) -> None:
+        """A failure found without raising (a missing key)."""
+        self.ctx.note(e)
+        self.failed = self.failed or e
+
+    def done(self) -> None:
+        if self.failed is not None:
+            raise self.failed
+
+
 class _Ctx:
-    """One file being read: its name for messages, and the line of every dotted key."""
+    """One file being read: its name for messages, the line of every dotted key, and every
+    problem found so far (``problems``; ``raise_problems`` reports them all at once)."""
 
     def __init__(self, file: str) -> None:
         self.file = file
@@ -115,6 +149,12 @@ class _Ctx:
         self.adjust_params: dict[str, float] = {}   # effective adjuster parameters
         self._entries: dict[int, list[tuple[str, Node, Node]]] = {}
         self._constructor = yaml.constructor.SafeConstructor()
+        self.problems: list[ConfigError] = []   # every problem found, each noted once
+        self._noted: set[int] = set()
+        # dotted key -> the unknown-key error that suggested it ("did you mean"): that
+        # key's "missing" is the same mistake, not a second one
+        self.suggested: dict[str, ConfigError] = {}
+        self.bad_keys: dict[int, ConfigError] = {}   # mapping node -> its first bad key
 
     # ---------------------------------------------------------------- errors and lines
 
@@ -122,6 +162,42 @@ class _Ctx:
         if line is None:
             line = self.line(path)
         return ConfigError(_one_line(what), file=self.file, line=line, key=path or None)
+
+    def note(self, e: ConfigError) -> ConfigError:
+        """List a problem (once: an error re-raised up through the walk is the same one)."""
+        if id(e) not in self._noted:
+            self._noted.add(id(e))
+            self.problems.append(e)
+        return e
+
+    def add_problem(self, path: str, what: str, line: int | None = None) -> None:
+        """List a problem and go on checking (``raise self.error(...)`` stops instead)."""
+        self.note(self.error(path, what, line=line))
+
+    def gather(self, node: Node | None = None) -> _Gather:
+        """Steps over the entries of ``node`` (a mapping whose bad keys break it too)."""
+        return _Gather(self, node)
+
+    def collect(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """``fn(*args)``, or None when it raised a ConfigError (then listed)."""
+        try:
+            return fn(*args, **kwargs)
+        except ConfigError as e:
+            self.note(e)
+            return None
+
+    def raise_problems(self, more: Iterable[ConfigError] = ()) -> None:
+        """Raise every problem of this file (in file order), then ``more`` (another file's,
+        such as a scenario's cell), as one error; nothing when there is none."""
+        seen: set[str] = set()
+        mine = []
+        for e in sorted(self.problems, key=lambda e: e.line or 0):
+            if str(e) not in seen:            # the same words on the same line: once
+                seen.add(str(e))
+                mine.append(e)
+        problems = mine + list(more)
+        if problems:
+            raise ConfigError.of(problems)
 
     def line(self, path: str) -> int | None:
         """The line of ``path``, or of its nearest ancestor that was written in the file."""
@@ -196,12 +272,17 @@ class _Ctx:
             if knode.tag == "tag:yaml.org,2002:merge":
                 has_merge = True
                 continue
-            key = self._key(knode, path)
+            key = self.collect(self._key, knode, path)
+            if key is None:                   # listed; the entry is left out
+                self.bad_keys.setdefault(id(node), self.problems[-1])
+                continue
             sub = _join(path, key)
             if key in seen:
-                raise self.error(sub, f"duplicate key {key!r} (first at line "
+                self.add_problem(sub, f"duplicate key {key!r} (first at line "
                                       f"{seen[key].start_mark.line + 1})",
                                  line=knode.start_mark.line + 1)
+                self.bad_keys.setdefault(id(node), self.problems[-1])
+                continue
             seen[key] = knode
             explicit.append((key, knode, vnode))
         result = explicit
@@ -213,8 +294,9 @@ class _Ctx:
                                  line=node.start_mark.line + 1) from None
             merged: dict[str, tuple[str, Node, Node]] = {}
             for knode, vnode in node.value:   # merged keys first, explicit keys win
-                key = self._key(knode, path)
-                merged[key] = (key, knode, vnode)
+                key = self.collect(self._key, knode, path)
+                if key is not None:
+                    merged[key] = (key, knode, vnode)
             result = list(merged.values())
         self._entries[id(node)] = result
         for key, knode, vnode in result:
@@ -242,13 +324,24 @@ class _Ctx:
             self._record(f"{path}[{i}]", item)
         return list(node.value)
 
-    def unknown(self, key: str, path: str, known: Iterable[str], what: str = "key") -> None:
+    def unknown(self, key: str, path: str, known: Iterable[str], what: str = "key") -> NoReturn:
+        raise self.unknown_error(key, path, known, what)
+
+    def unknown_error(self, key: str, path: str, known: Iterable[str], what: str = "key"
+                      ) -> ConfigError:
         known = sorted(known)
+        close = difflib.get_close_matches(key, known, n=1, cutoff=0.6)
         hint = _suggest(key, known) or (f" (known: {', '.join(known)})" if known else "")
-        raise self.error(_join(path, key), f"unknown {what} {key!r}{hint}",
-                         line=self.key_lines.get(_join(path, key)))
+        e = self.error(_join(path, key), f"unknown {what} {key!r}{hint}",
+                       line=self.key_lines.get(_join(path, key)))
+        if close:
+            self.suggested.setdefault(_join(path, close[0]), e)
+        return e
 
     def missing(self, path: str, key: str, node: Node) -> ConfigError:
+        """A required key is missing; when a misspelling of it was found, that is the error."""
+        if _join(path, key) in self.suggested:
+            return self.suggested[_join(path, key)]
         line = self.key_lines.get(path, node.start_mark.line + 1)
         where = f" in {path}" if path else ""
         return self.error(_join(path, key), f"missing required key {key!r}{where}", line=line)
@@ -287,20 +380,31 @@ class _Ctx:
             if len(items) != len(args):
                 raise self.error(path, f"expected a list of {len(args)} values, "
                                        f"got {len(items)}")
-            return tuple(self.build(a, n, f"{path}[{i}]")
-                         for i, (a, n) in enumerate(zip(args, items, strict=True)))
+            g, values = self.gather(), []
+            for i, (a, n) in enumerate(zip(args, items, strict=True)):
+                with g.step():
+                    values.append(self.build(a, n, f"{path}[{i}]"))
+            g.done()
+            return tuple(values)
         if origin is list:
-            return [self.build(args[0], n, f"{path}[{i}]")
-                    for i, n in enumerate(self.items(node, path))]
+            g, values = self.gather(), []
+            for i, n in enumerate(self.items(node, path)):
+                with g.step():
+                    values.append(self.build(args[0], n, f"{path}[{i}]"))
+            g.done()
+            return values
         if origin is dict:
             vt = args[1]
             named = dataclasses.is_dataclass(vt) and "name" in {
                 f.name for f in dataclasses.fields(vt)}
-            out = {}
-            for key, _, vnode in self.entries(node, path):
+            entries = self.entries(node, path)
+            g, out = self.gather(node), {}
+            for key, _, vnode in entries:
                 sub = _join(path, key)
-                out[key] = (self.dataclass(vt, vnode, sub, name=key) if named
-                            else self.build(vt, vnode, sub))
+                with g.step():
+                    out[key] = (self.dataclass(vt, vnode, sub, name=key) if named
+                                else self.build(vt, vnode, sub))
+            g.done()
             return out
         raise TypeError(f"loader cannot map model type {tp!r} at {path}")
 
@@ -321,23 +425,28 @@ class _Ctx:
         if name is not None and "name" in hints:
             kwargs["name"] = name
         given = set()
-        for key, _, vnode in self.entries(node, path):
+        entries = self.entries(node, path)
+        g = self.gather(node)                 # every key is checked, not only the first
+        for key, _, vnode in entries:
             sub = _join(path, key)
             if key in extra:
                 continue
-            if key not in fields:
-                self.unknown(key, path, list(fields) + list(extra))
-            given.add(key)
-            builder = _FIELD_BUILDERS.get((cls, key))
-            if builder is not None:
-                kwargs.update(builder(self, vnode, sub))
+            if key not in fields:             # listed; the other keys still make the value
+                self.note(self.unknown_error(key, path, list(fields) + list(extra)))
                 continue
-            value = self.build(hints[key], vnode, sub)
-            self.check_field(cls, key, value, sub)
-            kwargs[key] = value
+            given.add(key)
+            with g.step():
+                builder = _FIELD_BUILDERS.get((cls, key))
+                if builder is not None:
+                    kwargs.update(builder(self, vnode, sub))
+                    continue
+                value = self.build(hints[key], vnode, sub)
+                self.check_field(cls, key, value, sub)
+                kwargs[key] = value
         for fname, f in fields.items():
             if fname not in given and _required(f):
-                raise self.missing(path, fname, node)
+                g.fail(self.missing(path, fname, node))
+        g.done()
         return cls(**kwargs)
 
     def check_field(self, cls: type, fname: str, value: Any, path: str) -> None:
