@@ -109,7 +109,7 @@ def build_rates(ctx: Any, node: Any, path: str) -> dict[str, Any]:
     entries = ctx.entries(node, path)
     g = ctx.gather(node)                  # every kind is checked, not only the first
     for kind, _, vnode in entries:
-        with g.step():
+        with g.step(breaks=kind in RATE_UNITS):   # a wrong kind is left out, listed
             out[kind] = _build_rate(ctx, kind, vnode, f"{path}.{kind}", path)
     g.done()
     return {"rates": out}
