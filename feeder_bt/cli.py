@@ -242,7 +242,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         bad += 1
         found += len(problems)
         first, *rest = ConfigError.of(problems).lines()
-        print(f"{first} (read as {describe(kind)})" if told else first, file=sys.stderr)
+        how = "" if told else ": no key tells its kind"
+        print(f"{first} (read as {describe(kind)}{how})", file=sys.stderr)
         for line in rest:
             print(line, file=sys.stderr)
     if bad:

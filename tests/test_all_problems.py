@@ -177,3 +177,11 @@ def test_run_prints_every_problem_one_line_each_and_exits_2(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 4 and all(s.startswith(f"feeder: {bad}:") for s in err)
     assert "Traceback" not in "".join(err)
+
+
+def test_check_says_what_a_file_of_no_kind_was_read_as(tmp_path, capsys):
+    odd = tmp_path / "odd.yaml"
+    odd.write_text("foo: 1\n")
+    assert main(["check", str(odd)]) == 2
+    first = capsys.readouterr().err.splitlines()[0]
+    assert first.endswith("(read as a scenario: no key tells its kind)"), first

@@ -8,6 +8,7 @@ import copy
 import json
 from pathlib import Path
 
+import jsonschema
 import pytest
 import yaml
 
@@ -15,8 +16,6 @@ from feeder_bt.cli import main
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.loader import load_cell, load_fault_plan, load_scenario
 from feeder_bt.scenario.schema import KINDS, file_kind, schema
-
-jsonschema = pytest.importorskip("jsonschema")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = {
