@@ -1,11 +1,15 @@
 """Load and validate scenario, cell and fault-plan YAML files into the dataclasses of
 ``model.py`` and ``faults.py``: the public entry points.
 
-Every problem is reported as one line ``FILE:LINE: dotted.key: what is wrong`` (a
-``ConfigError``) instead of a traceback far from the cause. The work is split by concept:
+Every problem is reported as one line ``FILE:LINE: dotted.key: what is wrong`` instead of
+a traceback far from the cause, and every problem of a file is listed, not only the first:
+one ``ConfigError`` (``ConfigProblems`` when there are several) in file order. A problem
+that makes the rest meaningless (a file that is not YAML) stops early. The work is split by
+concept:
 
+- this module: reading a file (``_compose``) and the entry points ``load_*``, ``check_*``;
 - ``walker.py``: the generic node walker (``_Ctx``) that follows the dataclass fields and
-  type hints of the model, and reading a file (``_compose``);
+  type hints of the model, and gathers the problems of each key and item;
 - ``special.py``: where the YAML is not a mirror of the model (``Shape``, ``VisionClass``,
   ``Scenario.hopper``, ``CellSpec.conveyors``);
 - ``tables.py``: the tables of allowed values (enumerations, numeric ranges, adjuster
@@ -21,7 +25,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from yaml.nodes import MappingNode
+import yaml
+from yaml.nodes import MappingNode, ScalarNode
 
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.checks import (  # noqa: F401 - re-exported
@@ -71,7 +76,6 @@ from feeder_bt.scenario.tables import (  # noqa: F401 - re-exported
 from feeder_bt.scenario.walker import (  # noqa: F401 - re-exported
     _FIELD_BUILDERS,
     _SPECIAL_TYPES,
-    _compose,
     _Ctx,
     _describe,
     _hints,
@@ -94,6 +98,46 @@ __all__ = [
 
 
 # ============================================================================ files
+
+
+def _compose(path: Path, ctx: _Ctx) -> MappingNode:
+    """Read and parse one file into its root mapping node; every failure is a ConfigError."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError("file not found", file=ctx.file) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, not a YAML file", file=ctx.file) from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"not UTF-8 text ({e.reason} at byte {e.start})",
+                          file=ctx.file) from None
+    except OSError as e:
+        raise ConfigError(f"cannot read: {e.strerror or e}", file=ctx.file) from None
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        what = e.problem or e.context or "syntax error"
+        if e.context and e.problem and e.context_mark is not None:
+            what += f" ({e.context} at line {e.context_mark.line + 1})"
+        raise ConfigError(_one_line(f"YAML syntax error: {what}"), file=ctx.file,
+                          line=mark.line + 1 if mark else None) from None
+    except yaml.reader.ReaderError as e:
+        line = text[: e.position].count("\n") + 1 if isinstance(e.position, int) else None
+        raise ConfigError(f"unacceptable character #x{e.character:04x} in the file",
+                          file=ctx.file, line=line) from None
+    except yaml.YAMLError as e:
+        raise ConfigError(_one_line(f"YAML error: {e}"), file=ctx.file) from None
+    except RecursionError:
+        raise ConfigError("YAML nested too deeply", file=ctx.file) from None
+    if root is None:
+        raise ConfigError("file is empty; expected a mapping of keys", file=ctx.file, line=1)
+    if not isinstance(root, MappingNode):
+        v = root if not isinstance(root, ScalarNode) else ctx.scalar(root, "")
+        raise ConfigError(f"expected a mapping of keys at the top, got {_describe(v)}",
+                          file=ctx.file, line=root.start_mark.line + 1)
+    ctx.lines[""] = root.start_mark.line + 1
+    return root
 
 
 def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _Ctx]:

@@ -5,6 +5,11 @@ The mapping from YAML to the model follows the dataclass fields and type hints o
 ``model.py``, so a new field with a default there is a new optional YAML key here. The few
 places where the YAML is not a mirror of the model register their builders in
 ``_SPECIAL_TYPES`` and ``_FIELD_BUILDERS`` (``special.py``).
+
+Every key of a mapping and every item of a list is walked even after one fails: each
+problem is noted in ``_Ctx.problems`` and the value that holds a broken key is itself
+broken (it raises the first of its problems), while an unknown key is listed and leaves
+the rest whole. The loader raises them all at once (``_Ctx.raise_problems``).
 """
 
 from __future__ import annotations
@@ -486,46 +491,3 @@ class _Ctx:
 # registers them): by model type, and by (dataclass, field) for a field read specially.
 _SPECIAL_TYPES: dict[type, Callable[[_Ctx, Node, str], Any]] = {}
 _FIELD_BUILDERS: dict[tuple[type, str], Callable[[_Ctx, Node, str], dict[str, Any]]] = {}
-
-# ============================================================================ files
-
-
-def _compose(path: Path, ctx: _Ctx) -> MappingNode:
-    """Read and parse one file into its root mapping node; every failure is a ConfigError."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("file not found", file=ctx.file) from None
-    except IsADirectoryError:
-        raise ConfigError("is a directory, not a YAML file", file=ctx.file) from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"not UTF-8 text ({e.reason} at byte {e.start})",
-                          file=ctx.file) from None
-    except OSError as e:
-        raise ConfigError(f"cannot read: {e.strerror or e}", file=ctx.file) from None
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.MarkedYAMLError as e:
-        mark = e.problem_mark or e.context_mark
-        what = e.problem or e.context or "syntax error"
-        if e.context and e.problem and e.context_mark is not None:
-            what += f" ({e.context} at line {e.context_mark.line + 1})"
-        raise ConfigError(_one_line(f"YAML syntax error: {what}"), file=ctx.file,
-                          line=mark.line + 1 if mark else None) from None
-    except yaml.reader.ReaderError as e:
-        line = text[: e.position].count("\n") + 1 if isinstance(e.position, int) else None
-        raise ConfigError(f"unacceptable character #x{e.character:04x} in the file",
-                          file=ctx.file, line=line) from None
-    except yaml.YAMLError as e:
-        raise ConfigError(_one_line(f"YAML error: {e}"), file=ctx.file) from None
-    except RecursionError:
-        raise ConfigError("YAML nested too deeply", file=ctx.file) from None
-    if root is None:
-        raise ConfigError("file is empty; expected a mapping of keys", file=ctx.file, line=1)
-    if not isinstance(root, MappingNode):
-        v = root if not isinstance(root, ScalarNode) else ctx.scalar(root, "")
-        raise ConfigError(f"expected a mapping of keys at the top, got {_describe(v)}",
-                          file=ctx.file, line=root.start_mark.line + 1)
-    ctx.lines[""] = root.start_mark.line + 1
-    return root
-
