@@ -241,10 +241,16 @@ def cmd_check(args: argparse.Namespace) -> int:
             continue
         bad += 1
         found += len(problems)
-        first, *rest = ConfigError.of(problems).lines()
+        lines = ConfigError.of(problems).lines()
+        # the kind is said on the file's own first line (a scenario's cell names its own)
+        own = next((i for i, e in enumerate(problems[:len(lines)])
+                    if e.file and Path(e.file) == Path(path)), None)
         how = "" if told else ": no key tells its kind"
-        print(f"{first} (read as {describe(kind)}{how})", file=sys.stderr)
-        for line in rest:
+        if own is None:
+            lines[0] += f" (in the cell of {path}, {describe(kind)})"
+        else:
+            lines[own] += f" (read as {describe(kind)}{how})"
+        for line in lines:
             print(line, file=sys.stderr)
     if bad:
         print(f"{found} problem{'s' if found > 1 else ''} in {bad} of {len(args.files)} "

@@ -185,3 +185,18 @@ def test_check_says_what_a_file_of_no_kind_was_read_as(tmp_path, capsys):
     assert main(["check", str(odd)]) == 2
     first = capsys.readouterr().err.splitlines()[0]
     assert first.endswith("(read as a scenario: no key tells its kind)"), first
+
+
+def test_check_says_the_kind_on_the_files_own_line(tmp_path, capsys):
+    """A scenario's cell's problems name the cell file; the kind goes on the scenario's."""
+    cell = tmp_path / "cell.yaml"
+    cell.write_text(edited(CELL.read_text(), ("hal: sim", "hal: simm")))
+    p = scenario(tmp_path, cell=cell)
+    assert main(["check", str(p)]) == 2
+    (only,) = capsys.readouterr().err.splitlines()
+    assert only.startswith(f"{cell}:") and only.endswith(f"(in the cell of {p}, a scenario)")
+    p = scenario(tmp_path, ("tick_hz: 200", "tick_hz: 2"), cell=cell)
+    assert main(["check", str(p)]) == 2
+    first, second = capsys.readouterr().err.splitlines()
+    assert first.startswith(f"{p}:") and first.endswith("(read as a scenario)")
+    assert second.startswith(f"{cell}:") and "(read as" not in second
