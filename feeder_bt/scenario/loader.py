@@ -93,7 +93,8 @@ __all__ = [
     "ADJUST_ALGORITHMS", "ADJUST_ORDER", "ADJUST_PARAMS", "CELL_HALS", "CONVEYOR_NAMES",
     "ENUMS", "FOREGROUNDS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
     "PROBABILITY_TOLERANCE", "RANGES", "RETRIEVE_POLICIES", "SHAPE_KINDS", "THRESHOLD_METHODS",
-    "LOADERS", "Range", "check_file", "check_files", "load_cell", "load_fault_plan", "load_scenario", "part_size_mm",
+    "LOADERS", "Range", "check_file", "check_files", "load_cell", "load_fault_plan",
+    "load_scenario", "part_size_mm",
 ]
 
 
@@ -166,7 +167,9 @@ def load_scenario(path: str | Path, cell: str | Path | None = None
     """Load a scenario and its cell, validated against each other.
 
     The scenario's ``cell:`` key is relative to the scenario file; ``cell`` overrides it so
-    one scenario runs unchanged on the simulated cell, emulators or a real cell.
+    one scenario runs unchanged on the simulated cell, emulators or a real cell. Every
+    problem of the scenario, then of its cell, is raised at once; the checks against the
+    cell run when both files are whole.
     """
     path = Path(path)
     ctx = _Ctx(str(path))
