@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from .errors import FeederError
+from .errors import ConfigError, FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
@@ -159,7 +159,6 @@ def _check_run_args(args: argparse.Namespace) -> None:
 
 def expect_kind(path: str, kind: str, how: str) -> None:
     """A file given where another kind was expected is named as what it is."""
-    from .errors import ConfigError
     from .scenario.schema import describe, file_kind
     found = file_kind(path)
     if found is None or found == kind:
@@ -230,26 +229,32 @@ def cmd_tree(args: argparse.Namespace) -> int:
 
 def cmd_check(args: argparse.Namespace) -> int:
     """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
-    one is the loader's first problem, then every other one the kind's schema finds (keys,
-    types, values), one line each on stderr."""
-    from .errors import ConfigError
-    from .scenario.loader import load_cell, load_fault_plan, load_scenario
-    from .scenario.schema import describe, file_kind, problems
-    loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
-    bad = 0
+    one is every problem the loader finds in it, one line each on stderr in file order (the
+    first says which kind the file was read as), then a count on stdout."""
+    from .scenario.loader import check_file
+    from .scenario.schema import describe, file_kind
+    bad = found = 0
     for path in args.files:
-        told = file_kind(path)          # None: not a mapping of keys (the loader says why)
-        kind = told or "scenario"
-        try:
-            loaders[kind](path)
-        except ConfigError as e:
-            bad += 1
-            print(f"{e} (read as {describe(kind)})" if told else str(e), file=sys.stderr)
-            for more in problems(path, kind):      # only when the loader refused the file
-                if (more.line, more.key) != (e.line, e.key):
-                    print(more, file=sys.stderr)
-        else:
+        kind, told, problems = check_file(path)   # told None: not a mapping of keys
+        if not problems:
             print(f"ok: {path} ({describe(kind)})")
+            continue
+        bad += 1
+        found += len(problems)
+        lines = ConfigError.of(problems).lines()
+        # the kind is said on the file's own first line (a scenario's cell names its own)
+        own = next((i for i, e in enumerate(problems[:len(lines)])
+                    if e.file and Path(e.file) == Path(path)), None)
+        how = "" if told else ": no key tells its kind"
+        if own is None:
+            lines[0] += f" (in the cell of {path}, {describe(kind)})"
+        else:
+            lines[own] += f" (read as {describe(kind)}{how})"
+        for line in lines:
+            print(line, file=sys.stderr)
+    if bad:
+        print(f"{found} problem{'s' if found > 1 else ''} in {bad} of {len(args.files)} "
+              f"file{'s' if len(args.files) > 1 else ''}")
     if bad or not args.images:
         return 2 if bad else 0
     from .tools.check_images import check_images
@@ -277,7 +282,9 @@ def main(argv: list[str] | None = None) -> int:
     except FeederError as e:
         if os.environ.get("FEEDER_DEBUG"):
             raise
-        print(f"feeder: {e}", file=sys.stderr)
+        lines = e.lines() if isinstance(e, ConfigError) else [str(e)]
+        for line in lines:                  # every problem of a file, one line each
+            print(f"feeder: {line}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
         print("feeder: interrupted", file=sys.stderr)

@@ -18,6 +18,10 @@ class FeederError(Exception):
     exit_code = 1
 
 
+#: At most this many problems are shown at once; the rest are counted ("... and N more").
+MAX_PROBLEMS = 50
+
+
 class ConfigError(FeederError):
     """A scenario or cell description is wrong; the message reads ``FILE:LINE: key: what``."""
 
@@ -30,6 +34,39 @@ class ConfigError(FeederError):
         if file:
             where = f"{file}:{line}: " if line else f"{file}: "
         super().__init__(one_line(f"{where}{key + ': ' if key else ''}{message}"))
+
+    @property
+    def problems(self) -> list[ConfigError]:
+        """Every problem this error stands for, each a one-line ``ConfigError``."""
+        return [self]
+
+    def lines(self, limit: int = MAX_PROBLEMS) -> list[str]:
+        """One line per problem, at most ``limit`` of them and then how many more."""
+        shown = [str(p) for p in self.problems[:limit]]
+        more = len(self.problems) - len(shown)
+        return shown + ([f"... and {more} more problem{'s' if more > 1 else ''}"] if more else [])
+
+    @staticmethod
+    def of(problems: list[ConfigError]) -> ConfigError:
+        """The one error to raise for ``problems`` (not empty): the problem itself when there
+        is only one, so a file with one mistake still reads as one line."""
+        return problems[0] if len(problems) == 1 else ConfigProblems(problems)
+
+
+class ConfigProblems(ConfigError):
+    """Several problems found in one go (every independent mistake of a file, not only the
+    first). ``file``, ``line`` and ``key`` are the first's; the message is one line per
+    problem (at most ``MAX_PROBLEMS``)."""
+
+    def __init__(self, problems: list[ConfigError]) -> None:
+        first = problems[0]
+        self._problems = list(problems)
+        self.file, self.line, self.key, self.what = first.file, first.line, first.key, first.what
+        FeederError.__init__(self, "\n".join(self.lines()))
+
+    @property
+    def problems(self) -> list[ConfigError]:
+        return self._problems
 
 
 class HalError(FeederError):

@@ -34,6 +34,7 @@ rates:
   grab_failed: {per_frame: 0.002}
   conveyor_jam: {per_hour: 0.5}
   missed_grab: {per_pick: 0.01}
+  encoder_slip: {per_hour: 0.1, counts: 40}
 scripted:
   - {at_s: 7200, kind: estop, release_after_s: 60}
   - {at_s: 100, kind: comms_lost, device: camera, outage_s: 1}
@@ -186,9 +187,10 @@ def _load_or_config_error(path: Path) -> None:
     try:
         plan = load_fault_plan(path)
     except ConfigError as e:
-        msg = str(e)
-        assert msg and "\n" not in msg and "\r" not in msg, msg
-        assert msg.startswith(str(path)), msg
+        for problem in e.problems:            # every problem is one line naming the file
+            msg = str(problem)
+            assert msg and "\n" not in msg and "\r" not in msg, msg
+            assert msg.startswith(str(path)), msg
     else:
         assert isinstance(plan, FaultPlanSpec)
 

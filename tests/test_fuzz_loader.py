@@ -2,7 +2,7 @@
 
 Whatever is done to a scenario file — a key deleted, a value replaced by some other scalar,
 list or mapping, an unknown key inserted, a line cut, doubled or shifted — ``load_scenario``
-either loads it or raises a ``ConfigError`` whose message is one line naming a file. Never
+either loads it or raises a ``ConfigError`` whose problems are each one line naming a file. Never
 a traceback. The example budget is fixed and the examples derandomized, so CI runs the
 same cases every time.
 """
@@ -110,10 +110,12 @@ def _loads_or_one_line(path: Path) -> None:
     try:
         scenario, _ = load_scenario(path)
     except ConfigError as e:
-        msg = str(e)
-        assert msg and "\n" not in msg and "\r" not in msg, msg
-        assert e.file, msg
-        assert msg.startswith(e.file), msg
+        for problem in e.problems:            # every problem is one line naming a file
+            msg = str(problem)
+            assert msg and "\n" not in msg and "\r" not in msg, msg
+            assert problem.file, msg
+            assert msg.startswith(problem.file), msg
+        assert str(e).splitlines() == e.lines()
     else:
         assert isinstance(scenario, Scenario)
 

@@ -68,12 +68,16 @@ def edit(text: str, *pairs: tuple[str, str]) -> str:
     return text
 
 
-def expect(fn, file: Path | str, line: int | None, key: str | None, *fragments: str
-           ) -> ConfigError:
-    """Assert one ConfigError naming file, line and key, on one line, with ``fragments``."""
+def expect(fn, file: Path | str, line: int | None, key: str | None, *fragments: str,
+           more: int = 0) -> ConfigError:
+    """Assert a ConfigError whose first problem names file, line and key, on one line, with
+    ``fragments``; and exactly ``more`` other problems, each on its own line."""
     with pytest.raises(ConfigError) as info:
         fn()
-    e = info.value
+    problems = info.value.problems
+    assert len(problems) == 1 + more, str(info.value)
+    assert str(info.value).splitlines() == [str(p) for p in problems]
+    e = problems[0]
     msg = str(e)
     assert "\n" not in msg and "\r" not in msg, msg
     assert e.file == str(file), msg
@@ -389,12 +393,21 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
 }
 
 
+# Cases whose edits make more than one independent mistake: how many more are listed.
+MORE_PROBLEMS = {
+    "probability_out_of_range": 1,      # both poses' probabilities are out of range
+    "parts_not_a_mapping": 1,           # and the key `unused` the edit adds
+    "shape_wrong_field": 1,             # and diameter_mm is missing (size_mm is no misspelling)
+}
+
+
 @pytest.mark.parametrize("case", sorted(SCENARIO_CASES))
 def test_malformed_scenario(tmp_path: Path, case: str) -> None:
     edits, line, key, fragments = SCENARIO_CASES[case]
     p = write(tmp_path, edit(BASE, *edits))
-    e = expect(lambda: load_scenario(p), p, line, key, *fragments)
-    assert check_files([str(p)]) == [str(e)]
+    more = MORE_PROBLEMS.get(case, 0)
+    e = expect(lambda: load_scenario(p), p, line, key, *fragments, more=more)
+    assert check_files([str(p)])[0] == str(e) and len(check_files([str(p)])) == 1 + more
 
 
 def test_yaml_syntax_error(tmp_path: Path) -> None:
@@ -480,8 +493,11 @@ def test_cell_speed_limit_is_the_cells(tmp_path: Path) -> None:
     c = write(tmp_path, edit(CELL.read_text(), ("max_mm_s: 400, accel", "max_mm_s: 120, accel")),
               "c.yaml")
     p = write(tmp_path, BASE)
-    expect(lambda: load_scenario(p, cell=c), p, 20, "present.horizontal_mm_s",
-           "max_mm_s 120", str(c))
+    e = expect(lambda: load_scenario(p, cell=c), p, 20, "present.horizontal_mm_s",
+               "max_mm_s 120", str(c), more=2)
+    # the adjuster's speeds are above it too, each listed on its own line
+    assert [(q.line, q.key) for q in load_problems(p, cell=c)[1:]] == [
+        (28, "adjust.params.max_mm_s"), (28, "adjust.params.median_mm_s")], e
 
 
 def test_adjuster_default_speed_is_checked_against_the_cell(tmp_path: Path) -> None:
@@ -536,6 +552,15 @@ CELL_CASES: dict[str, tuple[list[tuple[str, str]], str, str, list[str]]] = {
         [("hal: sim\n", "hal: sim\ncamerra: {}\n")], "camerra:", "camerra",
         ["did you mean 'camera'"]),
 }
+
+
+def load_problems(path: Path, **kwargs) -> list[ConfigError]:
+    """Every problem ``load_scenario`` lists for ``path`` (none when it loads)."""
+    try:
+        load_scenario(path, **kwargs)
+    except ConfigError as e:
+        return e.problems
+    return []
 
 
 def _line_of(text: str, needle: str) -> int:
@@ -617,8 +642,9 @@ def test_walker_is_generic_over_dataclasses(tmp_path: Path) -> None:
     out = ctx.dataclass(_Outer, node, "")
     assert out == _Outer(items={"a": _Inner("a", 2.0, ["x"])}, maybe=(1.0, 2.0), flag=True)
     node = yaml.compose("items:\n  a: {speed_mm_s: 2, tag: [x]}\n", Loader=yaml.SafeLoader)
-    expect(lambda: L._Ctx("mem.yaml").dataclass(_Outer, node, ""), "mem.yaml", 2,
-           "items.a.tag", "did you mean 'tags'")
+    ctx = L._Ctx("mem.yaml")
+    ctx.dataclass(_Outer, node, "")          # an unknown key is listed, the rest still built
+    expect(ctx.raise_problems, "mem.yaml", 2, "items.a.tag", "did you mean 'tags'")
 
 
 # ---------------------------------------------------------------- property tests
@@ -667,7 +693,8 @@ def _load_must_not_crash(text: str, cell_file: Path | None = None) -> None:
             else:
                 load_cell(p)
         except ConfigError as e:
-            assert "\n" not in str(e) and e.file == str(p)
+            for problem in e.problems:
+                assert "\n" not in str(problem) and problem.file == str(p)
 
 
 def _mutated(draw, base: dict) -> dict:

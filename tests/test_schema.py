@@ -8,6 +8,7 @@ import copy
 import json
 from pathlib import Path
 
+import jsonschema
 import pytest
 import yaml
 
@@ -15,8 +16,6 @@ from feeder_bt.cli import main
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.loader import load_cell, load_fault_plan, load_scenario
 from feeder_bt.scenario.schema import KINDS, file_kind, schema
-
-jsonschema = pytest.importorskip("jsonschema")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = {
@@ -145,7 +144,7 @@ def test_the_schema_never_refuses_what_the_loader_takes(kind, path, tmp_path):
 
 
 def test_check_lists_every_problem_of_a_file(tmp_path, capsys):
-    """The loader stops at the first problem; the schema finds the others, each on its line."""
+    """The loader lists every problem of a file, each on its line, in file order."""
     text = (ROOT / "scenarios/lenses.yaml").read_text()
     for old, new in [("tick_hz: 200", "tick_hzz: 200"),
                      ("method: fixed, value: 80", "method: fixd, value: 800"),
@@ -162,14 +161,16 @@ def test_check_lists_every_problem_of_a_file(tmp_path, capsys):
         return next(i for i, s in enumerate(lines, 1) if needle in s)
 
     assert main(["check", str(bad)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    captured = capsys.readouterr()
+    assert captured.out == "5 problems in 1 of 1 file\n"
+    err = captured.err.strip().splitlines()
     assert err[0].endswith("(read as a scenario)")
     want = [
         (line_of("tick_hzz"), "tick_hzz: unknown key 'tick_hzz' (did you mean 'tick_hz'?)"),
         (line_of("size_mm"), "size_mm: expected a list of 2 values, got 3"),
         (line_of("fixd"), "vision.threshold.method: must be one of fixed, otsu, adaptive, "
                           "got 'fixd' (did you mean 'fixed'?)"),
-        (line_of("fixd"), "vision.threshold.value: must be <= 255, got 800"),
+        (line_of("fixd"), "vision.threshold.value: must be in [0, 255], got 800"),
         (line_of("horizontal_mm_s"), "present.horizontal_mm_s: expected a number, got "
                                      "string 'fast'"),
     ]

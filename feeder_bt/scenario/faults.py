@@ -112,27 +112,34 @@ def build_rates(ctx: Any, node: Any, path: str) -> dict[str, Any]:
     """``rates: {kind: {per_...: x, ...}}``: the kind is checked before its rate, so a
     misspelt kind is reported as such (with a did-you-mean), not as a bad rate."""
     out: dict[str, FaultRate] = {}
-    for kind, _, vnode in ctx.entries(node, path):
-        sub = f"{path}.{kind}"
-        if kind == "estop":
-            raise ctx.error(sub, "estop is scripted only: list it under `scripted` with "
-                                 "`at_s` and `release_after_s`",
-                            line=ctx.key_lines.get(sub))
-        if kind not in RATE_UNITS:
-            ctx.unknown(kind, path, RATE_UNITS, what="fault kind")
-        rate = ctx.dataclass(FaultRate, vnode, sub)
-        unit = RATE_UNITS[kind]
-        given = [k for k in RATE_KEYS if getattr(rate, k) is not None]
-        for k in given:
-            if k != unit:
-                raise ctx.error(f"{sub}.{k}", f"{kind} takes {unit}, not {k}",
-                                line=ctx.key_lines.get(f"{sub}.{k}"))
-        if not given:
-            raise ctx.error(sub, f"missing required key {unit!r} ({kind}'s rate)",
-                            line=ctx.key_lines.get(sub))
-        _check_only_for(ctx, kind, sub)
-        out[kind] = rate
+    entries = ctx.entries(node, path)
+    g = ctx.gather(node)                  # every kind is checked, not only the first
+    for kind, _, vnode in entries:
+        with g.step(breaks=kind in RATE_UNITS):   # a wrong kind is left out, listed
+            out[kind] = _build_rate(ctx, kind, vnode, f"{path}.{kind}", path)
+    g.done()
     return {"rates": out}
+
+
+def _build_rate(ctx: Any, kind: str, vnode: Any, sub: str, path: str) -> FaultRate:
+    if kind == "estop":
+        raise ctx.error(sub, "estop is scripted only: list it under `scripted` with "
+                             "`at_s` and `release_after_s`",
+                        line=ctx.key_lines.get(sub))
+    if kind not in RATE_UNITS:
+        ctx.unknown(kind, path, RATE_UNITS, what="fault kind")
+    rate = ctx.dataclass(FaultRate, vnode, sub)
+    unit = RATE_UNITS[kind]
+    given = [k for k in RATE_KEYS if getattr(rate, k) is not None]
+    for k in given:
+        if k != unit:
+            raise ctx.error(f"{sub}.{k}", f"{kind} takes {unit}, not {k}",
+                            line=ctx.key_lines.get(f"{sub}.{k}"))
+    if not given:   # a misspelt rate key ("did you mean") is that mistake, not a second one
+        raise ctx.suggested.get(f"{sub}.{unit}") or ctx.error(
+            sub, f"missing required key {unit!r} ({kind}'s rate)", line=ctx.key_lines.get(sub))
+    _check_only_for(ctx, kind, sub)
+    return rate
 
 
 def check_fault_plan(plan: FaultPlanSpec, ctx: Any) -> None:
@@ -145,7 +152,7 @@ def _check_only_for(ctx: Any, kind: str, path: str) -> None:
     for key, kinds in _ONLY_FOR.items():
         sub = f"{path}.{key}"
         if kind not in kinds and sub in ctx.key_lines:
-            raise ctx.error(sub, f"{key} applies only to {' and '.join(kinds)}, not {kind}",
+            ctx.add_problem(sub, f"{key} applies only to {' and '.join(kinds)}, not {kind}",
                             line=ctx.key_lines[sub])
 
 

@@ -1,0 +1,205 @@
+"""Checks that need more than one key at a time: inside a cell description (reach, target,
+encoder, Galil wiring), inside a scenario (pose probabilities, names of parts and poses,
+adjuster parameters) and of a scenario against the cell it runs on (speeds, camera window).
+
+Each problem is listed with ``ctx.add_problem`` and the checks go on, so every mistake of a
+file is reported at once; a check that still raises ``ctx.error(...)`` stops only itself.
+"""
+
+from __future__ import annotations
+
+import math
+
+from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
+from feeder_bt.scenario.model import AdjustParams, CellSpec, Scenario
+from feeder_bt.scenario.special import part_size_mm
+from feeder_bt.scenario.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
+from feeder_bt.scenario.walker import _Ctx, _suggest
+
+
+def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
+    """Cross-field checks inside a cell description."""
+    r = cell.robot
+    if r.inner_reach_mm >= r.reach_mm:
+        ctx.add_problem("robot.inner_reach_mm", f"must be < robot.reach_mm "
+                                                f"({_num(r.reach_mm)}), got "
+                                                f"{_num(r.inner_reach_mm)}")
+    t = cell.camera.target
+    if t is not None:
+        if min(t.board) < 2:
+            ctx.add_problem("camera.target.board", f"needs at least 2 points per row and 2 "
+                                                   f"rows, got {t.board[0]}x{t.board[1]}")
+        if t.kind == "charuco" and t.marker_mm >= t.pitch_mm:
+            ctx.add_problem("camera.target.marker_mm", f"must be < pitch_mm "
+                                                       f"({_num(t.pitch_mm)}), got "
+                                                       f"{_num(t.marker_mm)}")
+    e = cell.encoder
+    if e.robot_start >= 2 ** e.robot_bits:
+        ctx.add_problem("encoder.robot_start", f"must be < 2**robot_bits "
+                                               f"({2 ** e.robot_bits}), got {e.robot_start}")
+    if e.drift_warn_mm > e.drift_limit_mm:
+        ctx.add_problem("encoder.drift_warn_mm",
+                        f"must be <= drift_limit_mm ({_num(e.drift_limit_mm)}), "
+                        f"got {_num(e.drift_warn_mm)}")
+    _check_galil(cell, ctx)
+
+
+# Galil wiring (issue 15; docs/real-cell.md): I/O bits start at 1, the input monitor reports
+# inputs 1-16, and the DMC-21x3 latches each axis from its own fixed input.
+GALIL_MAX_INPUT = 16
+GALIL_MAX_OUTPUT = 16
+
+
+def _check_galil(cell: CellSpec, ctx: _Ctx) -> None:
+    g = cell.galil
+    for name, sig in cell.io.items():
+        if sig.controller != "galil":
+            continue
+        top = GALIL_MAX_INPUT if sig.dir == "in" else GALIL_MAX_OUTPUT
+        if not 1 <= sig.bit <= top:
+            ctx.add_problem(f"io.{name}.bit", f"Galil {'inputs' if sig.dir == 'in' else 'outputs'}"
+                                              f" are numbered 1-{top}, got {sig.bit}")
+    axis = str(g.latch_axis).upper()
+    if len(axis) != 1 or axis not in "ABCDEFGH":
+        ctx.add_problem("galil.latch_axis", f"one axis letter A-H, got {g.latch_axis!r}")
+        return
+    fixed = "ABCDEFGH".index(axis) + 1
+    if g.latch_input is not None and g.latch_input != fixed:
+        ctx.add_problem("galil.latch_input", f"the DMC-21x3 latches axis {axis} from input "
+                                             f"{fixed} only (fixed per axis); wire the camera "
+                                             f"trigger there, got {g.latch_input}")
+
+
+def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
+    """Checks that need more than one field of the scenario (but not the cell)."""
+    for pname, part in sc.parts.items():
+        ppath = f"parts.{pname}.poses"
+        if not part.poses:
+            ctx.add_problem(ppath, "a part needs at least one stable pose")
+            continue
+        total = math.fsum(p.probability for p in part.poses.values())
+        if abs(total - 1.0) > PROBABILITY_TOLERANCE:
+            terms = " + ".join(f"{n} {_num(p.probability)}" for n, p in part.poses.items())
+            ctx.add_problem(ppath, f"pose probabilities must sum to 1, got {total:.6g} "
+                                   f"({terms})")
+        if not any(p.pickable for p in part.poses.values()):
+            ctx.add_problem(ppath, "a part needs at least one pickable pose")
+    if not sc.parts:
+        ctx.add_problem("parts", "a scenario needs at least one part")
+    th = sc.vision.threshold
+    if th.block_px % 2 == 0:
+        ctx.add_problem("vision.threshold.block_px", f"must be odd, got {th.block_px}")
+    if th.method == "adaptive" and th.c >= 0:
+        ctx.add_problem("vision.threshold.c",
+                        f"must be < 0, got {_num(th.c)}: as in OpenCV the threshold is the "
+                        f"local mean minus c, so c >= 0 makes flat belt foreground "
+                        f"(c: -{_num(abs(th.c) or 5)} puts it {_num(abs(th.c) or 5)} grey "
+                        f"levels above the mean)")
+    for i, vc in enumerate(sc.vision.classes):
+        cpath = f"vision.classes[{i}]"
+        if vc.part not in sc.parts:
+            ctx.add_problem(f"{cpath}.part", f"unknown part {vc.part!r}"
+                                             f"{_suggest(vc.part, sc.parts)}; parts: "
+                                             f"{', '.join(sc.parts)}")
+            continue
+        poses = sc.parts[vc.part].poses
+        if vc.pose not in poses:
+            ctx.add_problem(f"{cpath}.pose", f"part {vc.part!r} has no pose {vc.pose!r}"
+                                             f"{_suggest(vc.pose, poses)}; poses: "
+                                             f"{', '.join(poses)}")
+    for name in sc.hopper:
+        if name not in sc.parts:
+            ctx.add_problem(f"hopper.parts.{name}", f"unknown part {name!r}"
+                                                    f"{_suggest(name, sc.parts)}; parts: "
+                                                    f"{', '.join(sc.parts)}",
+                            line=ctx.key_lines.get(f"hopper.parts.{name}"))
+    for i, name in enumerate(sc.retrieve.sequence):
+        if name not in sc.parts:
+            ctx.add_problem(f"retrieve.sequence[{i}]", f"unknown part {name!r}"
+                                                       f"{_suggest(name, sc.parts)}")
+    ctx.adjust_params = _check_adjust(sc.adjust, ctx)
+
+
+def _check_adjust(adj: AdjustParams, ctx: _Ctx) -> dict[str, float]:
+    """Check ``adjust.params`` against the tables, then let the adjuster check itself.
+
+    Returns the parameters the adjuster will really use (its defaults filled in) so that
+    speeds left at a default are still checked against the cell.
+    """
+    allowed = ADJUST_PARAMS[adj.algorithm]
+    listed = len(ctx.problems)
+    for key, v in adj.params.items():
+        sub = f"adjust.params.{key}"
+        if key not in allowed:
+            if not allowed:
+                ctx.add_problem(sub, f"algorithm {adj.algorithm!r} takes no params, got "
+                                     f"{', '.join(map(repr, adj.params))}",
+                                line=ctx.key_lines.get(sub))
+                break
+            ctx.note(ctx.unknown_error(key, "adjust.params", allowed,
+                                       what=f"{adj.algorithm} parameter"))
+            continue
+        if not allowed[key].contains(v):
+            ctx.add_problem(sub, f"must be {allowed[key].describe()}, got {_num(v)}")
+    cls = ADJUSTERS.get(adj.algorithm)
+    effective = dict(cls.PARAMS) if cls is not None else {}
+    effective.update(adj.params)
+    for algo, small, large, strict in ADJUST_ORDER:
+        if algo != adj.algorithm or small not in effective or large not in effective:
+            continue
+        a, b = effective[small], effective[large]
+        if a > b or (strict and a == b):
+            given = "" if large in adj.params else " (its default)"
+            ctx.add_problem(f"adjust.params.{small}",
+                            f"must be {'<' if strict else '<='} {large} ({_num(b)}{given}), "
+                            f"got {_num(a)}")
+    if cls is not None and len(ctx.problems) == listed:   # not the same mistake twice
+        try:
+            effective = dict(cls(adj.params).params)
+        except AdjusterParamError as e:
+            what = str(e).removeprefix(f"{e.key}: ")
+            ctx.add_problem(f"adjust.params.{e.key}", what)
+    return effective
+
+
+def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
+    """Checks of the scenario against the cell it runs on (errors name the scenario line)."""
+    hmax = cell.conveyors["horizontal"].max_mm_s
+    imax = cell.conveyors["incline"].max_mm_s
+    pct = sc.present.incline_pct
+    cfile = str(cell.path)
+
+    def speed(path: str, v: float, note: str = "") -> None:
+        if v > hmax:
+            ctx.add_problem(path, f"{_num(v)} mm/s{note} is above the horizontal conveyor's "
+                                  f"max_mm_s {_num(hmax)} ({cfile})")
+        elif v * pct / 100.0 > imax:
+            ctx.add_problem(path, f"{_num(v)} mm/s{note} at incline_pct {_num(pct)} gives "
+                                  f"{_num(v * pct / 100.0)} mm/s on the incline, above its "
+                                  f"max_mm_s {_num(imax)} ({cfile})")
+
+    h = sc.present.horizontal_mm_s
+    if h > hmax:
+        speed("present.horizontal_mm_s", h)
+    elif h * pct / 100.0 > imax:
+        ctx.add_problem("present.incline_pct", f"incline speed {_num(h)} * {_num(pct)}% = "
+                                               f"{_num(h * pct / 100.0)} mm/s is above the "
+                                               f"incline conveyor's max_mm_s {_num(imax)} "
+                                               f"({cfile})")
+    for key, v in ctx.adjust_params.items():   # with the adjuster's defaults filled in
+        if key.endswith("_mm_s"):
+            speed(f"adjust.params.{key}", v,
+                  "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
+
+    if not sc.parts:
+        return                                # listed by _check_scenario
+    window = cell.camera.height_px * cell.camera.calibration.mm_per_px
+    biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
+                        key=lambda t: t[1])
+    limit = window - size
+    fs = sc.locate.frame_spacing_mm
+    if fs >= limit:
+        ctx.add_problem("locate.frame_spacing_mm",
+                        f"must be < {_num(limit)} (camera window {_num(window)} mm along the "
+                        f"belt minus the largest part, {biggest!r} {size:.1f} mm), got "
+                        f"{_num(fs)}")
