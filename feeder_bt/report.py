@@ -98,7 +98,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed_touching": world.counts["landed_touching"],
-                           "placed": dict(world.placed_by_type)}
+                           "placed": dict(world.placed_by_type),
+                           # commands a belt ran slower than asked (0: the HAL refuses them)
+                           "axis_clamped": {"horizontal": world.horizontal.clamped,
+                                            "incline": world.incline.clamped}}
     return report
 
 

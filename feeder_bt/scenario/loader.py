@@ -1126,6 +1126,16 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         if key.endswith("_mm_s"):
             speed(f"adjust.params.{key}", v,
                   "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
+    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range (issue 16)
+    limits = {"horizontal": hmax, "incline": imax}
+    for env in cls(ctx.adjust_params).envelope(pct) if cls is not None else []:
+        if env.mm_s > limits[env.conveyor] + 1e-9:
+            given = "" if env.key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)"
+            raise ctx.error(f"adjust.params.{env.key}",
+                            f"{env.how}{given} drives the {env.conveyor} conveyor at "
+                            f"{_num(env.mm_s)} mm/s, above its max_mm_s "
+                            f"{_num(limits[env.conveyor])} ({cfile}); an adjuster runs "
+                            f"under the cell's limits, like a fixed setting")
 
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
