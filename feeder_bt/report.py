@@ -95,6 +95,11 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "vision": {"frames": s.counts["frames"], "p50_ms": _pct(s.vision_ms, 50),
                    "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell)},
     }
+    fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
+    if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
+        report["robot_model"] = fit.summary()
+        if world is not None:             # the simulated arm's truth, for comparison
+            report["robot_model"]["sim_speed_factor"] = cell.cell.robot.sim_speed_factor
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed_touching": world.counts["landed_touching"],

@@ -14,6 +14,7 @@ import numpy as np
 from ...clock import SimClock
 from ...errors import HalError
 from ...jobs import DoneJob, FutureJob, Job
+from ...robot_model import RobotModel, with_speed_factor
 from ...scenario.model import CellSpec, Scenario
 from ...vision.calibration import Calibration
 from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
@@ -283,6 +284,9 @@ class SimHal(Hal):
 
 def make_sim_hal(scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> SimHal:
     world = World(scenario, cell, clock, seed)
+    if cell.robot.sim_speed_factor != 1.0:     # the arm as it really moves; the trees see
+        world.robot_model = RobotModel(         # only the cell's description (issue 16)
+            with_speed_factor(cell.robot, cell.robot.sim_speed_factor))
     hal = SimHal(
         conveyors={"horizontal": SimConveyor("horizontal", world.horizontal, world),
                    "incline": SimConveyor("incline", world.incline, world)},
