@@ -44,6 +44,7 @@ PRIOR_SD = (0.25, 0.02)        # how far the prior (the cell description) is tru
 FORGET = 0.998                 # memory of about 500 moves
 HUBER = 3.0                    # residuals beyond this many scales are down-weighted
 MIN_SCALE_S = 0.004            # floor of the residual scale: the tick is 5 ms at 200 Hz
+NOISE_S = 0.01                 # a measured move's expected error (tick, timing jitter)
 
 
 class FittedRobotModel(RobotModel):
@@ -114,7 +115,7 @@ class RobotFit:
         s = max(self.scale, MIN_SCALE_S)
         w = 1.0 if abs(r) <= HUBER * s else HUBER * s / abs(r)
         p_phi = self.P @ phi
-        gain = p_phi / (FORGET / w + float(phi @ p_phi))
+        gain = p_phi / (NOISE_S ** 2 / w + float(phi @ p_phi))
         self.theta = self.theta + gain * r
         self.P = (self.P - np.outer(gain, p_phi)) / FORGET
         self.P = 0.5 * (self.P + self.P.T)
