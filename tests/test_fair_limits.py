@@ -161,3 +161,12 @@ def test_a_plugin_adjuster_beyond_the_limit_faults_the_run(tmp_path, monkeypatch
     assert r["faults"].get("hal", 0) >= 1           # counted as a conveyor fault, retried
     assert r["state"] == "FAULT" and "600 mm/s commanded, above its max_mm_s 400" in r["fault"]
     assert r["world"]["axis_clamped"] == {"horizontal": 0, "incline": 0}
+
+
+def test_feeder_check_refuses_it_in_one_line(tmp_path, capsys):
+    from feeder_bt.cli import main
+    p = with_adjust(tmp_path, "adjust:\n  algorithm: supply_queue\n  params: {max_mm_s: 400, "
+                              "max_incline_pct: 150}\n")
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "adjust.params.max_incline_pct" in err[0] and "600 mm/s" in err[0]
