@@ -28,11 +28,13 @@ def pick_window(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float, 
     return 0.0, x_hi, EDGE_MARGIN_MM, belt.width_mm - EDGE_MARGIN_MM
 
 
-def robot_bound(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float]:
+def robot_bound(cell_spec: CellSpec, scenario: Scenario,
+                model: RobotModel | None = None) -> tuple[float, float]:
     """(cycle s, parts/min): the shortest pick-and-place cycle the robot model allows at the
     scenario's robot speed — pick at the best point of the pick window, place, back — and
-    the throughput no feeder setting can beat with this robot. Over part types, the best."""
-    model = RobotModel(cell_spec.robot)
+    the throughput no feeder setting can beat with this robot. Over part types, the best.
+    ``model``: another model of the robot than the cell's (the one fitted online)."""
+    model = model or RobotModel(cell_spec.robot)
     window = pick_window(cell_spec, scenario)
     r = scenario.retrieve
     cycles = [model.shortest_cycle((spec.place.x, spec.place.y), window, r.robot_speed_pct,
@@ -98,6 +100,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
         report["robot_model"] = fit.summary()
+        report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
+            robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
         if world is not None:             # the simulated arm's truth, for comparison
             report["robot_model"]["sim_speed_factor"] = cell.cell.robot.sim_speed_factor
     if world is not None:

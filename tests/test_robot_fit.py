@@ -14,10 +14,11 @@ from treeutil import make_ctx, part
 
 from feeder_bt.behaviours.policies import ShortestCycle
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.robot_fit import K_BOUNDS, RobotFit, pricing_model, robot_fit
+from feeder_bt.report import robot_bound
+from feeder_bt.robot_fit import K_BOUNDS, RobotFit, Timing, pricing_model, robot_fit
 from feeder_bt.robot_model import RobotModel, with_speed_factor
 from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_cell
+from feeder_bt.scenario import load_cell, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = load_cell(ROOT / "cells" / "sim.yaml")
@@ -59,7 +60,6 @@ def test_the_fit_stays_within_its_bounds():
 
 def test_a_pick_that_may_have_waited_for_its_part_is_not_a_move():
     fit = RobotFit(CELL.robot)
-    from feeder_bt.robot_fit import Timing
     fit.pick_done(Timing("pick", 0.0, (1330.0, -120.0), 100.0, usable=False), 3.0, 900.0)
     assert fit.rejected["may_have_waited"] == 1 and not fit.samples and fit.k == 1.0
 
@@ -105,6 +105,10 @@ def test_a_simulated_run_learns_the_arm(tmp_path, factor):
     assert m["fitted"]["time_scale"] == pytest.approx(1.0 / factor, rel=0.04)
     assert m["fitted"]["v_max_mm_s"] == pytest.approx(CELL.robot.v_max_mm_s * factor, rel=0.04)
     assert m["nominal"]["time_scale"] == 1.0
+    # the ceiling with the arm as it really is (the grip and release do not scale)
+    sc, cl = load_scenario(scen)
+    true_bound = robot_bound(cl, sc, RobotModel(with_speed_factor(cl.robot, factor)))[1]
+    assert m["fitted"]["robot_bound_ppm"] == pytest.approx(true_bound, rel=0.03)
 
 
 def test_the_simulated_arm_is_slower_only_in_the_world():
