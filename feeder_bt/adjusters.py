@@ -31,6 +31,16 @@ class AdjustInputs:
     missed: int
 
 
+@dataclass(frozen=True)
+class Envelope:
+    """The fastest one conveyor may be driven by an adjuster, and the parameter that sets it."""
+
+    key: str            # the ``adjust.params`` key to blame
+    conveyor: str       # "horizontal" or "incline"
+    mm_s: float
+    how: str            # how the speed follows from the parameter, for the message
+
+
 @dataclass
 class Speeds:
     """The speeds the adjust tree writes back to the blackboard."""
@@ -83,6 +93,19 @@ class Adjuster:
     def update(self, inp: AdjustInputs) -> Speeds:
         """Called every ``adjust.period_s`` with fresh statistics; returns speeds to apply."""
         raise NotImplementedError
+
+    def envelope(self, incline_pct: float) -> list[Envelope]:
+        """The fastest speeds this adjuster can ever command, whatever the queue does.
+
+        The loader checks each against the cell's conveyor limits, so every adjuster runs
+        under the same limits as a fixed setting (issue 16). ``incline_pct`` is the
+        scenario's, which adjusters of the horizontal belt keep."""
+        if "max_mm_s" not in self.params:
+            return []
+        top = self.params["max_mm_s"]
+        return [Envelope("max_mm_s", "horizontal", top, f"{top:g} mm/s"),
+                Envelope("max_mm_s", "incline", top * incline_pct / 100.0,
+                         f"{top:g} mm/s at present.incline_pct {incline_pct:g}")]
 
     @staticmethod
     def _with_horizontal(inp: AdjustInputs, horizontal_mm_s: float) -> Speeds:
@@ -215,6 +238,15 @@ class SupplyQueue(Adjuster):
             raise AdjusterParamError("pull", "must be in [0, 1] or the pull overshoots")
         if not p["min_mm_s"] <= p["horizontal_mm_s"] <= p["max_mm_s"]:
             raise AdjusterParamError("horizontal_mm_s", "must lie within [min_mm_s, max_mm_s]")
+
+    def envelope(self, incline_pct: float) -> list[Envelope]:
+        """The incline runs at up to ``max_incline_pct`` % of a belt at up to ``max_mm_s``
+        (an operator may set the belt anywhere in [min_mm_s, max_mm_s])."""
+        p = self.params
+        top, pct = p["max_mm_s"], p["max_incline_pct"]
+        return [Envelope("max_mm_s", "horizontal", top, f"{top:g} mm/s"),
+                Envelope("max_incline_pct", "incline", top * pct / 100.0,
+                         f"{pct:g} % of max_mm_s {top:g} mm/s")]
 
     def update(self, inp: AdjustInputs) -> Speeds:
         p = self.params

@@ -28,11 +28,13 @@ def pick_window(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float, 
     return 0.0, x_hi, EDGE_MARGIN_MM, belt.width_mm - EDGE_MARGIN_MM
 
 
-def robot_bound(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float]:
+def robot_bound(cell_spec: CellSpec, scenario: Scenario,
+                model: RobotModel | None = None) -> tuple[float, float]:
     """(cycle s, parts/min): the shortest pick-and-place cycle the robot model allows at the
     scenario's robot speed — pick at the best point of the pick window, place, back — and
-    the throughput no feeder setting can beat with this robot. Over part types, the best."""
-    model = RobotModel(cell_spec.robot)
+    the throughput no feeder setting can beat with this robot. Over part types, the best.
+    ``model``: another model of the robot than the cell's (the one fitted online)."""
+    model = model or RobotModel(cell_spec.robot)
     window = pick_window(cell_spec, scenario)
     r = scenario.retrieve
     cycles = [model.shortest_cycle((spec.place.x, spec.place.y), window, r.robot_speed_pct,
@@ -96,10 +98,20 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "vision": {"frames": s.counts["frames"], "p50_ms": _pct(s.vision_ms, 50),
                    "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell)},
     }
+    fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
+    if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
+        report["robot_model"] = fit.summary()
+        report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
+            robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
+        if world is not None:             # the simulated arm's truth, for comparison
+            report["robot_model"]["sim_speed_factor"] = cell.cell.robot.sim_speed_factor
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed_touching": world.counts["landed_touching"],
-                           "placed": dict(world.placed_by_type)}
+                           "placed": dict(world.placed_by_type),
+                           # commands a belt ran slower than asked (0: the HAL refuses them)
+                           "axis_clamped": {"horizontal": world.horizontal.clamped,
+                                            "incline": world.incline.clamped}}
     return report
 
 

@@ -1,8 +1,8 @@
 """Pick policies: which located part the robot takes next (``retrieve.policy``).
 
 ``fifo`` and ``earliest_deadline`` need only the queue. ``shortest_cycle`` and
-``lookahead`` price every part by the robot model (thesis Figure 8-5, "does location
-matter"): the seconds from now until the part is released at its place pose, with the
+``lookahead`` price every part by the robot model fitted online from the robot's measured
+move times (``feeder_bt.robot_fit``; thesis Figure 8-5, "does location matter"): the seconds from now until the part is released at its place pose, with the
 intercept on the moving belt predicted from the belt speed. All parts of a choice are
 priced at once with numpy, so a choice over a long queue stays well inside a tick.
 """
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..parts import Part
-from ..robot_model import RobotModel
+from ..robot_fit import pricing_model
 from .common import Ctx
 
 XNow = Callable[[Part], float]
@@ -81,7 +81,9 @@ class ShortestCycle(Policy):
 
     def __init__(self, ctx: Ctx | None = None) -> None:
         super().__init__(ctx)
-        self.model = RobotModel(ctx.cell.robot) if ctx is not None else None
+        # fitted online from measured move times (feeder_bt/robot_fit.py), not the
+        # simulator's model; the cell's nominal model with retrieve.learn_robot: false
+        self.model = pricing_model(ctx) if ctx is not None else None
 
     def lead_s(self) -> float:
         """The pricing skips what cannot be caught, so only what no pick can reach in time

@@ -15,8 +15,16 @@ from ..errors import HalError, UnknownPart
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
 from ..parts import Part
+from ..robot_fit import Timing, robot_fit
 from .common import Ctx, JobLeaf, Leaf, client
 from .policies import POLICIES
+
+
+def belt_x_now(ctx: Ctx, part: Part) -> float:
+    """Where ``part`` is along the belt now, by the robot's belt encoder."""
+    enc = ctx.hal.robot_position.belt_encoder()
+    bits = ctx.cell.encoder.robot_bits
+    return part.x_mm + diff(enc, part.latch, bits) / ctx.cell.encoder.counts_per_mm
 
 
 class NextPart(Leaf):
@@ -32,9 +40,7 @@ class NextPart(Leaf):
         self.seq_i = 0
 
     def x_now(self, part: Part) -> float:
-        enc = self.ctx.hal.robot_position.belt_encoder()
-        bits = self.ctx.cell.encoder.robot_bits
-        return part.x_mm + diff(enc, part.latch, bits) / self.ctx.cell.encoder.counts_per_mm
+        return belt_x_now(self.ctx, part)
 
     def update(self) -> Status:
         r = self.ctx.scenario.retrieve
@@ -74,17 +80,27 @@ def count_retrieved(ctx: Ctx, part: Part, **data: object) -> None:
 
 
 class PartJob(JobLeaf):
-    """A robot job about the part the retriever chose (``/retrieve/part``)."""
+    """A robot job about the part the retriever chose (``/retrieve/part``).
+
+    A pick or place is timed on the cell's clock (``timing``) for the robot model fitted
+    online (``feeder_bt.robot_fit``); only one that ends by itself, successfully, counts."""
 
     fault_key = "/retrieve/error"
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part",), write=(PHASE,))
+        self.bb = client(self, read=("/retrieve/part", "/speeds/robot_speed_pct"),
+                         write=(PHASE,))
+        self.timing: Timing | None = None
 
     @property
     def part(self) -> Part:
         return self.bb.get("/retrieve/part")
+
+    def _timing(self, kind: str, **kw: object) -> Timing:
+        pose = self.ctx.hal.robot_position.pose()
+        pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        return Timing(kind, self.ctx.now(), (pose.x, pose.y), pct, **kw)  # type: ignore[arg-type]
 
 
 class Pick(PartJob):
@@ -93,6 +109,12 @@ class Pick(PartJob):
         spec = self.ctx.scenario.parts[part.type]
         self.feedback_message = f"picking part {part.id}"
         self.bb.set(PHASE, "pick")          # recorded before the command leaves
+        ox, oy, _ = spec.tool_offset
+        x, y = belt_x_now(self.ctx, part) + ox, part.y_mm + oy
+        tracking = self.ctx.scenario.retrieve.tracking
+        self.timing = self._timing(      # in reach now: the arm cannot wait for the part
+            "pick", usable=robot_fit(self.ctx).nominal.reachable(x, y), tool_y=y,
+            belt_mm_s=self.ctx.hal.conveyors["horizontal"].speed(), tracking=tracking)
         return self.ctx.hal.robot.pick(PickTarget(
             part_id=part.id, x_mm=part.x_mm, y_mm=part.y_mm, angle_deg=part.angle_deg,
             latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
@@ -100,6 +122,10 @@ class Pick(PartJob):
 
     def on_success(self, result: object) -> Status:
         self.bb.set(PHASE, "held")
+        grip_x = getattr(result, "belt_x_mm", None)
+        if self.timing is not None and grip_x is not None:
+            robot_fit(self.ctx).pick_done(self.timing, self.ctx.now(), float(grip_x))
+        self.timing = None
         return Status.SUCCESS
 
     def on_failure(self, error: HalError) -> Status:
@@ -122,15 +148,20 @@ class Place(PartJob):
         place = self.ctx.scenario.parts[part.type].place
         rz = -part.angle_deg if place.orient else 0.0
         self.bb.set(PHASE, "place")
+        self.timing = self._timing("place", end=(place.x, place.y))
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))
 
     def terminate(self, new_status: Status) -> None:
         super().terminate(new_status)
         if new_status is Status.INVALID and self.job is not None and self.job.ok \
                 and self.status is Status.RUNNING:
+            self.timing = None                    # cut short: not a move time
             self.on_success(self.job.result)      # pre-empted, but the part was placed
 
     def on_success(self, result: object) -> Status:
+        if self.timing is not None:
+            robot_fit(self.ctx).place_done(self.timing, self.ctx.now())
+            self.timing = None
         self.bb.set(PHASE, None)
         count_retrieved(self.ctx, self.part)
         return Status.SUCCESS

@@ -169,7 +169,11 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
     pct = sc.present.incline_pct
     cfile = str(cell.path)
 
+    flagged: set[str] = set()
+
     def speed(path: str, v: float, note: str = "") -> None:
+        if v > hmax or v * pct / 100.0 > imax:
+            flagged.add(path)
         if v > hmax:
             ctx.add_problem(path, f"{_num(v)} mm/s{note} is above the horizontal conveyor's "
                                   f"max_mm_s {_num(hmax)} ({cfile})")
@@ -190,6 +194,21 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         if key.endswith("_mm_s"):
             speed(f"adjust.params.{key}", v,
                   "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
+    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range (issue 16)
+    limits = {"horizontal": hmax, "incline": imax}
+    try:
+        envelope = cls(ctx.adjust_params).envelope(pct) if cls is not None else []
+    except (AdjusterParamError, KeyError, TypeError, ValueError):
+        envelope = []                            # its parameters were listed already
+    for env in envelope:
+        path = f"adjust.params.{env.key}"
+        if env.mm_s > limits[env.conveyor] + 1e-9 and path not in flagged:
+            flagged.add(path)
+            given = "" if env.key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)"
+            ctx.add_problem(path, f"{env.how}{given} drives the {env.conveyor} conveyor at "
+                            f"{_num(env.mm_s)} mm/s, above its max_mm_s "
+                            f"{_num(limits[env.conveyor])} ({cfile}); an adjuster runs "
+                            f"under the cell's limits, like a fixed setting")
 
     if not sc.parts:
         return                                # listed by _check_scenario

@@ -131,6 +131,9 @@ class RetrieveParams:
     reach_time_s: float = 0.35           # expected time from decision to grip, for too_far
     sequence: list[str] = field(default_factory=list)   # optional part-type order
     leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the pick step
+    # price picks with the robot model fitted online from measured move times
+    # (feeder_bt/robot_fit.py); false: with the cell's nominal model (the fit is still reported)
+    learn_robot: bool = True
 
 
 @dataclass
@@ -241,6 +244,10 @@ class RobotSpec:
     # controller time per pick and per place before the arm moves: command round trips,
     # program start-up (0 for our V+ servers, which get one line per pick or place)
     command_overhead_s: float = 0.0
+    # simulated cell only: the simulated arm's true speed over the one described here (v_max
+    # times f, a_max times f squared: every move takes 1/f as long). The controller never reads
+    # it; it is how a test or a study makes the robot slower or faster than the cell says.
+    sim_speed_factor: float = 1.0
 
 
 @dataclass

@@ -172,6 +172,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (RobotSpec, "track_settle_s"): NON_NEGATIVE,
     (RobotSpec, "grip_tolerance_mm"): POSITIVE,
     (RobotSpec, "command_overhead_s"): NON_NEGATIVE,
+    (RobotSpec, "sim_speed_factor"): Range(0.1, 10),
     (LocateParams, "max_parts_per_look"): NON_NEGATIVE,
     (IoSignal, "bit"): NON_NEGATIVE,
     (GalilSpec, "baud"): POSITIVE,

@@ -28,11 +28,17 @@ class Segment:
 
 
 class Axis:
-    """Position in mm of a belt (cumulative), driven by jog and relative-move commands."""
+    """Position in mm of a belt (cumulative), driven by jog and relative-move commands.
+
+    A command above ``max_speed`` runs at ``max_speed`` — a motor saturates — and is
+    counted in ``clamped`` (never silent: the simulated HAL refuses such a command before
+    it gets here, so in a simulated run the count stays 0; the Galil emulator's raw
+    commands can still saturate the motor)."""
 
     def __init__(self, accel_mm_s2: float, max_mm_s: float) -> None:
         self.accel = accel_mm_s2
         self.max_speed = max_mm_s
+        self.clamped = 0
         self.segments: list[Segment] = [Segment(0.0, 0.0, 0.0, 0.0)]
         self.commanded = 0.0
         self.version = 0          # bumps on every new command: pending notifications re-hint
@@ -81,6 +87,16 @@ class Axis:
         return None
 
     # ---------------------------------------------------------------- commands
+    def above_limit(self, speed: float) -> bool:
+        """``speed`` (mm/s, signed) is beyond what this axis can run."""
+        return abs(speed) > self.max_speed * (1.0 + 1e-9)
+
+    def _limit(self, speed: float) -> float:
+        if self.above_limit(speed):
+            self.clamped += 1
+            return math.copysign(self.max_speed, speed)
+        return speed
+
     def _cut(self, t: float) -> tuple[float, float]:
         """Drop the planned future from ``t``; return position and speed there."""
         seg = self._seg(t)
@@ -95,7 +111,7 @@ class Axis:
 
     def jog(self, t: float, speed: float) -> float:
         """Ramp to ``speed`` (mm/s, signed); returns when the speed is reached."""
-        speed = max(-self.max_speed, min(self.max_speed, speed))
+        speed = self._limit(speed)
         p, v = self._cut(t)
         self.commanded = speed
         if abs(speed - v) < 1e-9:
@@ -110,7 +126,7 @@ class Axis:
     def move(self, t: float, distance: float, speed: float) -> float:
         """Relative trapezoidal move from rest (or from the current speed); returns its end."""
         p, v = self._cut(t)
-        speed = min(abs(speed), self.max_speed)
+        speed = self._limit(abs(speed))
         sign = 1.0 if distance >= 0 else -1.0
         d = abs(distance)
         v = v * sign

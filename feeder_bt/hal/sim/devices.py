@@ -14,6 +14,7 @@ import numpy as np
 from ...clock import SimClock
 from ...errors import HalError
 from ...jobs import DoneJob, FutureJob, Job
+from ...robot_model import RobotModel, with_speed_factor
 from ...scenario.model import CellSpec, Scenario
 from ...vision.calibration import Calibration
 from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
@@ -50,10 +51,25 @@ class SimConveyor:
         job = TimedJob(name, self.world)
         return job.at(t_end, lambda t: job.succeed(t))
 
+    def _refused(self, what: str, mm_s: float) -> Job | None:
+        """A speed above the cell's ``max_mm_s`` fails the job: the simulated belt never
+        clamps silently, so every setting runs under the same limits (issue 16)."""
+        if not self.axis.above_limit(mm_s):
+            return None
+        return DoneJob(f"{self.name}.{what}", error=HalError(
+            f"{self.name} conveyor: {abs(mm_s):g} mm/s commanded, above its max_mm_s "
+            f"{self.axis.max_speed:g} ({self.world.cell.path}); refused"))
+
     def set_speed(self, mm_s: float) -> Job:
+        refused = self._refused("set_speed", mm_s)
+        if refused is not None:
+            return refused
         return self._ends_at(f"{self.name}.set_speed", self.axis.jog(self.world.now(), mm_s))
 
     def move(self, distance_mm: float, mm_s: float) -> Job:
+        refused = self._refused("move", mm_s)
+        if refused is not None:
+            return refused
         return self._ends_at(f"{self.name}.move", self.axis.move(self.world.now(), distance_mm, mm_s))
 
     def stop(self) -> Job:
@@ -274,6 +290,9 @@ class SimHal(Hal):
 
 def make_sim_hal(scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> SimHal:
     world = World(scenario, cell, clock, seed)
+    if cell.robot.sim_speed_factor != 1.0:     # the arm as it really moves; the trees see
+        world.robot_model = RobotModel(         # only the cell's description (issue 16)
+            with_speed_factor(cell.robot, cell.robot.sim_speed_factor))
     hal = SimHal(
         conveyors={"horizontal": SimConveyor("horizontal", world.horizontal, world),
                    "incline": SimConveyor("incline", world.incline, world)},

@@ -1,0 +1,185 @@
+"""A robot model fitted online from the robot's measured move times (issue 16).
+
+The pick policies price every pick with a robot model. The cell description's model is
+nominal: the arm in front of the cell may be slower (a payload, a controller's speed
+limit, wear) or faster than it says, and a policy pricing with the wrong model trades
+moves against belt waits at the wrong rate. So the retrieve tree times every successful
+pick and place on the cell's clock, takes off the fixed parts the cell description knows
+(command overhead, settle, grip, release), and fits what is left — the arm's move — by
+recursive least squares:
+
+    move time = k * nominal arch time(d, speed %) + c
+
+``k`` is a time scale (1/k the arm's speed over the described one: effective v_max / k,
+a_max / k²) and ``c`` a constant per move (controller latency, the tick at which the cell
+sees a job end). The fit starts from the nominal model (k = 1, c = 0) as a prior, forgets
+slowly (a robot slowed by an operator is followed), and is bounded and robust:
+
+- only successful jobs are timed (a time-out or fault fails the job: no sample);
+- a pick is timed only if its part was inside the reach when the pick was commanded, so
+  the arm never waited for the part to come into reach (a tracking wait is not a move);
+- a time no bounded model could explain is rejected and counted; the rest is weighted
+  by Huber's rule, so one slow move moves the fit only a little;
+- the estimates stay within ``K_BOUNDS`` and ``C_BOUNDS``.
+
+The fitted model lives in ``ctx.extras["robot_fit"]`` (``robot_fit(ctx)``); the pick
+policies read ``pricing_model(ctx)``, and the run report shows it as ``robot_model``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .robot_model import RobotModel, with_speed_factor
+from .scenario.model import RobotSpec
+
+K_BOUNDS = (0.4, 2.5)          # the arm 2.5 times faster to 2.5 times slower than described
+C_BOUNDS = (-0.05, 0.25)       # s per move
+PRIOR_SD = (0.25, 0.02)        # how far the prior (the cell description) is trusted
+FORGET = 0.998                 # memory of about 500 moves
+HUBER = 3.0                    # residuals beyond this many scales are down-weighted
+MIN_SCALE_S = 0.004            # floor of the residual scale: the tick is 5 ms at 200 Hz
+NOISE_S = 0.01                 # a measured move's expected error (tick, timing jitter)
+
+
+class FittedRobotModel(RobotModel):
+    """The nominal model with every arch time mapped through the fit: ``k t + c``."""
+
+    def __init__(self, spec: RobotSpec, fit: RobotFit) -> None:
+        super().__init__(spec)
+        self.fit = fit
+
+    def arch_time(self, d_xy: float, speed_pct: float) -> float:
+        return self.fit.k * super().arch_time(d_xy, speed_pct) + self.fit.c
+
+    def arch_times(self, d_xy: np.ndarray, speed_pct: float) -> np.ndarray:
+        return self.fit.k * super().arch_times(d_xy, speed_pct) + self.fit.c
+
+
+@dataclass
+class Timing:
+    """A pick or place as it was commanded: what the fit needs when it ends."""
+
+    kind: str                          # "pick" | "place"
+    t0: float
+    start: tuple[float, float]         # the arm's pose when commanded
+    speed_pct: float
+    usable: bool = True                # pick: the part was in reach (no wait possible)
+    end: tuple[float, float] | None = None     # place: where it goes
+    belt_mm_s: float = 0.0
+    tracking: bool = True
+    tool_y: float = 0.0
+
+
+class RobotFit:
+    """Recursive least squares of ``(k, c)`` from timed moves; see the module's doc."""
+
+    def __init__(self, spec: RobotSpec, learning: bool = True) -> None:
+        self.spec = spec
+        self.learning = learning
+        self.nominal = RobotModel(spec)
+        self.model = FittedRobotModel(spec, self)
+        self.theta = np.array([1.0, 0.0])
+        self.P0 = np.diag(np.square(PRIOR_SD))
+        self.P = self.P0.copy()
+        self.scale = 0.05              # robust residual scale, s (generous at first)
+        self.mean_sq = 0.0
+        self.samples: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+
+    @property
+    def k(self) -> float:
+        return float(self.theta[0])
+
+    @property
+    def c(self) -> float:
+        return float(self.theta[1])
+
+    # ---------------------------------------------------------------- the fit
+    def observe(self, kind: str, d_xy: float, speed_pct: float, move_s: float) -> bool:
+        """One measured move of ``d_xy`` mm at ``speed_pct``: update the fit; False if
+        the time was rejected as one no bounded model could explain."""
+        t_nom = self.nominal.arch_time(d_xy, speed_pct)
+        lo = K_BOUNDS[0] * t_nom + C_BOUNDS[0]
+        hi = K_BOUNDS[1] * t_nom + C_BOUNDS[1]
+        if not (math.isfinite(move_s) and lo <= move_s <= hi):
+            self.rejected["implausible"] += 1
+            return False
+        phi = np.array([t_nom, 1.0])
+        r = move_s - float(phi @ self.theta)
+        s = max(self.scale, MIN_SCALE_S)
+        w = 1.0 if abs(r) <= HUBER * s else HUBER * s / abs(r)
+        p_phi = self.P @ phi
+        gain = p_phi / (NOISE_S ** 2 / w + float(phi @ p_phi))
+        self.theta = self.theta + gain * r
+        self.P = (self.P - np.outer(gain, p_phi)) / FORGET
+        self.P = 0.5 * (self.P + self.P.T)
+        if np.trace(self.P) > np.trace(self.P0):     # no wind-up while nothing is learnt
+            self.P *= np.trace(self.P0) / np.trace(self.P)
+        self.theta = np.array([min(max(self.k, K_BOUNDS[0]), K_BOUNDS[1]),
+                               min(max(self.c, C_BOUNDS[0]), C_BOUNDS[1])])
+        self.scale = 0.97 * self.scale + 0.03 * 1.25 * min(abs(r), 5 * s)
+        self.mean_sq = 0.97 * self.mean_sq + 0.03 * r * r
+        self.samples[kind] += 1
+        return True
+
+    # ---------------------------------------------------------------- timing jobs
+    def pick_done(self, timing: Timing, t_end: float, grip_x: float) -> None:
+        """A pick that gripped at ``grip_x`` (the tool point along the belt) ended at
+        ``t_end``: its move ran from ``timing.start`` to where the part was at arrival."""
+        if not timing.usable:
+            self.rejected["may_have_waited"] += 1
+            return
+        sp = self.spec
+        hold = (sp.track_settle_s if timing.tracking else 0.0) + sp.grip_s
+        arrive_x = grip_x - (timing.belt_mm_s * hold if timing.tracking else 0.0)
+        d = math.dist(timing.start, (arrive_x, timing.tool_y))
+        self.observe("pick", d, timing.speed_pct,
+                     t_end - timing.t0 - sp.command_overhead_s - hold)
+
+    def place_done(self, timing: Timing, t_end: float) -> None:
+        sp = self.spec
+        assert timing.end is not None
+        self.observe("place", math.dist(timing.start, timing.end), timing.speed_pct,
+                     t_end - timing.t0 - sp.command_overhead_s - sp.release_s)
+
+    # ---------------------------------------------------------------- the report
+    def summary(self) -> dict[str, Any]:
+        """The report's ``robot_model``: nominal against fitted, and what it was fitted on."""
+        sp = self.spec
+        eff = with_speed_factor(sp, 1.0 / self.k)
+        return {
+            "learning": self.learning,
+            "samples": sum(self.samples.values()),
+            "picks": self.samples["pick"], "places": self.samples["place"],
+            "rejected": dict(self.rejected),
+            "nominal": {"v_max_mm_s": sp.v_max_mm_s, "a_max_mm_s2": sp.a_max_mm_s2,
+                        "time_scale": 1.0, "offset_s": 0.0,
+                        "standard_cycle_s": round(self.nominal.standard_cycle(), 4)},
+            "fitted": {"v_max_mm_s": round(eff.v_max_mm_s, 1),
+                       "a_max_mm_s2": round(eff.a_max_mm_s2, 1),
+                       "time_scale": round(self.k, 4), "offset_s": round(self.c, 4),
+                       "standard_cycle_s": round(self.model.standard_cycle(), 4),
+                       "rms_residual_s": round(math.sqrt(self.mean_sq), 4)},
+        }
+
+
+def robot_fit(ctx: Any) -> RobotFit:
+    """The run's fit (one per scenario), created on first use."""
+    fit = ctx.extras.get("robot_fit")
+    if fit is None:
+        fit = ctx.extras["robot_fit"] = RobotFit(ctx.cell.robot,
+                                                 ctx.scenario.retrieve.learn_robot)
+    return fit
+
+
+def pricing_model(ctx: Any) -> RobotModel:
+    """The model a pick policy prices with: the fitted one, or the nominal one if the
+    scenario says ``retrieve.learn_robot: false``."""
+    fit = robot_fit(ctx)
+    return fit.model if fit.learning else fit.nominal
