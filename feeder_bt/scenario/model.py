@@ -316,9 +316,9 @@ class SimImperfections:
     encoder_scale_pct: float = 0.1       # true counts/mm differ from the cell's by this
     robot_sample_s: float = 0.001        # the robot's belt channel: sampled and held
     # the camera's true mapping against the cell's calibration
-    calib_offset_mm: tuple[float, float] = (0.3, -0.3)
-    calib_scale_pct: float = 0.05
-    calib_rotation_deg: float = 0.05
+    calib_offset_mm: tuple[float, float] = (0.5, -0.4)
+    calib_scale_pct: float = 0.1
+    calib_rotation_deg: float = 0.1
     # landing on the horizontal belt (off the ramp, or dropped by the robot)
     land_slide_mm: float = 2.0           # sigma of the slide along and across
     land_turn_deg: float = 3.0           # sigma of the turn while settling
