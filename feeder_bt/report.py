@@ -108,6 +108,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed_touching": world.counts["landed_touching"],
+                           # the simulator's imperfections at work (docs/simulator.md)
+                           "landed_clumped": world.counts["landed_clumped"],
+                           "grip_slipped": world.counts["grip_slipped"],
                            "placed": dict(world.placed_by_type),
                            # commands a belt ran slower than asked (0: the HAL refuses them)
                            "axis_clamped": {"horizontal": world.horizontal.clamped,

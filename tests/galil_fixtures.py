@@ -19,7 +19,7 @@ from feeder_bt.hal.galil import GalilController, GalilConveyor, GalilIO, make_ga
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.jobs import Job
 from feeder_bt.scenario.loader import load_scenario
-from feeder_bt.scenario.model import CellSpec, IoSignal
+from feeder_bt.scenario.model import CellSpec, IoSignal, SimImperfections
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "lenses.yaml"
 JAM_BIT = 3                  # a Galil input added to the cell for the tests
@@ -43,6 +43,9 @@ def wait_job(job: Job, timeout: float = 3.0) -> Job:
 
 def make_cell() -> tuple[object, CellSpec]:
     sc, cell = load_scenario(SCENARIO)
+    # the ideal cell: the tests compare the driver's mm with the emulated axis's, which a
+    # simulated encoder scale error (docs/simulator.md) would set 0.1 % apart
+    cell.sim = SimImperfections(ideal=True)
     cell.io["jam"] = IoSignal("galil", JAM_BIT, "in")
     cell.galil.timeout_s = 0.5
     return sc, cell

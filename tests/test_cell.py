@@ -245,13 +245,32 @@ def test_stop_from_paused_reaches_stopped(rig):
 def test_setup_failure_faults_the_cell(rig):
     rig.cell.start()
     rig.tick()
-    fail(rig.hal, "robot", "move_safe", ServoTimeout("joint 1"))
+    # (not a servo time-out: set-up runs the recovery program for that, as clean-up does)
+    fail(rig.hal, "robot", "move_safe", HalError("joint 1"))
     rig.tick()
     assert rig.cell.state is CellState.FAULTING
     assert rig.cell.fault_reason == "set-up failed: joint 1"
     rig.drive_until(CellState.FAULT, max_s=1.0)
     rig.cell.reset()
     assert rig.cell.state is CellState.STOPPED
+
+
+def test_setup_runs_the_recovery_program_when_power_is_off(rig):
+    """An e-stop between a servo time-out and its recovery leaves the arm without power:
+    the next set-up's move to safe is refused, so it runs the recovery program first."""
+    rig.cell.start()
+    rig.tick()
+    since = len(rig.hal.jobs)
+    fail(rig.hal, "robot", "move_safe", ServoTimeout("robot power is off"))
+    rig.tick()
+    assert rig.cell.state is CellState.STARTING
+    pending(rig.hal, "robot", "recover").succeed()
+    rig.tick()
+    pending(rig.hal, "robot", "move_safe").succeed()
+    rig.tick()
+    assert rig.cell.state is CellState.STARTING
+    assert [m for m in rig.hal.methods()[since - 1:] if m.startswith("robot.")] == [
+        "robot.move_safe", "robot.recover", "robot.move_safe"]
 
 
 def test_cleanup_failure_ends_in_fault(rig):

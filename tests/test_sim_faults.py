@@ -28,6 +28,7 @@ from feeder_bt.hal.sim.faults import POWER_OFF, FaultInjector, inject_faults
 from feeder_bt.jobs import JobState
 from feeder_bt.scenario import load_scenario
 from feeder_bt.scenario.faults import FaultPlanSpec, FaultRate, ScriptedFault
+from feeder_bt.scenario.model import SimImperfections
 
 EPS = 1e-6
 WARM_S = 30.0          # belts running this long put pickable parts in the robot's reach
@@ -35,7 +36,10 @@ WARM_S = 30.0          # belts running this long put pickable parts in the robot
 
 @pytest.fixture(scope="module")
 def lenses():
-    return load_scenario("scenarios/lenses.yaml")
+    """The ideal cell: the rig plays the locator by the truth and predicts grip times with
+    the nominal robot model (the imperfections have their own tests)."""
+    scenario, cell = load_scenario("scenarios/lenses.yaml")
+    return scenario, dataclasses.replace(cell, sim=SimImperfections(ideal=True))
 
 
 class Rig:

@@ -131,3 +131,12 @@ def part(x_mm: float, y_mm: float = 0.0, latch: int = 0, located_at: float = 0.0
          type: str = "lens", angle_deg: float = 0.0) -> Part:
     return Part(id=next(_ids), type=type, x_mm=x_mm, y_mm=y_mm, angle_deg=angle_deg,
                 latch=latch, located_at=located_at, pose="flat")
+
+
+def ideal_cell(dest: Path, cell: str = "cells/sim.yaml") -> str:
+    """A copy of ``cell`` with the simulator's imperfections off (``sim: {ideal: true}``),
+    for tests whose subject is not the simulator and that need its ideal timing."""
+    src = Path(__file__).resolve().parent.parent / cell
+    out = Path(dest) / f"ideal_{Path(cell).name}"
+    out.write_text(src.read_text() + "\nsim: {ideal: true}\n")
+    return str(out)

@@ -47,8 +47,10 @@ class Plant:
         self.clock = FollowClock(rate)
         self.seed = seed
         self.lock = threading.RLock()
-        self.cpm = cell.encoder.counts_per_mm
         self._build(scenario)
+        # the counts the belts' encoders truly give per mm (the simulator's scale error:
+        # docs/simulator.md), the same the robot's belt channel counts
+        self.cpm = self.world.imperfect.true_cpm
         self._trigger_listeners: list[Callable[[float], None]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -120,7 +122,8 @@ class Plant:
             return 0
         with self.lock:
             t = self.world.now() if t is None else t
-            return wrap(round(axis.pos(t) * self.cpm), self.cell.encoder.conveyor_bits)
+            return wrap(self.world.imperfect.galil_counts(axis.pos(t), t),
+                        self.cell.encoder.conveyor_bits)
 
     def velocity_counts(self, letter: str) -> float:
         axis = self.axis(letter)

@@ -316,6 +316,35 @@ class AdeptSpec:
 
 
 @dataclass
+class SimImperfections:
+    """What makes the simulated cell imperfect (``hal/sim/imperfect.py``); every figure
+    and its source is in docs/simulator.md. ``ideal: true`` turns them all off; a zero
+    turns off one."""
+
+    ideal: bool = False
+    # encoders (both counters count the same belt encoder)
+    encoder_noise_counts: float = 0.5    # sigma of a reading, counts, before rounding
+    encoder_scale_pct: float = 0.1       # true counts/mm differ from the cell's by this
+    robot_sample_s: float = 0.001        # the robot's belt channel: sampled and held
+    # the camera's true mapping against the cell's calibration
+    calib_offset_mm: tuple[float, float] = (0.5, -0.4)
+    calib_scale_pct: float = 0.1
+    calib_rotation_deg: float = 0.1
+    # landing on the horizontal belt (off the ramp, or dropped by the robot)
+    land_slide_mm: float = 2.0           # sigma of the slide along and across
+    land_turn_deg: float = 3.0           # sigma of the turn while settling
+    drop_slide_mm: float = 4.0           # the same for a part the robot drops
+    settle_s: float = 0.25               # the slide's duration
+    clump_prob: float = 0.05             # a part lands against or on the one before it
+    # grip: P(success) = grip_p_centre / (1 + exp((d - d50) / width)), d50 = the cell's
+    # robot.grip_tolerance_mm
+    grip_p_centre: float = 0.995
+    grip_width_mm: float = 0.5
+    # robot: each move's time is the nominal one times 1 + N(0, cv)
+    robot_time_cv: float = 0.02
+
+
+@dataclass
 class CellSpec:
     name: str
     path: Path
@@ -330,3 +359,4 @@ class CellSpec:
     io: dict[str, IoSignal] = field(default_factory=dict)
     galil: GalilSpec = field(default_factory=GalilSpec)
     adept: AdeptSpec = field(default_factory=AdeptSpec)
+    sim: SimImperfections = field(default_factory=SimImperfections)   # simulated cell only

@@ -277,8 +277,10 @@ def _sim_cell(cell: CellSpec, seed: int, counts_per_mm: float | None = None):
     if counts_per_mm is not None:
         if not counts_per_mm > 0:
             raise CalibrationError(f"--sim-counts-per-mm must be > 0, got {counts_per_mm:g}")
+        # the simulated belt truly gives this many counts per mm: no scale error on top
         cell = dataclasses.replace(cell, encoder=dataclasses.replace(
-            cell.encoder, counts_per_mm=counts_per_mm))
+            cell.encoder, counts_per_mm=counts_per_mm), sim=dataclasses.replace(
+            cell.sim, encoder_scale_pct=0.0))
     empty = Scenario(name="calibration", path=Path("-"), cell_path=Path(cell.path), parts={},
                      hopper={}, vision=VisionRecipe())
     clock = SimClock()

@@ -57,7 +57,8 @@ def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
     vision = ctx.scenario.vision
     steps: list[py_trees.behaviour.Behaviour] = [
         SetRobotSpeed("robot speed", ctx),
-        MoveSafe("robot clear of the belt", ctx),
+        # an e-stop can come between a servo time-out and its recovery: recover first
+        _robot_to_safe(ctx),
     ] if robot else []
     steps.append(StopConveyors("stop conveyors", ctx))
     if vision.backlight:

@@ -19,6 +19,7 @@ from ...scenario.model import CellSpec, Scenario
 from ...vision.calibration import Calibration
 from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
 from .axis import Axis
+from .imperfect import true_calibration
 from .render import Renderer
 from .world import World
 
@@ -110,7 +111,8 @@ class SimConveyor:
 class SimCamera:
     def __init__(self, world: World, cell: CellSpec, seed: int) -> None:
         self.world, self.cell, self.seed = world, cell, seed
-        self.renderer = Renderer(cell.camera, truth=cell.camera.sim_truth)
+        # the world's true mapping (a calibration residual): the renderer's, never the locator's
+        self.renderer = Renderer(cell.camera, truth=true_calibration(cell))
         self.calibration = Calibration(cell.camera.calibration)
         cam = cell.camera
         corners = self.calibration.px_to_mm(np.array(
@@ -185,7 +187,8 @@ class SimRobot:
         if err:
             return DoneJob("robot.pick", error=err)
         try:
-            _, t_grip = w.plan_pick(target, w.now() + w.cell.robot.command_overhead_s)
+            _, t_grip = w.plan_pick(target, w.now() + w.cell.robot.command_overhead_s,
+                                    scale=w.imperfect.time_factor())
         except HalError as e:
             return DoneJob("robot.pick", error=e)
         return self._run("robot.pick", t_grip - w.now(), lambda t: w.grip(target, t))
@@ -193,8 +196,8 @@ class SimRobot:
     def place(self, pose: Pose) -> Job:
         w = self.world
         d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
-        duration = (w.cell.robot.command_overhead_s + w.robot_model.arch_time(d, w.robot_speed_pct)
-                    + w.cell.robot.release_s)
+        duration = (w.cell.robot.command_overhead_s + w.cell.robot.release_s
+                    + w.imperfect.time_factor() * w.robot_model.arch_time(d, w.robot_speed_pct))
         job = self._run("robot.place", duration, lambda t: w.release(pose, t))
         if isinstance(job, TimedJob):     # a place is never abandoned: the part is let go
             job.on_cancel = lambda: job.succeed(w.release(pose, w.now()))
@@ -208,7 +211,8 @@ class SimRobot:
             w.robot_pose = pose
             return pose
 
-        return self._run("robot.move", w.robot_model.arch_time(d, w.robot_speed_pct), arrive)
+        return self._run("robot.move", w.imperfect.time_factor()
+                         * w.robot_model.arch_time(d, w.robot_speed_pct), arrive)
 
     def move_safe(self) -> Job:
         return self.move_to(Pose(*self.world.cell.robot.safe_mm))

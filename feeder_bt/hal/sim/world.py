@@ -47,6 +47,7 @@ from ...robot_model import RobotModel
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import Held, PickResult, PickTarget, Pose
 from .axis import Axis
+from .imperfect import Imperfections
 
 PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed")
 LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp
@@ -73,6 +74,11 @@ class SimPart:
     angle: float = 0.0
     touching: set[int] = field(default_factory=set)
     held_error_deg: float = 0.0
+    # settling after a landing (imperfect.py): the rest pose is (x0, y); until settle_end
+    # the part is still sliding towards it, short of it by slide * (1 - s)^2
+    slide: tuple[float, float] = (0.0, 0.0)
+    settle_t0: float = 0.0
+    settle_end: float = -math.inf
 
     @property
     def singulated(self) -> bool:
@@ -103,6 +109,8 @@ class World:
         self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
         self.cpm = cell.encoder.counts_per_mm
         self.robot_model = RobotModel(cell.robot)
+        self.imperfect = Imperfections(cell.sim, self.cpm, cell.robot.grip_tolerance_mm, seed)
+        self._last_landed: int | None = None
         self.t = clock.now()
 
         # where the parts are
@@ -278,6 +286,7 @@ class World:
         land_x = part.x0
         part.x0 = land_x - self.horizontal.pos(t)
         self._relocate(part, "incline", "horizontal")
+        self._imperfect_landing(part, t, dropped=False)
         self._settle(part, t)
         self.on_horizontal[pid] = part
         self.counts["landed"] += 1
@@ -330,7 +339,35 @@ class World:
         return self._outlines[key]
 
     def part_xy(self, part: SimPart, t: float) -> tuple[float, float]:
+        if t < part.settle_end:                 # still sliding to its rest pose
+            left = (1.0 - (t - part.settle_t0) / (part.settle_end - part.settle_t0)) ** 2
+            return (part.x0 + self.horizontal.pos(t) - part.slide[0] * left,
+                    part.y - part.slide[1] * left)
         return part.x0 + self.horizontal.pos(t), part.y
+
+    def _imperfect_landing(self, part: SimPart, t: float, dropped: bool) -> None:
+        """A landing part may come down against or on the one before it (parts leave the
+        hopper in clumps), then slides and turns a little while it settles; its touching
+        is judged at its rest pose. Nothing happens on an ideal cell."""
+        imp = self.imperfect
+        if imp.ideal:
+            return
+        prev = self.on_horizontal.get(self._last_landed) if not dropped else None
+        if not dropped:
+            self._last_landed = part.id
+        if prev is not None and (c := imp.clump()) is not None:
+            ang, frac = c
+            dist = frac * (part.radius + prev.radius)
+            part.x0 = prev.x0 + dist * math.cos(ang)
+            part.y = prev.y + dist * math.sin(ang)
+            self.counts["landed_clumped"] += 1
+        dx, dy, turn, settle = imp.landing(dropped)
+        y_rest = min(max(part.y + dy, EDGE_MARGIN_MM), self.h_width - EDGE_MARGIN_MM)
+        part.slide = (dx, y_rest - part.y)
+        part.x0 += dx
+        part.y = y_rest
+        part.angle = wrap_deg(part.angle + turn)
+        part.settle_t0, part.settle_end = t, (t + settle if settle > 0 else -math.inf)
 
     def _touch(self, a: SimPart, b: SimPart, t: float) -> bool:
         """Whether two parts on the belt are closer than ``TOUCH_GAP_MM``. Convex outlines:
@@ -357,13 +394,15 @@ class World:
     # ------------------------------------------------------------------ sensing
     def galil_count(self, t: float | None = None) -> int:
         t = self.now() if t is None else t
-        return wrap(round(self.horizontal.pos(t) * self.cpm), self.cell.encoder.conveyor_bits)
+        return wrap(self.imperfect.galil_counts(self.horizontal.pos(t), t),
+                    self.cell.encoder.conveyor_bits)
 
     def robot_count(self, t: float | None = None) -> int:
         t = self.now() if t is None else t
         enc = self.cell.encoder
-        return wrap(enc.robot_start + self.robot_slip + round(self.horizontal.pos(t) * self.cpm),
-                    enc.robot_bits)
+        ts = self.imperfect.robot_sample_time(t)
+        counts = self.imperfect.robot_counts(self.horizontal.pos(ts), ts)
+        return wrap(enc.robot_start + self.robot_slip + counts, enc.robot_bits)
 
     def visible_outlines(self, t: float, x_range: tuple[float, float]) -> list[np.ndarray]:
         """Outlines (belt frame, mm) of parts near the camera window at ``t``, for rendering."""
@@ -422,15 +461,17 @@ class World:
             x += moved / self.cpm
         return x, target.y_mm + oy
 
-    def plan_pick(self, target: PickTarget, t0: float) -> tuple[float, float]:
-        """Intercept: the arrival time and grip time for a pick started at ``t0``."""
+    def plan_pick(self, target: PickTarget, t0: float, scale: float = 1.0
+                  ) -> tuple[float, float]:
+        """Intercept: the arrival time and grip time for a pick started at ``t0`` (the
+        move taking ``scale`` times the nominal model's time)."""
         spec = self.cell.robot
         px, py = self.robot_pose.x, self.robot_pose.y
         t_arr = t0
         for _ in range(6):
             cx, cy = self.commanded_xy(target, t_arr)
-            t_arr = t0 + self.robot_model.arch_time(math.hypot(cx - px, cy - py),
-                                                    self.robot_speed_pct)
+            t_arr = t0 + scale * self.robot_model.arch_time(math.hypot(cx - px, cy - py),
+                                                            self.robot_speed_pct)
         cx, cy = self.commanded_xy(target, t_arr)
         if not self.robot_model.reachable(cx, cy):
             t_enter = self._time_entering_reach(target, cy, t0)
@@ -456,8 +497,9 @@ class World:
         return self.horizontal.time_at(self.horizontal.pos(t0) + (x_enter - cx), t0)
 
     def grip(self, target: PickTarget, t: float) -> PickResult:
-        """Judge a grip against the truth: the nearest part must be within tolerance,
-        pickable and singulated."""
+        """Judge a grip against the truth: the nearest part must be under the cup,
+        pickable and singulated, and the grip holds with a probability that falls with
+        the cup's offset from its centre (``Imperfections.grip_probability``)."""
         cx, cy = self.commanded_xy(target, t)
         self.robot_pose = Pose(cx, cy, 0.0, target.angle_deg)
         if self.gripper is not None:      # one suction cup: the held part stays held
@@ -469,14 +511,16 @@ class World:
             d = math.hypot(x - cx, y - cy)
             if d < best_d:
                 best, best_d = part, d
-        tol = self.cell.robot.grip_tolerance_mm
-        if best is None or best_d > tol:
+        if best is None or best_d > self.imperfect.grip_reach_mm():
             self.counts["grip_empty"] += 1
             raise MissedGrab(f"nothing under the gripper at x={cx:.1f} y={cy:.1f} mm")
         if not best.pickable or not best.singulated:
             self.counts["grip_refused"] += 1
             why = "not singulated" if best.pickable else f"lying {best.pose}"
             raise MissedGrab(f"part under the gripper is {why}")
+        if not self.imperfect.grip_holds(best_d):
+            self.counts["grip_slipped"] += 1
+            raise MissedGrab(f"the grip did not hold ({best_d:.1f} mm off the centre)")
         self.on_horizontal.pop(best.id)
         self._untouch(best)
         self._relocate(best, "horizontal", "gripper")
@@ -522,6 +566,7 @@ class World:
         if 0.0 <= x < self.h_len and 0.0 <= y <= self.h_width:
             self._relocate(part, "gripper", "horizontal")
             part.x0, part.y = x - self.horizontal.pos(t), y
+            self._imperfect_landing(part, t, dropped=True)
             self._settle(part, t)               # it may land on or against another
             self.on_horizontal[pid] = part
         else:
