@@ -212,7 +212,18 @@ def summary(report: dict) -> str:
             f" ({report['wall_seconds']:.1f} s wall)\n"
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
-            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}")
+            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
+            + _ceiling_line(report))
+
+
+def _ceiling_line(report: dict) -> str:
+    """The ceiling: the lower of the robot and supply bounds, and how near the run came."""
+    if "ceiling_ppm" not in report:
+        return ""
+    pct = report["of_ceiling_pct"]
+    return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
+            f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f})"
+            + (f": {pct:.0f} % of it" if pct is not None else ""))
 
 
 def cmd_tree(args: argparse.Namespace) -> int:
