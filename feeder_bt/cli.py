@@ -110,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_db_options(r)
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
+    r.add_argument("--supply", metavar="PLAN.yaml",
+                   help="simulated cell: bring parts and change conditions as a supply plan "
+                        "says (docs/supply.md)")
     add_ui_options(r)
     from .run import add_plant_options
     add_plant_options(r)
@@ -122,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--part", default="feeding", choices=["feeding", "setup", "cleanup"],
                    help="which tree (default: the four feeding trees)")
 
-    c = sub.add_parser("check", help="validate scenarios, cell descriptions and fault plans "
+    c = sub.add_parser("check", help="validate scenarios, cell descriptions, fault and supply "
+                       "plans "
                        "(each file's kind is told by its keys)")
     c.add_argument("files", nargs="+")
     c.add_argument("--images", metavar="DIR", help="also run each scenario's recipe on the "
@@ -152,7 +156,8 @@ def _check_run_args(args: argparse.Namespace) -> None:
         raise UsageError("--ui serves operators in real time: drop --fast")
     for path, kind, how in ((args.scenario, "scenario", ""),
                             (args.cell, "cell", "--cell"),
-                            (args.faults, "faults", "--faults")):
+                            (args.faults, "faults", "--faults"),
+                            (args.supply, "supply", "--supply")):
         if path is not None:
             expect_kind(path, kind, how)
 
@@ -167,7 +172,9 @@ def expect_kind(path: str, kind: str, how: str) -> None:
     where = {"scenario": "give it as the first argument of `feeder run`",
              "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
              "faults": f"give it with --faults after a scenario "
-                       f"(feeder run SCENARIO --faults {path})"}
+                       f"(feeder run SCENARIO --faults {path})",
+             "supply": f"give it with --supply after a scenario "
+                       f"(feeder run SCENARIO --supply {path})"}
     how = f" ({how})" if how else ""
     raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
                       f"{where[found]}", file=path)
@@ -180,7 +187,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
-                                faults=args.faults, plant=plant_options(args)))
+                                faults=args.faults, supply=args.supply,
+                                plant=plant_options(args)))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
@@ -246,7 +254,9 @@ def cmd_check(args: argparse.Namespace) -> int:
     from .errors import ConfigError
     from .scenario.loader import load_cell, load_fault_plan, load_scenario
     from .scenario.schema import describe, file_kind, problems
-    loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
+    from .scenario.supply import load_supply_plan
+    loaders = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan,
+               "supply": load_supply_plan}
     bad = 0
     for path in args.files:
         told = file_kind(path)          # None: not a mapping of keys (the loader says why)

@@ -114,6 +114,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     }
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
+                           "landed": world.counts["landed"],
                            "landed_touching": world.counts["landed_touching"],
                            "placed": dict(world.placed_by_type)}
     return report
