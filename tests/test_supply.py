@@ -237,7 +237,8 @@ def test_a_friction_ramp_steps_the_lift(lenses):
     assert hal.world.lift == pytest.approx(0.75)
     _to(hal, clock, 40.0)
     assert hal.world.lift == pytest.approx(0.5)
-    assert [e["kind"] for e in driver.log] == ["friction"] * 4
+    assert [e["detail"] for e in driver.log] == [
+        "incline lift ramps from 100% to 50% of its nominal rate over 20 s"]
     hal.close()
 
 

@@ -105,19 +105,21 @@ class SupplyDriver:
     # ------------------------------------------------------------------ friction, operator
     def _friction(self, t: float, lift: float, ramp_s: float) -> None:
         start = self.world.lift
-        steps = max(1, math.ceil(ramp_s / RAMP_STEP_S)) if ramp_s > 0 else 0
-        if steps == 0:
-            self._set_lift(t, lift)
+        if ramp_s <= 0:
+            self._set_lift(lift)
+            self._note(t, "friction", f"incline lifts {lift:.0%} of its nominal rate")
             return
+        steps = max(1, math.ceil(ramp_s / RAMP_STEP_S))
+        self._note(t, "friction", f"incline lift ramps from {start:.0%} to {lift:.0%} of its "
+                                  f"nominal rate over {ramp_s:g} s")
         for k in range(1, steps + 1):
             value = start + (lift - start) * k / steps
             self.world.schedule(t + ramp_s * k / steps,
-                                lambda now, v=value: self._set_lift(now, v))
+                                lambda now, v=value: self._set_lift(v))
 
-    def _set_lift(self, t: float, lift: float) -> None:
+    def _set_lift(self, lift: float) -> None:
         self.world.lift = lift
         self.world.redraw_release()
-        self._note(t, "friction", f"incline lifts {lift:.0%} of its nominal rate")
 
     def _override(self, t: float, pct: float) -> None:
         self.world.speed_override_pct = pct
