@@ -141,6 +141,19 @@ def test_schema_follows_the_loaders_models():
     assert (lift["minimum"], lift["maximum"]) == (0, 2)
 
 
+@pytest.mark.parametrize("path", PLANS, ids=lambda p: p.name)
+def test_shipped_plans_are_valid_against_the_schema(path):
+    import jsonschema
+    import yaml
+    s = schema("supply")
+    jsonschema.Draft7Validator.check_schema(s)
+    data = yaml.safe_load(path.read_text())
+    assert list(jsonschema.Draft7Validator(s).iter_errors(data)) == []
+    data["totes"] = {"every_s": 60, "parts": 5, "mix": {"lens": -1}, "evry_s": 1}
+    found = {e.message for e in jsonschema.Draft7Validator(s).iter_errors(data)}
+    assert any("evry_s" in m for m in found) and any("-1" in m for m in found)
+
+
 @pytest.mark.parametrize("text, where, what", [
     ("tots: {every_s: 60, parts: 10}\n", "p.yaml:1: tots",
      "unknown key 'tots' (did you mean 'totes'?)"),

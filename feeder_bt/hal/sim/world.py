@@ -535,7 +535,7 @@ class World:
     @property
     def robot_speed_pct(self) -> float:
         """The speed the robot moves at: the commanded % times the operator's override."""
-        return self._speed_cmd_pct * self.speed_override_pct / 100.0
+        return self._speed_cmd_pct * (self.speed_override_pct / 100.0)   # exact at 100 %
 
     @robot_speed_pct.setter
     def robot_speed_pct(self, pct: float) -> None:
