@@ -110,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_db_options(r)
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
+    r.add_argument("--supply", metavar="PLAN.yaml",
+                   help="simulated cell: bring parts and change conditions as a supply plan "
+                        "says (docs/supply.md)")
     add_ui_options(r)
     from .run import add_plant_options
     add_plant_options(r)
@@ -122,7 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--part", default="feeding", choices=["feeding", "setup", "cleanup"],
                    help="which tree (default: the four feeding trees)")
 
-    c = sub.add_parser("check", help="validate scenarios, cell descriptions and fault plans "
+    c = sub.add_parser("check", help="validate scenarios, cell descriptions, fault and supply "
+                       "plans "
                        "(each file's kind is told by its keys)")
     c.add_argument("files", nargs="+")
     c.add_argument("--images", metavar="DIR", help="also run each scenario's recipe on the "
@@ -152,7 +156,8 @@ def _check_run_args(args: argparse.Namespace) -> None:
         raise UsageError("--ui serves operators in real time: drop --fast")
     for path, kind, how in ((args.scenario, "scenario", ""),
                             (args.cell, "cell", "--cell"),
-                            (args.faults, "faults", "--faults")):
+                            (args.faults, "faults", "--faults"),
+                            (args.supply, "supply", "--supply")):
         if path is not None:
             expect_kind(path, kind, how)
 
@@ -166,7 +171,9 @@ def expect_kind(path: str, kind: str, how: str) -> None:
     where = {"scenario": "give it as the first argument of `feeder run`",
              "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
              "faults": f"give it with --faults after a scenario "
-                       f"(feeder run SCENARIO --faults {path})"}
+                       f"(feeder run SCENARIO --faults {path})",
+             "supply": f"give it with --supply after a scenario "
+                       f"(feeder run SCENARIO --supply {path})"}
     how = f" ({how})" if how else ""
     raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
                       f"{where[found]}", file=path)
@@ -179,7 +186,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
-                                faults=args.faults, plant=plant_options(args)))
+                                faults=args.faults, supply=args.supply,
+                                plant=plant_options(args)))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
@@ -211,7 +219,18 @@ def summary(report: dict) -> str:
             f" ({report['wall_seconds']:.1f} s wall)\n"
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
-            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}")
+            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
+            + _ceiling_line(report))
+
+
+def _ceiling_line(report: dict) -> str:
+    """The ceiling: the lower of the robot and supply bounds, and how near the run came."""
+    if "ceiling_ppm" not in report:
+        return ""
+    pct = report["of_ceiling_pct"]
+    return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
+            f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f})"
+            + (f": {pct:.0f} % of it" if pct is not None else ""))
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

@@ -11,6 +11,7 @@ import numpy as np
 from .cell import Cell
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
+from .supply_bound import ceiling, supply_bound_ppm
 from .ticker import Ticker
 
 
@@ -46,6 +47,18 @@ def robot_bound(cell_spec: CellSpec, scenario: Scenario,
     return cycle, 60.0 / cycle
 
 
+def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds: float
+           ) -> dict[str, Any]:
+    """The supply bound (``feeder_bt.supply_bound``) beside the robot's; the lower is the
+    ceiling, and parts/min as a % of it."""
+    supply = supply_bound_ppm(located_in_reach, feed_seconds)
+    which, ceil = ceiling(robot_ppm, supply)
+    ppm = retrieved * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
+    return {"supply_bound_ppm": round(supply, 3), "ceiling": which,
+            "ceiling_ppm": round(ceil, 3),
+            "of_ceiling_pct": round(100.0 * ppm / ceil, 1) if ceil > 0 else None}
+
+
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
                  feed_seconds: float, wall_seconds: float, interrupted: bool = False
                  ) -> dict[str, Any]:
@@ -71,6 +84,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "misplaced": dict(world.misplaced_by_type) if world else None,
         "dropped": s.counts["dropped"],
     }
+    if world is not None:                 # every part that entered the cell, and left it
+        parts["supplied"] = world.total
+        parts["shipped"] = world.counts["shipped"]
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario) if cell.scenario
@@ -89,6 +105,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "parts_per_minute": round(total * 60.0 / feed_seconds, 3) if feed_seconds > 0 else 0.0,
         "robot_bound_ppm": round(bound_ppm, 3),
         "robot_bound_cycle_s": round(bound_cycle, 4),
+        **bounds(s.counts["located_in_reach"], bound_ppm, total, feed_seconds),
         "parts": parts,
         "faults": dict(s.faults),
         "recoveries": dict(s.recoveries),
@@ -107,6 +124,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
             report["robot_model"]["sim_speed_factor"] = cell.cell.robot.sim_speed_factor
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
+                           "landed": world.counts["landed"],
                            "landed_touching": world.counts["landed_touching"],
                            # the simulator's imperfections at work (docs/simulator.md)
                            "landed_clumped": world.counts["landed_clumped"],

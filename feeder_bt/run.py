@@ -42,6 +42,7 @@ class RunOptions:
     users: str | None = None       # the UI's users file (default: feeder_bt.ui.users)
     start: bool | None = None      # start feeding at once; None: yes, unless --ui
     faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
+    supply: str | None = None      # a supply plan (docs/supply.md) for the simulated cell
     plant: Any = None              # PlantOptions: --part-server / --opcua (docs/plant.md)
 
 
@@ -258,12 +259,26 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             raise ConfigError("fault plans drive the simulated cell; the emulators take "
                               "their faults from tests (feeder_bt.emulators.faults)",
                               key="faults")
+    supply_plan = None
+    if opts.supply:             # like a bad plan: before the HAL opens
+        from .hal.sim.supply import with_start
+        from .scenario.supply import check_against_scenario, load_supply_plan
+        supply_plan = load_supply_plan(opts.supply)
+        if opts.hal != "sim":
+            raise ConfigError("supply plans drive the simulated cell; on an emulated or "
+                              "real cell the plant brings the parts", key="supply")
+        check_against_scenario(supply_plan, list(scenario.parts))
+        scenario = with_start(scenario, supply_plan)
     log = EventLog(opts.db) if opts.db else None      # a bad --db fails before the HAL opens
     hal, clock = make_hal(opts.hal, scenario, cell_spec, opts.seed)
     injector = None
     if plan is not None:
         from .hal.sim.faults import inject_faults
         injector = inject_faults(hal, plan)  # type: ignore[arg-type]
+    supply = None
+    if supply_plan is not None:
+        from .hal.sim.supply import apply_supply
+        supply = apply_supply(hal, supply_plan)
     if not isinstance(clock, SimClock):
         clock = RealClock()
     cell = Cell(cell_spec, hal, clock)
@@ -356,6 +371,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         report["injected"] = dict(injector.injected)
         report["unseen"] = dict(injector.unseen)     # injected, but met by nobody
         report["fault_plan"] = str(opts.faults)
+    if supply is not None:
+        report["supply"] = supply.report()
     if ui:
         report["operator"] = ui.report()
     if plant is not None:

@@ -72,7 +72,8 @@ def _run(doc, line, tmp_path, monkeypatch):
         if flag in argv:
             i = argv.index(flag)
             argv[i + 1] = str(tmp_path / Path(argv[i + 1]).name)
-    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/", "faults/"))
+    argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/", "faults/",
+                                                 "supply/"))
             else a
             for a in argv]
     if argv[0] == "check":                    # expand globs the shell would expand

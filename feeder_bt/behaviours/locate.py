@@ -11,6 +11,7 @@ from ..encoder import diff
 from ..hal.interfaces import Frame
 from ..jobs import Job
 from ..parts import Part
+from ..supply_bound import ReachWindow
 from ..vision.watch import recipe_watch
 from .common import Ctx, JobLeaf, Leaf, client
 
@@ -109,6 +110,7 @@ class Enqueue(Leaf):
                              window_end + 200.0)
             ctx.extras["seen"] = seen
         self.seen: SeenParts = seen
+        self.reach = ReachWindow(ctx.cell, ctx.scenario)     # for the supply bound
 
     @staticmethod
     def downstream_first(parts: list) -> list:
@@ -139,6 +141,8 @@ class Enqueue(Leaf):
             if part.pickable:
                 self.ctx.queue.put(part)
                 stats.count("located")
+                if self.reach.crosses(part.x_mm, part.y_mm, part.type):
+                    stats.count("located_in_reach")
                 new += 1
                 stats.emit(frame.t, "located", id=part.id, type=part.type,
                            x_mm=round(part.x_mm, 1), y_mm=round(part.y_mm, 1))

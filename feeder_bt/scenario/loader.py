@@ -224,7 +224,14 @@ def load_fault_plan(path: str | Path) -> FaultPlanSpec:
     return plan
 
 
-LOADERS = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan}
+def _load_supply_plan(path: str | Path):
+    from feeder_bt.scenario.supply import load_supply_plan  # it reads this module's walker
+
+    return load_supply_plan(path)
+
+
+LOADERS = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan,
+           "supply": _load_supply_plan}
 
 
 def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:

@@ -1,9 +1,9 @@
 """JSON Schemas of the YAML file kinds, generated from what the loader itself follows.
 
-``feeder schema scenario|cell|faults`` prints one; an editor with a YAML language server
-then checks a file as it is typed (docs/getting-started.md). The schema is built from the same
-sources as ``loader.py``: the dataclasses and type hints of ``model.py`` and ``faults.py``
-(a field with a default is an optional key), the tables of allowed values (``ENUMS``,
+``feeder schema scenario|cell|faults|supply`` prints one; an editor with a YAML language
+server then checks a file as it is typed (docs/getting-started.md). The schema is built from
+the same sources as ``loader.py``: the dataclasses and type hints of ``model.py``,
+``faults.py`` and ``supply.py`` (a field with a default is an optional key), the tables of allowed values (``ENUMS``,
 ``RANGES``, ``ADJUST_PARAMS``, ``SHAPE_KINDS``, ``FEATURES``) and the few places where the
 YAML is not a mirror of the model (the shape, a vision class, the hopper, the conveyors,
 the fault rates). What needs more than one key at a time (pose probabilities summing to 1,
@@ -26,6 +26,7 @@ from yaml.nodes import MappingNode, ScalarNode
 from feeder_bt.scenario import loader as L
 from feeder_bt.scenario.faults import _ONLY_FOR, RATE_UNITS, FaultPlanSpec, FaultRate
 from feeder_bt.scenario.model import CellSpec, ConveyorSpec, Scenario, Shape, VisionClass
+from feeder_bt.scenario.supply import SupplyPlanSpec, Totes
 from feeder_bt.vision.features import FEATURES
 
 DRAFT = "http://json-schema.org/draft-07/schema#"
@@ -35,6 +36,7 @@ KINDS: dict[str, tuple[type, str]] = {
     "scenario": (Scenario, "a scenario"),
     "cell": (CellSpec, "a cell description"),
     "faults": (FaultPlanSpec, "a fault plan"),
+    "supply": (SupplyPlanSpec, "a supply plan"),
 }
 
 
@@ -275,9 +277,24 @@ def _adjust_rules() -> list[dict[str, Any]]:
     return rules
 
 
+def _by_type(key: str, what: str, integer: bool = False) -> Any:
+    """A supply plan's mapping of part type to a count or a weight, each >= 0."""
+    value = {"type": "integer" if integer else "number", "minimum": 0}
+    body: dict[str, Any] = {"type": "object", "additionalProperties": value,
+                            "description": what}
+    if key == "start":
+        body = {"anyOf": [body, {"type": "null"}]}
+    return lambda: {key: body}
+
+
 _SPECIAL_SCHEMAS = {Shape: _shape, VisionClass: _vision_class}
 _FIELD_SCHEMAS = {(Scenario, "hopper"): _hopper, (CellSpec, "conveyors"): _conveyors,
-                  (FaultPlanSpec, "rates"): _rates}
+                  (FaultPlanSpec, "rates"): _rates,
+                  (SupplyPlanSpec, "start"): _by_type(
+                      "start", "the hopper at the start: parts by type", integer=True),
+                  (Totes, "mix"): _by_type("mix", "a tote's parts by type, as weights"),
+                  (Totes, "drift_to"): _by_type(
+                      "drift_to", "the mix the totes drift to, as weights")}
 _EXTRA_SCHEMAS = {(Scenario, "cell"): {
     "type": "string", "minLength": 1,
     "description": "the cell description file, relative to this scenario"}}

@@ -11,7 +11,7 @@ locator.
 Accounting by identity: every part is always in exactly one place. Each part carries its
 own record (``SimPart.where``); every move between places checks that record against the
 place it leaves and keeps a tally of the records by place. Every step compares the tally
-with the containers' sizes (six integers), and a full audit matches each part's record
+with the containers' sizes (seven integers), and a full audit matches each part's record
 against the containers one by one whenever they disagree, every ``AUDIT_EVERY`` steps and
 at every census. A part found nowhere is *lost*, one found in two places *duplicated*:
 each is named with its id and last known place (``problems``), counted, and told to the
@@ -49,7 +49,7 @@ from ..interfaces import Held, PickResult, PickTarget, Pose
 from .axis import Axis
 from .imperfect import Imperfections
 
-PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed")
+PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed", "shipped")
 LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp
 EDGE_MARGIN_MM = 28.0           # side rails keep parts this far from the belt edges
 TOUCH_GAP_MM = 1.0              # closer than this, two parts count as touching
@@ -131,6 +131,12 @@ class World:
             self.parts[pid] = SimPart(pid, str(ptype))
             self.hopper.append(pid)
         self.total = len(self.parts)
+        self._ids = ids
+        # supply (a supply plan, docs/supply.md): placed parts leave the cell instead of
+        # going back to the hopper; the incline lifts ``lift`` times its nominal rate
+        self.shipped: list[int] = []
+        self.ship_placed = False
+        self.lift = 1.0
         self.next_release = self._draw_gap(0.0)
 
         # scheduled things
@@ -141,6 +147,7 @@ class World:
 
         # robot
         self.robot_pose = Pose(*cell.robot.safe_mm)
+        self.speed_override_pct = 100.0     # the operator's override (a supply plan)
         self.robot_speed_pct = 100.0
         self.robot_busy: Job | None = None
         # the controller's own record (what a V+ program keeps): the commanded id of the
@@ -242,8 +249,8 @@ class World:
     # ------------------------------------------------------------------ part flow
     def _draw_gap(self, at: float) -> float:
         fill = min(1.0, len(self.hopper) / max(1, self.cell.hopper.nominal_fill))
-        rate = self.cell.hopper.release_per_mm * max(fill, 1e-6)
-        return at + float(self.rng.exponential(1.0 / rate))
+        rate = self.cell.hopper.release_per_mm * max(fill, 1e-6) * self.lift
+        return at + float(self.rng.exponential(1.0 / rate)) if rate > 0 else math.inf
 
     def _release(self, t: float) -> None:
         pid = self.hopper.popleft()
@@ -320,7 +327,33 @@ class World:
 
     def _recycle(self, t: float) -> None:
         _, pid = heapq.heappop(self.placed)
-        self._to_hopper(pid, "placed")
+        if self.ship_placed:                    # it leaves the cell (a supply plan)
+            self._relocate(self.parts[pid], "placed", "shipped")
+            self.shipped.append(pid)
+            self.counts["shipped"] += 1
+        else:
+            self._to_hopper(pid, "placed")
+
+    def add_parts(self, types: list[str]) -> list[int]:
+        """New parts arrive in the hopper (a tote): new identities, counted as supplied.
+        The next release is drawn again at the new fill (the draws are memoryless)."""
+        new = []
+        for ptype in types:
+            pid = next(self._ids)
+            self.parts[pid] = SimPart(pid, ptype, where="hopper")
+            self.hopper.append(pid)
+            self.tally["hopper"] += 1
+            new.append(pid)
+        self.total += len(new)
+        self.counts["supplied"] += len(new)
+        if new:
+            self.redraw_release()
+        return new
+
+    def redraw_release(self) -> None:
+        """Draw the next release again from now: the fill or the lift changed."""
+        self.next_release = (self._draw_gap(self.incline.pos(self.t)) if self.hopper
+                             else math.inf)
 
     def _to_hopper(self, pid: int, src: str) -> None:
         was_empty = not self.hopper
@@ -548,6 +581,15 @@ class World:
             self.counts["misoriented"] += 1
         return pid
 
+    @property
+    def robot_speed_pct(self) -> float:
+        """The speed the robot moves at: the commanded % times the operator's override."""
+        return self._speed_cmd_pct * (self.speed_override_pct / 100.0)   # exact at 100 %
+
+    @robot_speed_pct.setter
+    def robot_speed_pct(self, pct: float) -> None:
+        self._speed_cmd_pct = pct
+
     def held_now(self) -> Held:
         """The controller's word on its gripper (``Robot.held``): the commanded id it
         recorded at the grip, ``unknown`` for a part no pick of ours gripped."""
@@ -594,6 +636,7 @@ class World:
             "return": len(self.returning),
             "gripper": 0 if self.gripper is None else 1,
             "placed": len(self.placed),
+            "shipped": len(self.shipped),
         }
 
     def census(self) -> dict[str, int]:
@@ -609,6 +652,7 @@ class World:
                 or len(self.hopper) != t["hopper"] or len(self.on_incline) != t["incline"]
                 or len(self.on_horizontal) != t["horizontal"]
                 or len(self.returning) != t["return"] or len(self.placed) != t["placed"]
+                or len(self.shipped) != t["shipped"]
                 or (self.gripper is not None) != t["gripper"]):
             self.audit()
 
@@ -619,6 +663,7 @@ class World:
         yield "return", (pid for _, pid in self.returning)
         yield "gripper", () if self.gripper is None else (self.gripper,)
         yield "placed", (pid for _, pid in self.placed)
+        yield "shipped", self.shipped
 
     def audit(self) -> list[dict]:
         """Match every part against the containers by identity; name each part that is
