@@ -14,7 +14,7 @@ from .errors import FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission")
+         "users_cmd", "commission", "tune")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
@@ -110,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_db_options(r)
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
+    r.add_argument("--overlay", metavar="OVERLAY.yaml",
+                   help="a partial scenario merged over SCENARIO before it is checked, e.g. "
+                        "the settings `feeder tune --out` found")
     add_ui_options(r)
     from .run import add_plant_options
     add_plant_options(r)
@@ -180,7 +183,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 fast=args.fast, seed=args.seed, report=args.report,
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
-                                faults=args.faults, plant=plant_options(args)))
+                                faults=args.faults, plant=plant_options(args),
+                                overlay=args.overlay))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}

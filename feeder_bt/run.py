@@ -43,6 +43,7 @@ class RunOptions:
     start: bool | None = None      # start feeding at once; None: yes, unless --ui
     faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
     plant: Any = None              # PlantOptions: --part-server / --opcua (docs/plant.md)
+    overlay: str | None = None     # a partial scenario merged over it (feeder tune --out)
 
 
 def add_db_options(parser: argparse.ArgumentParser) -> None:
@@ -244,7 +245,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
     duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start
-    scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
+    scenario, cell_spec = load_scenario(opts.scenario, opts.cell, overlay=opts.overlay)
     if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
         from .ui.app import check_users
         check_users(opts.users)
