@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -291,7 +292,10 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
 
     request = _StopRequest()
-    old = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+    # only the main thread may take signals (a Dask worker runs `feeder tune`'s jobs in one
+    # of its threads: there the worker, not the run, answers Ctrl-C)
+    old = ({sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+           if threading.current_thread() is threading.main_thread() else {})
     wall0 = time.monotonic()
     interrupted = False
     ui = None

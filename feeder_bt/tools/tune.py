@@ -94,8 +94,9 @@ def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, 
             client = stack.enter_context(Client(args.dask, timeout=10))
         except (OSError, TimeoutError, ValueError) as e:
             raise TuneUsage(f"--dask {args.dask}: cannot reach the scheduler ({e})") from None
-        threads = sum(client.nthreads().values()) or 1
-        return client.get_executor(pure=False), threads, f"Dask {args.dask}, {threads} threads"
+        # one run at a time per worker process (the trees' blackboard is per process)
+        workers = len(client.scheduler_info().get("workers", {})) or 1
+        return client.get_executor(pure=False), workers, f"Dask {args.dask}, {workers} workers"
     workers = args.workers or os.cpu_count() or 1
     if workers == 1:
         from ..tuning.search import InlineExecutor

@@ -13,10 +13,15 @@ import contextlib
 import dataclasses
 import io
 import tempfile
+import threading
 from pathlib import Path
 from typing import Any
 
 from ..errors import FeederError
+
+#: py_trees' blackboard is one per process: runs in one process (a Dask worker's threads)
+#: take turns
+_ONE_RUN_AT_A_TIME = threading.Lock()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +55,7 @@ def evaluate(job: Job) -> dict[str, Any]:
         path = Path(d) / "overlay.yaml"
         write_overlay(path, job.overlay)
         try:
-            with contextlib.redirect_stderr(io.StringIO()):    # the run's progress lines
+            with _ONE_RUN_AT_A_TIME, contextlib.redirect_stderr(io.StringIO()):
                 report = run_job(RunOptions(scenario=job.scenario, cell=job.cell,
                                             duration=job.duration, fast=True, seed=job.seed,
                                             view="none", db=None, overlay=str(path),

@@ -29,8 +29,8 @@ class TrialProgress:
         if self._bar is not None:
             self._bar.stop()
 
-    def start(self, done: int, total: int) -> None:
-        self.done, self.total = done, total
+    def start(self, done: int, total: int, best: tuple[float, int] | None = None) -> None:
+        self.done, self.total, self.best = done, total, best
         if done:
             print(f"tune: continuing the study at trial {done}/{total}", file=self.out)
         if not self.tty:
@@ -38,14 +38,21 @@ class TrialProgress:
                   flush=True)
             return
         from rich.console import Console
-        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                   TimeElapsedColumn, TimeRemainingColumn)
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
         self._bar = Progress(TextColumn("tune"), BarColumn(), MofNCompleteColumn(),
                              TimeElapsedColumn(), TextColumn("eta"), TimeRemainingColumn(),
                              TextColumn("{task.fields[best]}"),
                              console=Console(file=self.out), transient=False)
         self._task = self._bar.add_task("tune", total=total, completed=done,
-                                        best=f"on {self.where}")
+                                        best=f"on {self.where}" + (
+                                            f"; best {best[0]:.2f}" if best else ""))
         self._bar.start()
 
     def trial(self, r: TrialResult) -> None:

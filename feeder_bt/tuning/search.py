@@ -112,11 +112,12 @@ def finished(study: Any) -> list[Any]:
 
 
 def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
-               on_start: Callable[[int, int], None] | None = None,
+               on_start: Callable[[int, int, tuple[float, int] | None], None] | None = None,
                on_trial: Callable[[TrialResult], None] | None = None) -> Any:
     """Run trials until the study has ``cfg.trials`` finished ones; returns the study.
 
-    ``capacity`` is how many runs to keep in flight (the workers). ``on_start(done, total)``
+    ``capacity`` is how many runs to keep in flight (the workers). ``on_start(done, total,
+    best)``
     is called once, ``on_trial`` after every trial (for the progress display).
     """
     from optuna.trial import TrialState
@@ -131,7 +132,9 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     done = len(finished(study))
     todo = max(0, cfg.trials - done)
     if on_start:
-        on_start(done, cfg.trials)
+        complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+        best = max(complete, key=lambda t: t.value, default=None)
+        on_start(done, cfg.trials, None if best is None else (best.value, best.number))
     scenario_path = str(Path(cfg.scenario).resolve())
     cell_path = str(Path(cfg.cell).resolve()) if cfg.cell else None
     supply = str(Path(cfg.supply).resolve()) if cfg.supply else None
