@@ -17,13 +17,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..scenario.loader import RETRIEVE_POLICIES, part_size_mm
-from ..scenario.model import CellSpec, Scenario
+from ..scenario.loader import RANGES, RETRIEVE_POLICIES, part_size_mm
+from ..scenario.model import CellSpec, PresentParams, Scenario
 
 SPACES = ("ours", "watermarks", "fixed")
 ADJUSTERS = ("none", "water_marks", "supply_queue")
 MIN_BELT_MM_S = 50.0          # slower belts starve the robot on every shipped part
 MIN_INCLINE_MM_S = 10.0
+#: the highest incline % a scenario may give (the loader's range of present.incline_pct)
+MAX_INCLINE_PCT = float(RANGES[(PresentParams, "incline_pct")].hi or 200.0)
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,7 @@ def _r(x: float, digits: int = 2) -> float:
 
 def _pct(incline_mm_s: float, horizontal_mm_s: float) -> float:
     """The incline % that gives at most ``incline_mm_s`` at ``horizontal_mm_s``."""
-    pct = _r(100.0 * incline_mm_s / horizontal_mm_s, 2)
+    pct = min(_r(100.0 * incline_mm_s / horizontal_mm_s, 2), MAX_INCLINE_PCT)
     while pct * horizontal_mm_s / 100.0 > incline_mm_s:      # rounding must not go over
         pct = _r(pct - 0.01, 2)
     return pct
