@@ -63,7 +63,7 @@ def evaluate(job: Job) -> dict[str, Any]:
         except FeederError as e:
             return {"error": str(e).replace(str(path), "overlay")}
     if report.get("interrupted"):               # Ctrl-C reached the worker: not a value
-        return {"interrupted": True, "error": "interrupted", "seed": job.seed}
+        return {"interrupted": True, "error": "interrupted", "seed": job.seed}  # INTERRUPTED
     parts = report["parts"]
     out = {"ppm": float(report["parts_per_minute"]), "seed": job.seed,
            "robot_bound_ppm": report.get("robot_bound_ppm"),

@@ -20,6 +20,8 @@ from ..errors import FeederError
 from .objective import Job, evaluate
 from .space import Limits, suggest
 
+INTERRUPTED = "interrupted"
+
 
 class TuneError(FeederError):
     """A study that cannot go on as asked (other duration or seeds than it was started with)."""
@@ -107,8 +109,11 @@ def _sampler(cfg: TuneConfig, done: int) -> Any:
 
 
 def finished(study: Any) -> list[Any]:
+    """The trials that count against ``--trials``: completed or failed, not interrupted."""
     from optuna.trial import TrialState
-    return study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL))
+    return [t for t in study.get_trials(deepcopy=False,
+                                        states=(TrialState.COMPLETE, TrialState.FAIL))
+            if t.user_attrs.get("error") != INTERRUPTED]
 
 
 def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
@@ -170,11 +175,14 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
                     if on_trial:
                         on_trial(result)
     except KeyboardInterrupt:
+        stop = True
+    if stop:                    # Ctrl-C: unfinished trials fail, a rerun does them again
         for fut in pending:
             fut.cancel()
         for trial, _, _ in open_trials.values():
+            trial.set_user_attr("error", INTERRUPTED)
             study.tell(trial, state=TrialState.FAIL)
-        raise
+        raise KeyboardInterrupt
     return study
 
 
