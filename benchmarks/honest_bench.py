@@ -57,6 +57,14 @@ def stats(rows: list[dict]) -> dict:
     return out
 
 
+def ratio(a: dict, b: dict) -> float | None:
+    return round(a["mean"] / b["mean"], 3) if b["mean"] else None
+
+
+def _x(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}×"
+
+
 def run_all(pool: cf.Executor, jobs: list[Job]) -> list[dict]:
     rows = list(pool.map(evaluate, jobs))
     bad = [r["error"] for r in rows if r.get("error")]
@@ -72,7 +80,7 @@ def thesis(pool: cf.Executor, args: argparse.Namespace) -> dict:
         rows = run_all(pool, [Job(str(path), {}, s, args.eval_duration) for s in seeds])
         out[name] = stats(rows)
         print(f"thesis {name}: {out[name]['mean']:.2f} parts/min", flush=True)
-    out["ratio"] = round(out["new_water_marks"]["mean"] / out["original"]["mean"], 2)
+    out["ratio"] = ratio(out["new_water_marks"], out["original"])
     return out
 
 
@@ -97,8 +105,8 @@ def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
                       "tune_wall_s": round(time.monotonic() - t0, 1), **stats(rows)}
         print(f"{space}: tuned {best.value:.2f}, fresh seeds {out[space]['mean']:.2f} "
               f"parts/min ({describe(overlay)})", flush=True)
-    out["ours_vs_watermarks"] = round(out["ours"]["mean"] / out["watermarks"]["mean"], 3)
-    out["ours_vs_fixed"] = round(out["ours"]["mean"] / out["fixed"]["mean"], 3)
+    out["ours_vs_watermarks"] = ratio(out["ours"], out["watermarks"])
+    out["ours_vs_fixed"] = ratio(out["ours"], out["fixed"])
     return out
 
 
@@ -119,7 +127,7 @@ def markdown(result: dict) -> str:
                   f"| original (CWRU) | {_cell(th['original'])} | {_of(th['original'])} |",
                   f"| new, thesis water marks | {_cell(th['new_water_marks'])} | "
                   f"{_of(th['new_water_marks'])} |",
-                  f"| ratio | {th['ratio']:.2f}× | |", ""]
+                  f"| ratio | {_x(th['ratio'])} | |", ""]
     tu = result.get("tuned")
     if tu:
         lines += ["| setting (same budget) | tuned | fresh seeds mean (min–max, sd) | "
@@ -128,8 +136,8 @@ def markdown(result: dict) -> str:
             s = tu[space]
             lines.append(f"| {label}: {s['setting']} | {s['tuned_ppm']:.2f} | {_cell(s)} | "
                          f"{_of(s)} |")
-        lines += [f"| ours / tuned water marks | | {tu['ours_vs_watermarks']:.3f}× | |",
-                  f"| ours / best fixed | | {tu['ours_vs_fixed']:.3f}× | |"]
+        lines += [f"| ours / tuned water marks | | {_x(tu['ours_vs_watermarks'])} | |",
+                  f"| ours / best fixed | | {_x(tu['ours_vs_fixed'])} | |"]
     return "\n".join(lines)
 
 
