@@ -177,3 +177,27 @@ def test_same_search_on_a_local_dask_cluster(study_file, tmp_path):
         assert main(["tune", LENSES, "--trials", "2", *TINY, "--dask",
                      cluster.scheduler_address, "--study", str(db)]) == 0
     assert _values(db) == study_file[2]
+
+
+def test_ctrl_c_fails_the_open_trial_without_spending_the_budget(tmp_path, monkeypatch):
+    """A run interrupted in a worker ends the search (KeyboardInterrupt); its trial fails
+    as interrupted and does not count, so a rerun still does the trials asked for."""
+    from feeder_bt.tuning import search
+    calls = []
+
+    def fake(job):                      # the second run is the one Ctrl-C reached
+        calls.append(job)
+        if len(calls) == 2:
+            return {"interrupted": True, "error": "interrupted", "seed": job.seed}
+        return {"ppm": 50.0 + len(calls), "seed": job.seed}
+
+    monkeypatch.setattr(search, "evaluate", fake)
+    cfg = search.TuneConfig(scenario=LENSES, trials=2, duration=20, seeds=1,
+                            study=str(tmp_path / "i.db"))
+    with pytest.raises(KeyboardInterrupt):
+        search.run_search(cfg, search.InlineExecutor(), 1)
+    study = search.run_search(cfg, search.InlineExecutor(), 1)
+    states = [t.state.name for t in study.trials]
+    assert states == ["COMPLETE", "FAIL", "COMPLETE"]
+    assert study.trials[1].user_attrs["error"] == search.INTERRUPTED
+    assert len(search.finished(study)) == 2 and study.best_value == 53.0
