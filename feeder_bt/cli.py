@@ -14,7 +14,7 @@ from .errors import ConfigError, FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission")
+         "users_cmd", "commission", "tune")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
@@ -113,6 +113,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--supply", metavar="PLAN.yaml",
                    help="simulated cell: bring parts and change conditions as a supply plan "
                         "says (docs/supply.md)")
+    r.add_argument("--overlay", metavar="OVERLAY.yaml",
+                   help="a partial scenario merged over SCENARIO before it is checked, e.g. "
+                        "the settings `feeder tune --out` found")
     add_ui_options(r)
     from .run import add_plant_options
     add_plant_options(r)
@@ -187,7 +190,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
                                 faults=args.faults, supply=args.supply,
-                                plant=plant_options(args)))
+                                plant=plant_options(args), overlay=args.overlay))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}

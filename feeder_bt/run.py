@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -44,6 +45,7 @@ class RunOptions:
     faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
     supply: str | None = None      # a supply plan (docs/supply.md) for the simulated cell
     plant: Any = None              # PlantOptions: --part-server / --opcua (docs/plant.md)
+    overlay: str | None = None     # a partial scenario merged over it (feeder tune --out)
 
 
 def add_db_options(parser: argparse.ArgumentParser) -> None:
@@ -245,7 +247,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
     duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start
-    scenario, cell_spec = load_scenario(opts.scenario, opts.cell)
+    scenario, cell_spec = load_scenario(opts.scenario, opts.cell, overlay=opts.overlay)
     if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
         from .ui.app import check_users
         check_users(opts.users)
@@ -305,7 +307,10 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
 
     request = _StopRequest()
-    old = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+    # only the main thread may take signals (a Dask worker runs `feeder tune`'s jobs in one
+    # of its threads: there the worker, not the run, answers Ctrl-C)
+    old = ({sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+           if threading.current_thread() is threading.main_thread() else {})
     wall0 = time.monotonic()
     interrupted = False
     ui = None

@@ -162,18 +162,22 @@ def load_cell(path: str | Path, calibration_files: bool = True) -> CellSpec:
     return _load_cell(Path(path), calibration_files)[0]
 
 
-def load_scenario(path: str | Path, cell: str | Path | None = None
-                  ) -> tuple[Scenario, CellSpec]:
+def load_scenario(path: str | Path, cell: str | Path | None = None,
+                  overlay: str | Path | None = None) -> tuple[Scenario, CellSpec]:
     """Load a scenario and its cell, validated against each other.
 
     The scenario's ``cell:`` key is relative to the scenario file; ``cell`` overrides it so
     one scenario runs unchanged on the simulated cell, emulators or a real cell. Every
     problem of the scenario, then of its cell, is raised at once; the checks against the
-    cell run when both files are whole.
+    cell run when both files are whole. An ``overlay`` file is merged over the scenario
+    before validation (scenario/overlay.py).
     """
     path = Path(path)
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
+    if overlay is not None:
+        from .overlay import apply_overlay
+        root = apply_overlay(root, overlay, ctx, _compose, _Ctx)
     cell_path = ctx.collect(_cell_path, path, root, ctx, cell)
     scenario = ctx.collect(ctx.dataclass, Scenario, root, "",
                            fill={"path": path, "cell_path": cell_path or Path()})

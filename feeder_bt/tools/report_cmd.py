@@ -18,7 +18,11 @@ COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retri
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register ``report`` on the ``feeder`` sub-command parsers."""
     p = subparsers.add_parser("report", help="summarise and plot runs from the event log")
-    p.add_argument("db", metavar="FILE.db", help="event log written by `feeder run --db`")
+    p.add_argument("db", metavar="FILE.db", nargs="?",
+                   help="event log written by `feeder run --db`")
+    p.add_argument("--study", metavar="FILE.db",
+                   help="instead: the searches `feeder tune --study` kept there (--plot: "
+                        "parts/min per trial and parameter importance)")
     which = p.add_mutually_exclusive_group()
     which.add_argument("--run", type=int, metavar="ID", help="only this run")
     which.add_argument("--last", action="store_true", help="only the latest run")
@@ -35,6 +39,11 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Print the summaries; write the plot if asked. Errors are EventLogError (exit 2)."""
+    if args.study or args.db is None:
+        if args.db is not None or args.study is None:
+            raise EventLogError("give an event log FILE.db or --study FILE.db (one of them)")
+        from ..tuning.report import report_study
+        return report_study(args.study, args.plot)
     conn = open_readonly(args.db)
     try:
         ids = run_ids(conn, args.run, args.last)

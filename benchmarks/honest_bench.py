@@ -1,0 +1,177 @@
+"""Issue 16's honest comparison: the thesis table, then ours against baselines tuned with the
+same budget, each against the report's ceiling; JSON and a markdown table out.
+
+    python benchmarks/honest_bench.py [--supply supply/batch_refill.yaml] [--trials 20]
+        [--duration 600] [--tune-seeds 2] [--eval-seeds 5] [--eval-duration 600]
+        [--workers 2] [--study FILE.db] [--only thesis|tuned] [--out PATH]
+
+(a) The thesis table: the original feeder (scenarios/original_cwru_lenses.yaml) against
+    the new feeder with the thesis's water marks (scenarios/lenses.yaml as shipped), seeds
+    1..N each: mean, spread, ratio.
+(b) Same tuning budget for each (``--trials`` x ``--tune-seeds`` runs of ``--duration``
+    s, ``feeder tune``'s search, optionally under a supply plan): our full space
+    (adjuster + policy + speeds + frame spacing), the thesis's water marks tuned for this
+    cell, and the best fixed belt/incline setting. Each best overlay is then run on fresh
+    seeds (101..100+N, never seen while tuning): mean, spread, ratios.
+(c) Every mean as a % of the report's ceiling (``ceiling_ppm`` when the report has a supply
+    bound, else ``robot_bound_ppm``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import multiprocessing
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from feeder_bt.tuning.objective import Job, evaluate  # noqa: E402
+from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search  # noqa: E402
+
+LENSES = ROOT / "scenarios" / "lenses.yaml"
+ORIGINAL = ROOT / "scenarios" / "original_cwru_lenses.yaml"
+FRESH_SEED0 = 100
+SPACES = {"ours": "ours (adjuster + policy)", "watermarks": "water marks, tuned",
+          "fixed": "best fixed setting"}
+
+
+def stats(rows: list[dict]) -> dict:
+    """Mean, spread (min, max, sample stdev) and ceiling of runs of one setting."""
+    ppm = [r["ppm"] for r in rows]
+    ceiling = [r.get("ceiling_ppm") or r.get("robot_bound_ppm") for r in rows]
+    out = {"seeds": [r["seed"] for r in rows], "ppm": ppm,
+           "mean": round(statistics.mean(ppm), 2), "min": min(ppm), "max": max(ppm),
+           "stdev": round(statistics.stdev(ppm), 2) if len(ppm) > 1 else 0.0,
+           "lost": sum(r.get("lost") or 0 for r in rows)}
+    if all(ceiling):
+        out["ceiling_ppm"] = round(statistics.mean(ceiling), 2)
+        out["of_ceiling"] = round(out["mean"] / out["ceiling_ppm"], 3)
+    return out
+
+
+def ratio(a: dict, b: dict) -> float | None:
+    return round(a["mean"] / b["mean"], 3) if b["mean"] else None
+
+
+def _x(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}×"
+
+
+def run_all(pool: cf.Executor, jobs: list[Job]) -> list[dict]:
+    rows = list(pool.map(evaluate, jobs))
+    bad = [r["error"] for r in rows if r.get("error")]
+    if bad:
+        raise SystemExit(f"honest_bench: a run failed: {bad[0]}")
+    return rows
+
+
+def thesis(pool: cf.Executor, args: argparse.Namespace) -> dict:
+    seeds = range(1, args.eval_seeds + 1)
+    out = {}
+    for name, path in (("original", ORIGINAL), ("new_water_marks", LENSES)):
+        rows = run_all(pool, [Job(str(path), {}, s, args.eval_duration) for s in seeds])
+        out[name] = stats(rows)
+        print(f"thesis {name}: {out[name]['mean']:.2f} parts/min", flush=True)
+    out["ratio"] = ratio(out["new_water_marks"], out["original"])
+    return out
+
+
+def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
+    supply = str(Path(args.supply).resolve()) if args.supply else None
+    out: dict = {"budget": {"trials": args.trials, "duration_s": args.duration,
+                            "seeds": args.tune_seeds}, "supply": args.supply}
+    for space in SPACES:
+        cfg = TuneConfig(scenario=str(LENSES), trials=args.trials, duration=args.duration,
+                         seeds=args.tune_seeds, space=space, study=study, supply=supply)
+        t0 = time.monotonic()
+        s = run_search(cfg, pool, args.workers,
+                       on_trial=lambda r, sp=space: print(
+                           f"tune {sp} trial {r.number}: "
+                           f"{'failed' if r.value is None else f'{r.value:.2f}'}", flush=True))
+        overlay, best = best_overlay(s)
+        seeds = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
+        rows = run_all(pool, [Job(str(LENSES), overlay, sd, args.eval_duration, None, supply)
+                              for sd in seeds])
+        out[space] = {"tuned_ppm": round(best.value, 2), "trial": best.number,
+                      "setting": describe(overlay), "overlay": overlay,
+                      "tune_wall_s": round(time.monotonic() - t0, 1), **stats(rows)}
+        print(f"{space}: tuned {best.value:.2f}, fresh seeds {out[space]['mean']:.2f} "
+              f"parts/min ({describe(overlay)})", flush=True)
+    out["ours_vs_watermarks"] = ratio(out["ours"], out["watermarks"])
+    out["ours_vs_fixed"] = ratio(out["ours"], out["fixed"])
+    return out
+
+
+def _cell(s: dict) -> str:
+    return f"{s['mean']:.2f} ({s['min']:.2f}–{s['max']:.2f}, sd {s['stdev']:.2f})"
+
+
+def _of(s: dict) -> str:
+    return f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
+        else "-"
+
+
+def markdown(result: dict) -> str:
+    lines = []
+    th = result.get("thesis")
+    if th:
+        lines += ["| feeder | parts/min mean (min–max, sd) | of ceiling |", "|---|---|---|",
+                  f"| original (CWRU) | {_cell(th['original'])} | {_of(th['original'])} |",
+                  f"| new, thesis water marks | {_cell(th['new_water_marks'])} | "
+                  f"{_of(th['new_water_marks'])} |",
+                  f"| ratio | {_x(th['ratio'])} | |", ""]
+    tu = result.get("tuned")
+    if tu:
+        lines += ["| setting (same budget) | tuned | fresh seeds mean (min–max, sd) | "
+                  "of ceiling |", "|---|---|---|---|"]
+        for space, label in SPACES.items():
+            s = tu[space]
+            lines.append(f"| {label}: {s['setting']} | {s['tuned_ppm']:.2f} | {_cell(s)} | "
+                         f"{_of(s)} |")
+        lines += [f"| ours / tuned water marks | | {_x(tu['ours_vs_watermarks'])} | |",
+                  f"| ours / best fixed | | {_x(tu['ours_vs_fixed'])} | |"]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--supply", metavar="PLAN.yaml", help="tune and evaluate under this plan")
+    ap.add_argument("--trials", type=int, default=20)
+    ap.add_argument("--duration", type=float, default=600.0, help="s per tuning run")
+    ap.add_argument("--tune-seeds", type=int, default=2)
+    ap.add_argument("--eval-seeds", type=int, default=5)
+    ap.add_argument("--eval-duration", type=float, default=600.0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--study", help="keep the three studies here (default: a fresh temp file)")
+    ap.add_argument("--only", choices=["thesis", "tuned"])
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "honest.json"))
+    args = ap.parse_args(argv)
+    t0 = time.monotonic()
+    result: dict = {"machine": platform.platform(), "python": platform.python_version(),
+                    "command": " ".join(["python", "benchmarks/honest_bench.py",
+                                         *(argv if argv is not None else sys.argv[1:])]),
+                    "eval_seeds": args.eval_seeds, "eval_duration_s": args.eval_duration}
+    ctx = multiprocessing.get_context("forkserver")
+    with cf.ProcessPoolExecutor(args.workers, mp_context=ctx) as pool, \
+            tempfile.TemporaryDirectory() as tmp:
+        if args.only != "tuned":
+            result["thesis"] = thesis(pool, args)
+        if args.only != "thesis":
+            result["tuned"] = tuned(pool, args, args.study or str(Path(tmp) / "honest.db"))
+    result["wall_s"] = round(time.monotonic() - t0, 1)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=2) + "\n")
+    print(markdown(result))
+    return result
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,141 @@
+"""``feeder tune SCENARIO``: search belt and incline speeds, frame spacing, the adjuster and
+its parameters and the pick policy for the best mean parts/min over K seeds of a simulated
+run, with Optuna; write the best settings as an overlay for ``feeder run --overlay``."""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing
+import os
+import sys
+import time
+from contextlib import ExitStack
+from typing import Any
+
+from ..errors import FeederError
+from ..tuning.space import SPACES
+
+DEFAULT_STUDY = "runs/tune.db"
+
+
+class TuneUsage(FeederError):
+    exit_code = 2
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return v
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register ``tune`` on the ``feeder`` sub-command parsers."""
+    p = subparsers.add_parser(
+        "tune", help="search a scenario's speeds, adjuster and pick policy for the best "
+                     "parts/min (simulated, virtual time); write the best as an overlay")
+    p.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")
+    p.add_argument("--trials", type=_positive_int, default=20,
+                   help="trials in the study in all (a rerun continues to this many; "
+                        "default 20)")
+    p.add_argument("--duration", type=_positive, default=600.0,
+                   help="simulated seconds per run (default 600)")
+    p.add_argument("--seeds", type=_positive_int, default=2,
+                   help="runs per trial, seeds 1..K; the trial's value is their mean "
+                        "parts/min (default 2)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="local worker processes (default: the machine's cores; 1 runs the "
+                        "trials in this process)")
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="run the trials on a Dask cluster's workers, e.g. "
+                        "tcp://127.0.0.1:8786 (they need feeder_bt and the scenario's files)")
+    p.add_argument("--out", metavar="OVERLAY.yaml",
+                   help="write the best settings here, for `feeder run SCENARIO --overlay`")
+    p.add_argument("--study", metavar="FILE.db", default=DEFAULT_STUDY,
+                   help=f"the study's SQLite file; rerunning continues it (default "
+                        f"{DEFAULT_STUDY})")
+    p.add_argument("--space", choices=SPACES, default="ours",
+                   help="what to search: ours (everything), watermarks (only the thesis's "
+                        "water-mark adjuster), fixed (one constant belt and incline speed)")
+    p.add_argument("--supply", metavar="PLAN.yaml", help="run every trial under this supply "
+                   "plan")
+    p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    p.add_argument("--sampler-seed", type=int, default=0,
+                   help="seed of the search itself (default 0)")
+    p.set_defaults(handler=cmd_tune)
+    return p
+
+
+def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, int, str]:
+    """The executor the trials run on, how many runs to keep in flight, and its name."""
+    if args.dask:
+        if args.workers:
+            raise TuneUsage("--workers is for local processes; a Dask cluster has its own")
+        try:
+            from distributed import Client
+        except ImportError:
+            raise TuneUsage("--dask needs dask.distributed: pip install 'dask[distributed]'"
+                            ) from None
+        try:
+            client = stack.enter_context(Client(args.dask, timeout=10))
+        except (OSError, TimeoutError, ValueError) as e:
+            raise TuneUsage(f"--dask {args.dask}: cannot reach the scheduler ({e})") from None
+        # one run at a time per worker process (the trees' blackboard is per process)
+        workers = len(client.scheduler_info().get("workers", {})) or 1
+        return client.get_executor(pure=False), workers, f"Dask {args.dask}, {workers} workers"
+    workers = args.workers or os.cpu_count() or 1
+    if workers == 1:
+        from ..tuning.search import InlineExecutor
+        return InlineExecutor(), 1, "this process"
+    ctx = multiprocessing.get_context("forkserver")
+    pool = stack.enter_context(cf.ProcessPoolExecutor(workers, mp_context=ctx))
+    return pool, workers, f"{workers} local processes"
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    from ..tuning.progress import TrialProgress
+    from ..tuning.search import TuneConfig, best_overlay, describe, run_search
+    cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
+                     seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
+                     supply=args.supply, sampler_seed=args.sampler_seed)
+    wall0 = time.monotonic()
+    with ExitStack() as stack:
+        executor, capacity, where = _executor(args, stack)
+        progress = stack.enter_context(TrialProgress(where))
+        study = run_search(cfg, executor, capacity, on_start=progress.start,
+                           on_trial=progress.trial)
+    overlay, best = best_overlay(study)
+    per_seed = ", ".join(f"{v:.2f}" for v in best.user_attrs.get("per_seed_ppm", []))
+    print(f"best: trial {best.number}, {best.value:.2f} parts/min (seeds {per_seed}): "
+          f"{describe(overlay)}")
+    print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
+          f"{time.monotonic() - wall0:.0f} s wall)")
+    if args.out:
+        from ..scenario.overlay import write_overlay
+        header = (f"feeder tune {args.scenario}: best of study {study.study_name!r} in "
+                  f"{args.study}\ntrial {best.number}: {best.value:.2f} parts/min, the mean "
+                  f"of seeds 1-{args.seeds} ({per_seed}), {args.duration:g} s each"
+                  + (f", supply plan {args.supply}" if args.supply else "")
+                  + f"\nuse: feeder run {args.scenario} --overlay {args.out}")
+        write_overlay(args.out, overlay, header)
+        print(f"overlay: {args.out}")
+    return 0
+
+
+def main() -> None:  # pragma: no cover - `python -m feeder_bt.tools.tune` for debugging
+    from ..cli import main as cli_main
+    sys.exit(cli_main(["tune", *sys.argv[1:]]))

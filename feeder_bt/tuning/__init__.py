@@ -1,0 +1,1 @@
+"""``feeder tune``: search a scenario's settings for the best mean parts/min (Optuna)."""

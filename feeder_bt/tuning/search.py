@@ -1,0 +1,226 @@
+"""The search loop of ``feeder tune``: Optuna asks, workers run, Optuna is told.
+
+The study lives only in this process (its SQLite file is written by nobody else), and the
+workers get plain jobs (one scenario run per seed) through any ``concurrent.futures``
+executor: a process pool on this machine, a Dask cluster's executor, or this process
+itself for one worker. A trial's value is the mean parts/min over its seeds; every trial
+runs the same seeds 1..K, so trials differ only by their settings.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import statistics
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import FeederError
+from .objective import Job, evaluate
+from .space import Limits, suggest
+
+INTERRUPTED = "interrupted"
+
+
+class TuneError(FeederError):
+    """A study that cannot go on as asked (other duration or seeds than it was started with)."""
+
+    exit_code = 2
+
+
+@dataclass
+class TuneConfig:
+    scenario: str
+    trials: int = 20
+    duration: float = 600.0
+    seeds: int = 2
+    space: str = "ours"
+    study: str | None = None            # SQLite file; None: in memory
+    cell: str | None = None
+    supply: str | None = None
+    sampler_seed: int = 0
+
+
+@dataclass
+class TrialResult:
+    """One finished trial, as the progress display and the tests see it."""
+
+    number: int
+    value: float | None                 # mean parts/min; None: failed
+    per_seed: list[float] = field(default_factory=list)
+    overlay: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+
+class InlineExecutor(cf.Executor):
+    """Runs each job in this process when submitted: one worker without a process pool."""
+
+    def submit(self, fn, /, *args, **kwargs):  # type: ignore[override]
+        fut: cf.Future = cf.Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as e:  # noqa: BLE001 - handed to the caller like a pool would
+            fut.set_exception(e)
+        return fut
+
+
+def study_name(cfg: TuneConfig) -> str:
+    """One study per scenario, space and supply plan, so one file can hold the baselines."""
+    name = f"{Path(cfg.scenario).stem}:{cfg.space}"
+    return name + (f":{Path(cfg.supply).stem}" if cfg.supply else "")
+
+
+def open_study(cfg: TuneConfig, read_only: bool = False) -> Any:
+    """Create the study, or load it to continue; refuses to mix durations or seeds."""
+    import optuna
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    storage = None
+    if cfg.study:
+        Path(cfg.study).parent.mkdir(parents=True, exist_ok=True)
+        storage = f"sqlite:///{Path(cfg.study).resolve()}"
+    name = study_name(cfg)
+    try:
+        study = optuna.create_study(study_name=name, storage=storage, direction="maximize",
+                                    load_if_exists=True)
+    except Exception as e:      # sqlalchemy / sqlite: a file that is not a study
+        raise TuneError(f"{cfg.study}: cannot open as an Optuna study ({e})") from None
+    want = {"duration_s": cfg.duration, "seeds": cfg.seeds, "space": cfg.space,
+            "scenario": str(cfg.scenario), "supply": cfg.supply}
+    have = study.user_attrs
+    if not have:
+        for k, v in want.items():
+            study.set_user_attr(k, v)
+    else:
+        for k in ("duration_s", "seeds"):
+            if have.get(k) != want[k]:
+                raise TuneError(f"{cfg.study}: study {name!r} was run with {k} "
+                                f"{have.get(k)}, not {want[k]}: its values would not compare "
+                                f"(give the same, or another --study file)")
+    return study
+
+
+def _sampler(cfg: TuneConfig, done: int) -> Any:
+    """TPE, seeded so that a search is repeatable; a resumed one draws new points."""
+    import optuna
+    startup = max(3, min(10, cfg.trials // 3))
+    return optuna.samplers.TPESampler(seed=cfg.sampler_seed + done, constant_liar=True,
+                                      n_startup_trials=startup)
+
+
+def finished(study: Any) -> list[Any]:
+    """The trials that count against ``--trials``: completed or failed, not interrupted."""
+    from optuna.trial import TrialState
+    return [t for t in study.get_trials(deepcopy=False,
+                                        states=(TrialState.COMPLETE, TrialState.FAIL))
+            if t.user_attrs.get("error") != INTERRUPTED]
+
+
+def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
+               on_start: Callable[[int, int, tuple[float, int] | None], None] | None = None,
+               on_trial: Callable[[TrialResult], None] | None = None) -> Any:
+    """Run trials until the study has ``cfg.trials`` finished ones; returns the study.
+
+    ``capacity`` is how many runs to keep in flight (the workers). ``on_start(done, total,
+    best)``
+    is called once, ``on_trial`` after every trial (for the progress display).
+    """
+    from optuna.trial import TrialState
+
+    from ..scenario import load_scenario
+    scenario, cell = load_scenario(cfg.scenario, cfg.cell)      # a bad scenario: one line
+    limits = Limits.of(scenario, cell)
+    study = open_study(cfg)
+    for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
+        study.tell(t.number, state=TrialState.FAIL)              # left by an interrupted run
+    study.sampler = _sampler(cfg, len(study.trials))
+    done = len(finished(study))
+    todo = max(0, cfg.trials - done)
+    if on_start:
+        complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+        best = max(complete, key=lambda t: t.value, default=None)
+        on_start(done, cfg.trials, None if best is None else (best.value, best.number))
+    scenario_path = str(Path(cfg.scenario).resolve())
+    cell_path = str(Path(cfg.cell).resolve()) if cfg.cell else None
+    supply = str(Path(cfg.supply).resolve()) if cfg.supply else None
+    pending: dict[cf.Future, int] = {}
+    open_trials: dict[int, tuple[Any, dict[str, Any], list[dict[str, Any]]]] = {}
+    asked = 0
+    stop = False
+    try:
+        while (asked < todo and not stop) or pending:
+            while asked < todo and not stop and len(pending) < capacity:
+                trial = study.ask()
+                overlay = suggest(trial, cfg.space, limits)
+                trial.set_user_attr("overlay", overlay)
+                open_trials[trial.number] = (trial, overlay, [])
+                for seed in range(1, cfg.seeds + 1):
+                    job = Job(scenario_path, overlay, seed, cfg.duration, cell_path, supply)
+                    pending[executor.submit(evaluate, job)] = trial.number
+                asked += 1
+            done_now, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
+            for fut in done_now:
+                number = pending.pop(fut)
+                try:
+                    res = fut.result()
+                except Exception as e:  # noqa: BLE001 - a worker died: the trial failed
+                    res = {"error": f"worker: {type(e).__name__}: {e}"}
+                if res.get("interrupted"):
+                    stop = True
+                trial, overlay, results = open_trials[number]
+                results.append(res)
+                if len(results) == cfg.seeds:
+                    del open_trials[number]
+                    result = _tell(study, trial, overlay, results)
+                    if on_trial:
+                        on_trial(result)
+    except KeyboardInterrupt:
+        stop = True
+    if stop:                    # Ctrl-C: unfinished trials fail, a rerun does them again
+        for fut in pending:
+            fut.cancel()
+        for trial, _, _ in open_trials.values():
+            trial.set_user_attr("error", INTERRUPTED)
+            study.tell(trial, state=TrialState.FAIL)
+        raise KeyboardInterrupt
+    return study
+
+
+def _tell(study: Any, trial: Any, overlay: dict[str, Any],
+          results: list[dict[str, Any]]) -> TrialResult:
+    from optuna.trial import TrialState
+    results.sort(key=lambda r: r.get("seed", 0))
+    errors = [r["error"] for r in results if r.get("error")]
+    if errors:
+        trial.set_user_attr("error", errors[0])
+        study.tell(trial, state=TrialState.FAIL)
+        return TrialResult(trial.number, None, overlay=overlay, error=errors[0])
+    per_seed = [r["ppm"] for r in results]
+    trial.set_user_attr("per_seed_ppm", per_seed)
+    ceiling = [r.get("ceiling_ppm") or r.get("robot_bound_ppm") for r in results]
+    if all(ceiling):
+        trial.set_user_attr("ceiling_ppm", statistics.mean(ceiling))
+    value = statistics.mean(per_seed)
+    study.tell(trial, value)
+    return TrialResult(trial.number, value, per_seed, overlay)
+
+
+def best_overlay(study: Any) -> tuple[dict[str, Any], Any]:
+    """The best trial's overlay and the trial; a study without a finished trial is an error."""
+    from optuna.trial import TrialState
+    if not study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
+        raise TuneError(f"study {study.study_name!r} has no completed trial yet")
+    best = study.best_trial
+    return best.user_attrs["overlay"], best
+
+
+def describe(overlay: dict[str, Any]) -> str:
+    """A short name of an overlay's settings for progress lines: adjuster + policy."""
+    adj = (overlay.get("adjust") or {}).get("algorithm", "?")
+    pol = (overlay.get("retrieve") or {}).get("policy")
+    present = overlay.get("present") or {}
+    text = adj + (f" + {pol}" if pol else "")
+    if adj == "none" and present:
+        text += (f" belt {present.get('horizontal_mm_s'):g} mm/s, incline "
+                 f"{present.get('incline_pct'):g} %")
+    return text

@@ -1,0 +1,112 @@
+"""The search space of ``feeder tune``: every trial is a legal scenario overlay.
+
+Bounds come from the cell's axis limits (each conveyor's ``max_mm_s``) and the camera
+window, so no trial asks an axis for more than it can do: incline speeds are sampled in
+mm/s up to the incline's limit and turned into the percentages the scenario takes, divided
+by the highest horizontal speed they go with. Three spaces, each with the same budget:
+
+* ``ours``: adjuster (none, water_marks, supply_queue) and its parameters, belt and
+  incline speeds, frame spacing and pick policy;
+* ``watermarks``: only the thesis's water-mark adjuster's parameters (the baseline tuned
+  for this cell); the scenario's frame spacing and pick policy stay;
+* ``fixed``: only one constant belt and incline speed, no adjuster.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..scenario.loader import RANGES, RETRIEVE_POLICIES, part_size_mm
+from ..scenario.model import CellSpec, PresentParams, Scenario
+
+SPACES = ("ours", "watermarks", "fixed")
+ADJUSTERS = ("none", "water_marks", "supply_queue")
+MIN_BELT_MM_S = 50.0          # slower belts starve the robot on every shipped part
+MIN_INCLINE_MM_S = 10.0
+#: the highest incline % a scenario may give (the loader's range of present.incline_pct)
+MAX_INCLINE_PCT = float(RANGES[(PresentParams, "incline_pct")].hi or 200.0)
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What bounds the search: the axes' top speeds and the largest legal frame spacing."""
+
+    horizontal_mm_s: float
+    incline_mm_s: float
+    frame_spacing_mm: float      # exclusive: the camera window minus the largest part
+
+    @classmethod
+    def of(cls, scenario: Scenario, cell: CellSpec) -> Limits:
+        window = cell.camera.height_px * cell.camera.calibration.mm_per_px
+        size = max(part_size_mm(p) for p in scenario.parts.values())
+        return cls(cell.conveyors["horizontal"].max_mm_s, cell.conveyors["incline"].max_mm_s,
+                   window - size)
+
+
+def _r(x: float, digits: int = 2) -> float:
+    """Rounded, so the overlay reads well and a rerun of it is the trial itself."""
+    return round(float(x), digits)
+
+
+def _pct(incline_mm_s: float, horizontal_mm_s: float) -> float:
+    """The incline % that gives at most ``incline_mm_s`` at ``horizontal_mm_s``."""
+    pct = min(_r(100.0 * incline_mm_s / horizontal_mm_s, 2), MAX_INCLINE_PCT)
+    while pct * horizontal_mm_s / 100.0 > incline_mm_s:      # rounding must not go over
+        pct = _r(pct - 0.01, 2)
+    return pct
+
+
+def _fixed(trial: Any, lim: Limits, prefix: str) -> dict[str, Any]:
+    h = _r(trial.suggest_float(f"{prefix}belt_mm_s", MIN_BELT_MM_S, lim.horizontal_mm_s))
+    inc = trial.suggest_float(f"{prefix}incline_mm_s", MIN_INCLINE_MM_S, lim.incline_mm_s)
+    return {"present": {"horizontal_mm_s": h, "incline_pct": _pct(inc, h)},
+            "adjust": {"algorithm": "none"}}
+
+
+def _water_marks(trial: Any, lim: Limits, prefix: str) -> dict[str, Any]:
+    low = _r(trial.suggest_float(f"{prefix}low", 0.0, 60.0))
+    high = _r(low + trial.suggest_float(f"{prefix}band", 1.0, 80.0))
+    lo = _r(trial.suggest_float(f"{prefix}min_mm_s", MIN_BELT_MM_S, lim.horizontal_mm_s))
+    hi = _r(lo + trial.suggest_float(f"{prefix}max_over_min", 0.0, 1.0)
+            * (lim.horizontal_mm_s - lo))
+    med = _r(lo + trial.suggest_float(f"{prefix}median_at", 0.0, 1.0) * (hi - lo))
+    med = min(max(med, lo), hi)
+    inc = trial.suggest_float(f"{prefix}incline_at_max_mm_s", MIN_INCLINE_MM_S,
+                              lim.incline_mm_s)
+    params = {"high": high, "low": low,
+              "gain": _r(trial.suggest_float(f"{prefix}gain", 0.01, 1.0), 3),
+              "step": _r(trial.suggest_float(f"{prefix}step", 1.0, 30.0)),
+              "min_mm_s": lo, "max_mm_s": hi, "median_mm_s": med}
+    return {"present": {"horizontal_mm_s": med, "incline_pct": _pct(inc, max(hi, med))},
+            "adjust": {"algorithm": "water_marks", "params": params}}
+
+
+def _supply_queue(trial: Any, lim: Limits, prefix: str) -> dict[str, Any]:
+    h = _r(trial.suggest_float(f"{prefix}belt_mm_s", MIN_BELT_MM_S, lim.horizontal_mm_s))
+    inc = trial.suggest_float(f"{prefix}max_incline_mm_s", MIN_INCLINE_MM_S, lim.incline_mm_s)
+    top = _pct(inc, h)
+    params = {"target_queue": _r(trial.suggest_float(f"{prefix}target_queue", 2.0, 60.0)),
+              "gain_pct": _r(trial.suggest_float(f"{prefix}gain_pct", 0.1, 10.0, log=True), 3),
+              "min_incline_pct": min(_r(0.2 * top), 20.0), "max_incline_pct": top,
+              "horizontal_mm_s": h, "min_mm_s": min(MIN_BELT_MM_S, h), "max_mm_s": h}
+    return {"present": {"horizontal_mm_s": h, "incline_pct": _r(top / 2)},
+            "adjust": {"algorithm": "supply_queue", "params": params}}
+
+
+def suggest(trial: Any, space: str, lim: Limits) -> dict[str, Any]:
+    """Ask ``trial`` (an Optuna trial) for one point of ``space``; the overlay it means."""
+    if space == "fixed":
+        return _fixed(trial, lim, "")
+    if space == "watermarks":
+        return _water_marks(trial, lim, "")
+    if space != "ours":
+        raise ValueError(f"unknown search space {space!r} (known: {', '.join(SPACES)})")
+    algorithm = trial.suggest_categorical("adjuster", list(ADJUSTERS))
+    build = {"none": _fixed, "water_marks": _water_marks, "supply_queue": _supply_queue}
+    overlay = build[algorithm](trial, lim, f"{algorithm}.")
+    overlay["locate"] = {"frame_spacing_mm": _r(trial.suggest_float(
+        "frame_spacing_mm", 0.4 * lim.frame_spacing_mm, 0.95 * lim.frame_spacing_mm))}
+    overlay["retrieve"] = {"policy": trial.suggest_categorical("policy",
+                                                               list(RETRIEVE_POLICIES))}
+    return overlay

@@ -1,0 +1,203 @@
+"""`feeder tune` and scenario overlays: every trial legal, the overlay applied and checked,
+a study that resumes, the same search on a local Dask cluster, the search's plot.
+
+Tiny searches (20 simulated seconds, one seed, two or three trials) in virtual time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from feeder_bt.cli import main
+from feeder_bt.errors import ConfigError
+from feeder_bt.run import RunOptions, run_job
+from feeder_bt.scenario import load_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+LENSES = str(ROOT / "scenarios" / "lenses.yaml")
+SQUARES = str(ROOT / "scenarios" / "squares.yaml")
+TINY = ["--duration", "20", "--seeds", "1"]
+
+
+def _write(path: Path, text: str) -> str:
+    path.write_text(text)
+    return str(path)
+
+
+# --------------------------------------------------------------------------- overlays
+
+def test_overlay_merges_over_the_scenario(tmp_path):
+    base, _ = load_scenario(LENSES)
+    ov = _write(tmp_path / "o.yaml", "retrieve:\n  policy: lookahead\n"
+                                     "present:\n  horizontal_mm_s: 220\n")
+    sc, _ = load_scenario(LENSES, overlay=ov)
+    assert sc.retrieve.policy == "lookahead" and sc.present.horizontal_mm_s == 220
+    assert sc.present.incline_pct == base.present.incline_pct     # merged, not replaced
+    assert sc.retrieve.too_far_mm == base.retrieve.too_far_mm
+    assert sc.adjust == base.adjust
+    # naming an adjust algorithm replaces the scenario's params (they were water marks')
+    ov = _write(tmp_path / "n.yaml", "adjust:\n  algorithm: none\n")
+    sc, _ = load_scenario(LENSES, overlay=ov)
+    assert sc.adjust.algorithm == "none" and sc.adjust.params == {}
+    assert sc.adjust.period_s == base.adjust.period_s
+
+
+@pytest.mark.parametrize("text, line, what", [
+    ("present:\n  horizontal_mm_s: 150\nadjust:\n  algorthm: none\n", 4, "did you mean"),
+    ("present:\n  horizontal_mm_s: 900\n", 2, "max_mm_s 400"),
+    ("adjust:\n  algorithm: water_marks\n  params: {low: 5, hgh: 3}\n", 3, "'hgh'"),
+])
+def test_bad_overlay_names_the_overlay_file_and_line(tmp_path, capsys, text, line, what):
+    ov = _write(tmp_path / "bad.yaml", text)
+    with pytest.raises(ConfigError) as e:
+        load_scenario(LENSES, overlay=ov)
+    assert (e.value.file, e.value.line) == (ov, line)
+    assert main(["run", LENSES, "--overlay", ov, "--fast", "--no-db"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"feeder: {ov}:{line}: ") and what in err and "\n" not in err
+
+
+def test_scenario_errors_still_name_the_scenario(tmp_path):
+    """A mistake in the scenario itself is not blamed on the overlay."""
+    sc = tmp_path / "s.yaml"
+    sc.write_text(Path(LENSES).read_text().replace("cell: ../cells/sim.yaml",
+                                                   f"cell: {ROOT / 'cells' / 'sim.yaml'}")
+                  .replace("policy: fifo", "policy: fiffo"))
+    ov = _write(tmp_path / "o.yaml", "present:\n  horizontal_mm_s: 200\n")
+    with pytest.raises(ConfigError) as e:
+        load_scenario(sc, overlay=ov)
+    assert e.value.file == str(sc) and e.value.key == "retrieve.policy"
+
+
+@pytest.mark.parametrize("space", ["ours", "watermarks", "fixed"])
+def test_every_point_of_a_space_is_a_legal_scenario(tmp_path, space):
+    """Random points of each space, on both shipped scenarios, pass the loader's checks
+    (bounds from the cell's axis limits), so no trial is refused or clamped."""
+    import optuna
+
+    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.tuning.space import Limits, suggest
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    for path in (LENSES, SQUARES):
+        limits = Limits.of(*load_scenario(path))
+        study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=3))
+        for _ in range(8):
+            trial = study.ask()
+            overlay = suggest(trial, space, limits)
+            write_overlay(tmp_path / "p.yaml", overlay)
+            sc, cell = load_scenario(path, overlay=tmp_path / "p.yaml")
+            incline = sc.present.horizontal_mm_s * sc.present.incline_pct / 100
+            assert incline <= cell.conveyors["incline"].max_mm_s
+            study.tell(trial, 0.0)
+
+
+# --------------------------------------------------------------------------- the search
+
+@pytest.fixture(scope="module")
+def study_file(tmp_path_factory):
+    """A two-trial search in this process, then continued to three."""
+    d = tmp_path_factory.mktemp("tune")
+    db, out = d / "s.db", d / "o.yaml"
+    assert main(["tune", LENSES, "--trials", "2", *TINY, "--workers", "1",
+                 "--study", str(db), "--out", str(out)]) == 0
+    first = _values(db)
+    first_overlay = yaml.safe_load(out.read_text())
+    assert main(["tune", LENSES, "--trials", "3", *TINY, "--workers", "1",
+                 "--study", str(db), "--out", str(out)]) == 0
+    return db, out, first, first_overlay
+
+
+def _values(db: Path) -> list[float | None]:
+    import optuna
+    study = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}")
+    return [t.value for t in study.trials]
+
+
+def test_study_resumes_and_the_best_only_improves(study_file):
+    db, out, first, _ = study_file
+    values = _values(db)
+    assert len(first) == 2 and len(values) == 3
+    assert values[:2] == first                 # the resumed study kept its trials
+    assert None not in values                  # none failed: every point was legal
+    assert max(values) > 0
+    assert max(values) >= max(first)
+
+
+def test_overlay_out_is_the_best_trial_and_reproduces_it(study_file, tmp_path):
+    db, out, _, first_overlay = study_file
+    import optuna
+    study = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}")
+    best = study.best_trial
+    text = out.read_text()
+    assert f"trial {best.number}: {best.value:.2f} parts/min" in text
+    assert yaml.safe_load(text) == best.user_attrs["overlay"]
+    report = run_job(RunOptions(scenario=LENSES, overlay=str(out), duration=20, fast=True,
+                                seed=1, view="none", db=None))
+    assert report["parts_per_minute"] == pytest.approx(best.value)
+    assert first_overlay == study.trials[max(range(2), key=lambda i: study.trials[i].value)
+                                         ].user_attrs["overlay"]
+
+
+def test_resume_refuses_another_duration(study_file, capsys):
+    db = study_file[0]
+    assert main(["tune", LENSES, "--trials", "4", "--duration", "25", "--seeds", "1",
+                 "--workers", "1", "--study", str(db)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "duration_s 20.0, not 25.0" in err and "\n" not in err
+
+
+def test_progress_lines_when_not_a_terminal(tmp_path, capsys):
+    assert main(["tune", LENSES, "--trials", "1", *TINY, "--workers", "1", "--space",
+                 "fixed", "--study", str(tmp_path / "f.db")]) == 0
+    err = capsys.readouterr().err
+    assert "tune: 1 trials on this process" in err
+    assert "trial 0 [1/1]: " in err and "parts/min" in err and "none belt" in err
+
+
+def test_report_plots_the_study(study_file, tmp_path, capsys):
+    db = study_file[0]
+    png = tmp_path / "study.png"
+    assert main(["report", "--study", str(db), "--plot", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "lenses:ours: 3 trials completed" in out and "best: trial" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "importance: " in out                              # the right-hand panel's
+    assert main(["report", "--study", str(tmp_path / "none.db")]) == 2
+
+
+def test_same_search_on_a_local_dask_cluster(study_file, tmp_path):
+    """The search on a Dask cluster (one worker process on 127.0.0.1) draws the same
+    points as in this process and gets the same parts/min for them."""
+    distributed = pytest.importorskip("distributed")
+    db = tmp_path / "d.db"
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        assert main(["tune", LENSES, "--trials", "2", *TINY, "--dask",
+                     cluster.scheduler_address, "--study", str(db)]) == 0
+    assert _values(db) == study_file[2]
+
+
+def test_ctrl_c_fails_the_open_trial_without_spending_the_budget(tmp_path, monkeypatch):
+    """A run interrupted in a worker ends the search (KeyboardInterrupt); its trial fails
+    as interrupted and does not count, so a rerun still does the trials asked for."""
+    from feeder_bt.tuning import search
+    calls = []
+
+    def fake(job):                      # the second run is the one Ctrl-C reached
+        calls.append(job)
+        if len(calls) == 2:
+            return {"interrupted": True, "error": "interrupted", "seed": job.seed}
+        return {"ppm": 50.0 + len(calls), "seed": job.seed}
+
+    monkeypatch.setattr(search, "evaluate", fake)
+    cfg = search.TuneConfig(scenario=LENSES, trials=2, duration=20, seeds=1,
+                            study=str(tmp_path / "i.db"))
+    with pytest.raises(KeyboardInterrupt):
+        search.run_search(cfg, search.InlineExecutor(), 1)
+    study = search.run_search(cfg, search.InlineExecutor(), 1)
+    states = [t.state.name for t in study.trials]
+    assert states == ["COMPLETE", "FAIL", "COMPLETE"]
+    assert study.trials[1].user_attrs["error"] == search.INTERRUPTED
+    assert len(search.finished(study)) == 2 and study.best_value == 53.0
