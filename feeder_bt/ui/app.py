@@ -54,6 +54,8 @@ class OperatorUi:
         self.bridge = Bridge(self.ops.execute, self.panel.snapshot)
         self.web = UiApp(self.bridge, users, host=host)
         self.trace = trace              # treelog.TreeTrace: the tree view and its timeline
+        if trace is not None:
+            self.web.trace_view = lambda: trace.published
         self.server = UiServer(self.web, host, port)
         self.url = ""
 
