@@ -38,7 +38,7 @@ BOARD_EVERY_S = 1.0         # virtual seconds between blackboard samples
 PUBLISH_WALL_S = 0.2        # the live view (dashboard) is refreshed at most this often
 MAX_LIVE_BYTES = 64 << 20   # in-memory history kept for the dashboard's timeline
 STATUS_NAMES = ("invalid", "running", "success", "failure")
-_CODE = {Status.INVALID: 0, Status.RUNNING: 1, Status.SUCCESS: 2, Status.FAILURE: 3}
+_BY_CODE = (Status.INVALID, Status.RUNNING, Status.SUCCESS, Status.FAILURE)
 _STATUS = operator.attrgetter("status")
 
 SCHEMA = """
@@ -169,6 +169,7 @@ class TreeTrace:
         self._root: Any = None
         self._pairs: list[tuple[int, Any]] = []   # (id, node) of the ticked tree
         self._plain: list[Any] = []
+        self._node_ids: list[int] = []
         self._prev: list[Status] = []
         self._part: str | None = None
         now = cell.clock.now()
@@ -209,13 +210,17 @@ class TreeTrace:
             self.publish()
 
     def _scan(self, now: float, statuses: list[Status] | None = None) -> None:
+        """Record the nodes whose status differs from the last scan's (``_prev`` always
+        says what ``_last`` holds for the ticked tree's nodes)."""
         if statuses is None:
             statuses = list(map(_STATUS, self._plain))
         ms = round((now - self._t0) * 1000)
-        last = self._last
-        for (nid, _), st in zip(self._pairs, statuses, strict=True):
-            code = _CODE[st]
-            if last[nid] != code:
+        last, ids = self._last, self._node_ids
+        for i, (st, was) in enumerate(zip(statuses, self._prev, strict=True)):
+            if st is not was:
+                nid = ids[i]
+                code = (1 if st is Status.RUNNING else 2 if st is Status.SUCCESS
+                        else 3 if st is Status.FAILURE else 0)
                 last[nid] = code
                 _varint(self._moves, ms - self._ms)
                 _varint(self._moves, nid << 2 | code)
@@ -226,7 +231,7 @@ class TreeTrace:
     def _attach(self, root: Any) -> None:
         self._root = root
         if root is None:
-            self._pairs, self._plain, self._prev = [], [], []
+            self._pairs, self._plain, self._prev, self._node_ids = [], [], [], []
             return
         part = self._part_of(root)
         pairs: list[tuple[int, Any]] = []
@@ -246,7 +251,8 @@ class TreeTrace:
             kids = list(getattr(node, "children", ()))
             stack.extend((kid, (*path, i)) for i, kid in reversed(list(enumerate(kids))))
         self._pairs, self._plain = pairs, [n for _, n in pairs]
-        self._prev = [Status.INVALID] * len(pairs)
+        self._node_ids = [nid for nid, _ in pairs]
+        self._prev = [_BY_CODE[self._last[nid]] for nid in self._node_ids]
 
     def _part_of(self, root: Any) -> str | None:
         if root is None:
