@@ -271,7 +271,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     trace = None
     if log or opts.ui:          # the trees' history, for `feeder replay` and the timeline
         from .treelog import TreeTrace
-        trace = TreeTrace(cell, live=bool(opts.ui))
+        trace = TreeTrace(cell, live=bool(opts.ui), logged=bool(log))
     if log:
         _start_log(log, opts, scenario, cell)
         if trace is not None:

@@ -160,9 +160,10 @@ class TreeTrace:
 
     SCHEMA = SCHEMA
 
-    def __init__(self, cell: Any, live: bool = False) -> None:
+    def __init__(self, cell: Any, live: bool = False, logged: bool = True) -> None:
         self.cell = cell
         self.live = live                          # keep history in memory for the dashboard
+        self.logged = logged                      # keep closed chunks for the event log
         self.nodes: list[Node] = []
         self._ids: dict[tuple[str, tuple[int, ...]], int] = {}
         self._last: bytearray = bytearray()       # status code per node id
@@ -295,7 +296,8 @@ class TreeTrace:
 
     def _close(self, now: float) -> None:
         chunk = self._freeze(now)
-        self.closed.append(chunk)
+        if self.logged:
+            self.closed.append(chunk)
         if self.live:
             chunks, size = (*self.live_chunks, chunk), self.live_bytes + chunk.size
             while size > MAX_LIVE_BYTES and len(chunks) > 1:
