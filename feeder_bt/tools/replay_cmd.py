@@ -33,7 +33,12 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--tree", choices=["setup", "feeding", "cleanup"],
                    help="draw this tree (default: the one ticked at that time)")
     p.add_argument("--json", action="store_true", help="print the state as JSON")
-    p.add_argument("--ui", nargs="?", const="127.0.0.1:8080", metavar="HOST:PORT",
+    def bind(text: str) -> str:
+        from ..ui import parse_bind
+        parse_bind(text)                 # a usage mistake: one line, exit 2
+        return text
+
+    p.add_argument("--ui", nargs="?", const="127.0.0.1:8080", type=bind, metavar="HOST:PORT",
                    help="serve the tree view with a timeline over the whole run "
                         "(default 127.0.0.1:8080; until Ctrl-C)")
     p.set_defaults(handler=cmd_replay)
@@ -132,6 +137,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                              indent=1))
             return 0
         ticked = f"the {state.tree} tree" if state.tree else "no tree ticked"
+        if tree != state.tree:
+            ticked += f"; drawn: the {tree} tree"
         print(f"run {run_id} at t = {t:.2f} s ({what}): {ticked}")
         for line in draw(view, state, tree):
             print(line)
