@@ -87,7 +87,13 @@ def node(page, name: str):
 
 
 def fill(page, name: str) -> str:
-    return node(page, name).locator("rect").evaluate("r => getComputedStyle(r).fill")
+    """The computed fill of a node's box (asked again if it was redrawn meanwhile)."""
+    for _ in range(50):
+        got = node(page, name).locator("rect").evaluate("r => getComputedStyle(r).fill")
+        if got:
+            return got
+        page.wait_for_timeout(100)
+    return ""
 
 
 def drag_to(page, fraction: float) -> None:
@@ -131,8 +137,19 @@ def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page):
     page.screenshot(path=str(tmp), full_page=True)
     shutil.move(tmp, SHOT)
 
+    # a folded (idle) branch opens on a click, showing its nodes
+    before = page.locator("#tv-graph g.tv-node").count()
+    folded = page.locator("#tv-graph g.tv-node.folded").first
+    hidden = int(re.search(r"\+(\d+)$", folded.locator("text").last.text_content()).group(1))
+    folded.click()
+    expect(page.locator("#tv-graph g.tv-node")).to_have_count(before + hidden)
+
     page.click("#tv-back")                                 # one second further back
     expect(page.locator("#tv-time")).to_have_attribute("data-t", str(round(t - 1, 3)))
+    page.click("#tv-play")                                 # play on from there
+    expect(page.locator("#tv-play")).to_contain_text("Pause")
+    expect(page.locator("#tv-time")).not_to_have_attribute("data-t", str(round(t - 1, 3)))
+    assert float(page.locator("#tv-time").get_attribute("data-t")) > t - 1
     page.click("#tv-live")                                 # resume: the end of the run
     expect(page.locator("#tv-time")).to_contain_text("end of the run")
     expect(node(page, "feeder")).to_have_attribute("data-status", "invalid")

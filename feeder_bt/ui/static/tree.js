@@ -53,7 +53,7 @@
         this.part.append(new Option(p === "ticked" ? "the ticked tree" : p, p));
       }
       this.liveBtn = el("button", {type: "button", id: "tv-live"}, this.live ? "Live" : "End");
-      this.playBtn = el("button", {type: "button", id: "tv-play"}, "\u25b6 Play");
+      this.playBtn = el("button", {type: "button", id: "tv-play"}, "\u25b6 Play 2\u00d7");
       const back = el("button", {type: "button", id: "tv-back"}, "\u2212 1 s");
       const fwd = el("button", {type: "button", id: "tv-fwd"}, "+ 1 s");
       const fold = el("button", {type: "button", id: "tv-fold"}, "Fold idle");
@@ -171,7 +171,7 @@
       this.playBtn.textContent = "\u275a\u275a Pause";
       this.playing = setInterval(() => {
         const end = this.state ? this.state.span[1] : 0;
-        const next = this.shownT() + 0.5;
+        const next = this.shownT() + 1.0;     // twice the cell's pace: catches up
         if (next >= end) {
           this.stopPlay();
           if (this.live) this.follow(); else this.seek(end);
@@ -184,7 +184,7 @@
     stopPlay() {
       clearInterval(this.playing);
       this.playing = null;
-      this.playBtn.textContent = "\u25b6 Play";
+      this.playBtn.textContent = "\u25b6 Play 2\u00d7";
     }
 
     // ------------------------------------------------------------ drawing
@@ -200,6 +200,9 @@
         : `${(st.span[1] - st.t).toFixed(2)} s before the ${this.live ? "latest" : "end"}`;
       this.time.textContent = `t = ${st.t.toFixed(2)} s (${when})`;
       this.time.dataset.t = String(st.t);
+      const same = old && old.t === st.t && old.tree === st.tree &&
+        old.statuses.join() === st.statuses.join();
+      if (same) return;                   // nothing new (a finished run): keep the drawing
       this.drawMarks();
       this.draw();
       this.drawBoard();
