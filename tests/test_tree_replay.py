@@ -147,3 +147,31 @@ def test_replay_refuses_bad_times_in_one_line(fault_run, tmp_path, capsys):
 def test_status_codes_cover_py_trees():
     assert [s.value.lower() for s in (Status.INVALID, Status.RUNNING, Status.SUCCESS,
                                       Status.FAILURE)] == list(STATUS_NAMES)
+
+
+def test_the_dashboards_memory_is_bounded_and_agrees_with_the_log(tmp_path, monkeypatch):
+    """The live view (what the dashboard's timeline reads) keeps the newest chunks within
+    MAX_LIVE_BYTES and shows the same states as the event log."""
+    import feeder_bt.treelog as treelog
+    monkeypatch.setattr(treelog, "MAX_LIVE_BYTES", 4000)
+    traces: list[TreeTrace] = []
+    orig = TreeTrace.__init__
+
+    def live_init(self, cell, live=False, logged=True):
+        orig(self, cell, live=True, logged=logged)
+        traces.append(self)
+
+    monkeypatch.setattr(TreeTrace, "__init__", live_init)
+    db = tmp_path / "live.db"
+    run_job(RunOptions(scenario=LENSES, duration=60.0, fast=True, seed=2, view="none",
+                       db=str(db)))
+    trace = traces[0]
+    assert 0 < trace.live_bytes <= 4000 and len(trace.closed) == 0    # all written
+    live = trace.publish()
+    t0, t1 = live.span
+    assert t0 > 10.0 and t1 >= 60.0                 # the oldest chunks were let go
+    logged = read_trace(open_readonly(db), 1)
+    assert logged.nodes == live.nodes and logged.span[0] == 0.0
+    for t in (t0, (t0 + t1) / 2, t1 - 5.0):
+        assert live.at(t).statuses == logged.at(t).statuses
+        assert live.at(t).board == logged.at(t).board
