@@ -14,7 +14,7 @@ from .errors import ConfigError, FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission", "tune")
+         "users_cmd", "commission", "tune", "replay_cmd")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in

@@ -130,6 +130,7 @@ class EventLog:
         self._stats: Stats | None = None
         self._timeline_idx = 0
         self._samples: list[dict[str, float]] = []
+        self._writers: list[Any] = []       # more tables, written in the same batches
         self._next_flush = time.monotonic() + flush_wall_s
 
     # ------------------------------------------------------------------ run lifecycle
@@ -148,8 +149,21 @@ class EventLog:
         self._bind(cell.stats)
         cell.listeners.append(lambda old, new: self._bind(cell.stats))
 
+    def add_writer(self, writer: Any) -> None:
+        """Another recorder writing its own tables in this log's batches (the trees'
+        history, ``treelog.TreeTrace``): it has ``SCHEMA``, ``seal()``, ``pending()`` and
+        ``write(conn, run_id)``, called in the flush's transaction."""
+        if self._conn is not None:
+            try:
+                self._conn.executescript(writer.SCHEMA)
+            except sqlite3.Error as e:
+                self._fail(e)
+        self._writers.append(writer)
+
     def finish(self, report: dict[str, Any] | None) -> None:
         """Flush, then store the final report and the end time on the run row."""
+        for w in self._writers:
+            w.seal()
         self.flush()
         if self.run_id is not None:
             self._execute("UPDATE runs SET ended=?, report=? WHERE id=?",
@@ -201,7 +215,8 @@ class EventLog:
         """Write the buffered events and samples in one transaction."""
         self._next_flush = time.monotonic() + self.flush_wall_s
         self._take_samples()
-        if self._conn is None or self.run_id is None or not (self._events or self._samples):
+        if self._conn is None or self.run_id is None or not (
+                self._events or self._samples or any(w.pending() for w in self._writers)):
             return
         rid = self.run_id
         events = [(rid, float(t), kind, _dumps(data)) for t, kind, data in self._events]
@@ -212,6 +227,8 @@ class EventLog:
             with self._conn:
                 self._conn.executemany("INSERT INTO events VALUES (?,?,?,?)", events)
                 self._conn.executemany("INSERT INTO samples VALUES (?,?,?,?,?,?,?,?)", samples)
+                for w in self._writers:
+                    w.write(self._conn, rid)
         except sqlite3.Error as e:
             self._fail(e)
 

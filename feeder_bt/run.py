@@ -285,8 +285,14 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         clock = RealClock()
     cell = Cell(cell_spec, hal, clock)
     broken = _watch_accounting(cell)
+    trace = None
+    if log or opts.ui:          # the trees' history, for `feeder replay` and the timeline
+        from .treelog import TreeTrace
+        trace = TreeTrace(cell, live=bool(opts.ui), logged=bool(log))
     if log:
         _start_log(log, opts, scenario, cell)
+        if trace is not None:
+            log.add_writer(trace)
     ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
     t_start = clock.now()
     t_stop: float | None = None     # set when feeding ends: the report's feed time stops
@@ -302,9 +308,9 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         show = Progress(cell, duration or 0.0, feed_seconds=feed_seconds)
     elif opts.view != "none":
         show = LiveView(cell, fmt=opts.view, feed_seconds=feed_seconds)
-    every = show.update if show else None
+    every = _chain(trace.after_tick if trace else None, show.update if show else None)
     if log:     # after each tick: the view, then the log's batch (cheap when not due)
-        every = (lambda: (show.update(), log.periodic_flush())) if show else log.periodic_flush
+        every = _chain(every, log.periodic_flush)
 
     request = _StopRequest()
     # only the main thread may take signals (a Dask worker runs `feeder tune`'s jobs in one
@@ -320,7 +326,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
         if opts.ui:             # commands run and snapshots are taken in the tick thread
             from .ui.app import OperatorUi
             ui = OperatorUi(cell, opts.scenario, opts.cell or scenario.cell_path,
-                            *_bind(opts.ui), users_path=opts.users, t0=t_start)
+                            *_bind(opts.ui), users_path=opts.users, t0=t_start, trace=trace)
             url = ui.start()
             print(f"operator UI: {url}", file=sys.stderr, flush=True)
             if isinstance(show, LiveView):
@@ -352,7 +358,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
             ticker.fast, ticker.skip_idle = True, opts.skip_idle
         ticker.run(until=clock.now() + STOP_GRACE_S,
                    stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT),
-                   every=_chain(ui.pump if ui else None, plant.pump if plant else None))
+                   every=_chain(trace.after_tick if trace else None, ui.pump if ui else None,
+                                plant.pump if plant else None))
         if show:
             show.update(force=True)
     finally:

@@ -47,12 +47,15 @@ class OperatorUi:
 
     def __init__(self, cell: Cell, scenario_path: str | Path, cell_file: str | Path,
                  host: str, port: int, users_path: str | Path | None = None,
-                 t0: float | None = None) -> None:
+                 t0: float | None = None, trace: Any = None) -> None:
         users = check_users(users_path)
         self.ops = CellOps(cell, Path(scenario_path).resolve().parent, Path(cell_file))
         self.panel = CellPanel(cell, self.ops.limits, lambda: sorted(self.ops.scenarios), t0)
         self.bridge = Bridge(self.ops.execute, self.panel.snapshot)
         self.web = UiApp(self.bridge, users, host=host)
+        self.trace = trace              # treelog.TreeTrace: the tree view and its timeline
+        if trace is not None:
+            self.web.trace_view = lambda: trace.published
         self.server = UiServer(self.web, host, port)
         self.url = ""
 

@@ -51,6 +51,7 @@ from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
 from .operate import COMMANDS
 from .responses import SecurityHeaders, client_ip, json_response, refuse, same_origin
 from .serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
+from .treedata import tree_routes
 from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
 
 COOKIE = "feeder_session"
@@ -103,7 +104,9 @@ class UiApp:
         self._release_seq = users.section("release_control").get("seq")
         self._allowed = allowed_hosts(host, st.hosts)
         _dummy_hash()                    # computed now, not on the loop at the first login
+        self.trace_view: Callable[[], Any] = lambda: None   # the trees' history (app.py)
         self.app = Starlette(routes=[
+            *tree_routes(lambda: self.trace_view(), self._may_watch, live=True),
             Route("/", self.index),
             Route("/api/login", self.login, methods=["POST"]),
             Route("/api/logout", self.logout, methods=["POST"]),
@@ -201,6 +204,13 @@ class UiApp:
         self.tidy()
         for c in self.clients:
             c.wake.set()
+
+    def _may_watch(self, request: Request) -> Response | None:
+        """The tree view's polls: a logged-in user's, not counted as use (like a push)."""
+        self.tidy()
+        if self.sessions.peek(request.cookies.get(COOKIE)) is None:
+            return refuse("not logged in", 401)
+        return None
 
     # ------------------------------------------------------------------ pages
     async def index(self, request: Request) -> Response:

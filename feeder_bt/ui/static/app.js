@@ -13,6 +13,7 @@ let socket = null;
 let loggedIn = false;
 let history = [];          // [up time s, parts/min, queue]
 let lastStatus = null;
+let treeView = null;       // tree.js: the graph, the blackboard and the timeline
 
 async function api(path, body) {
   const opts = {credentials: "same-origin", headers: {}};
@@ -64,6 +65,7 @@ function showLogin(message) {
   $("who").textContent = "";
   $("control-state").textContent = "Control: -";
   $("control-state").dataset.state = "";
+  if (treeView) treeView.stop();
   $("login-error").textContent = message || "";
   $("login-password").value = "";
   $("login-user").focus();
@@ -76,6 +78,8 @@ function showDashboard(session) {
   $("logout").hidden = false;
   renderSession(session);
   connect();
+  if (!treeView && window.feederTree) treeView = window.feederTree.mount($("tree-view"), true);
+  if (treeView) treeView.start();
 }
 
 $("login-form").addEventListener("submit", async (ev) => {
