@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from ..encoder import diff
 from ..errors import HalError, UnknownPart
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
@@ -33,8 +32,8 @@ class NextPart(Leaf):
 
     def x_now(self, part: Part) -> float:
         enc = self.ctx.hal.robot_position.belt_encoder()
-        bits = self.ctx.cell.encoder.robot_bits
-        return part.x_mm + diff(enc, part.latch, bits) / self.ctx.cell.encoder.counts_per_mm
+        return part.x_at(enc, self.ctx.cell.encoder.robot_bits,
+                         self.ctx.cell.encoder.counts_per_mm)
 
     def update(self) -> Status:
         r = self.ctx.scenario.retrieve
