@@ -229,10 +229,11 @@ class CameraView:
         assert self.feed is not None
         pic = await run_in_threadpool(self.feed.picture, 1.0 / self.fps())
         if pic is None:
-            return json_response({"ok": True, "seq": None,
+            return json_response({"ok": True, "fps": self.fps(), "seq": None,
                                   "why": "no frame located yet (the cell grabs frames "
                                          "while it feeds)"})
-        return Response('{"ok":true,' + pic.meta_json[1:], media_type="application/json",
+        head = f'{{"ok":true,"fps":{self.fps():g},'
+        return Response(head + pic.meta_json[1:], media_type="application/json",
                         headers={"cache-control": "no-store"})
 
     async def image(self, request: Request) -> Response:
