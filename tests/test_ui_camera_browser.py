@@ -61,11 +61,16 @@ def test_camera_and_belt_views(tmp_path):
 
             # the belt view: one shape per queued part (and the one being picked)
             queued = rig.cell.ctx.queue.peek_all()
-            expect(page.locator("#belt-parts g.part:not(.picking):not(.held)")).to_have_count(
+            expect(page.locator("#belt-parts g.part:not(.picking)")).to_have_count(
                 len(queued))
             first = page.locator(f'#belt-parts g[data-id="{queued[0].id}"]')
             expect(first).to_have_count(1)
-            assert "translate(" in first.get_attribute("transform")
+            shown = rig.ui.belt.snapshot()      # what the status carries (the cell is still)
+            x, y = shown["parts"][0]["x_mm"], shown["parts"][0]["y_mm"]
+            assert first.get_attribute("transform") == f"translate({x:g} {y:g})"
+            pick = shown["picking"]
+            expect(page.locator("#belt-parts g.picking")).to_have_count(
+                1 if pick and pick["phase"] == "pick" else 0)
             expect(page.locator("#belt-info")).to_contain_text(f"{len(queued)} part(s) queued")
             expect(page.locator("#belt .camera-window")).to_have_count(1)
             expect(page.locator("#belt .reach path")).to_have_count(1)

@@ -65,10 +65,9 @@ window.feederBelt = (() => {
                        "belt travel \u2192"));
     const parts = el("g", {id: "belt-parts"});
     for (const p of b.parts) parts.appendChild(partShape(p, "part"));
-    if (b.picking) {
-      parts.appendChild(partShape(b.picking, b.picking.phase === "pick" ? "part picking"
-                                                                        : "part held"));
-    }
+    // a gripped part is off the belt (where the gripper is, the robot's frame would say)
+    if (b.picking && b.picking.phase === "pick") parts.appendChild(partShape(b.picking,
+                                                                           "part picking"));
     svg.appendChild(parts);
     const info = document.getElementById("belt-info");
     const pick = b.picking ? `; part #${b.picking.id} ${b.picking.phase === "pick" ?
