@@ -14,6 +14,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
+from .encoder import diff
+
 
 @dataclass
 class Part:
@@ -30,6 +32,10 @@ class Part:
     pickable: bool = True
     frame: int = 0
     features: dict[str, float] = field(default_factory=dict)
+
+    def x_at(self, count: int, bits: int, counts_per_mm: float) -> float:
+        """Its x when the robot's belt encoder reads ``count``: it moved with the belt."""
+        return self.x_mm + diff(count, self.latch, bits) / counts_per_mm
 
 
 class PartsQueue:

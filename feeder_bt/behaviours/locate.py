@@ -12,6 +12,7 @@ from ..hal.interfaces import Frame
 from ..jobs import Job
 from ..parts import Part
 from ..supply_bound import ReachWindow
+from ..vision.latest import hand_over
 from ..vision.watch import recipe_watch
 from .common import Ctx, JobLeaf, Leaf, client
 
@@ -150,6 +151,7 @@ class Enqueue(Leaf):
                 stats.count("located_unpickable")
         stats.count("rejected_blobs", len(result.rejected))
         recipe_watch(self.ctx.extras).feed(frame.t, result, stats)   # no silent zero
+        hand_over(self.ctx.extras, frame, result)      # a reference, for the camera view
         self.bb.set("/locate/found", new)
         self.feedback_message = f"frame {frame.index}: {new} new"
         return Status.SUCCESS

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from ..encoder import diff
 from ..errors import HalError, UnknownPart
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
@@ -23,8 +22,7 @@ from .policies import POLICIES
 def belt_x_now(ctx: Ctx, part: Part) -> float:
     """Where ``part`` is along the belt now, by the robot's belt encoder."""
     enc = ctx.hal.robot_position.belt_encoder()
-    bits = ctx.cell.encoder.robot_bits
-    return part.x_mm + diff(enc, part.latch, bits) / ctx.cell.encoder.counts_per_mm
+    return part.x_at(enc, ctx.cell.encoder.robot_bits, ctx.cell.encoder.counts_per_mm)
 
 
 class NextPart(Leaf):

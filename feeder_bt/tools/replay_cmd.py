@@ -46,10 +46,19 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
 
 
 def faults(conn: sqlite3.Connection, run_id: int) -> list[tuple[float, str]]:
-    """(time, message) of each ``fault`` event of the run, in order."""
-    return [(t, json.loads(d or "{}").get("message", "?")) for t, d in conn.execute(
-        "SELECT t, data FROM events WHERE run_id=? AND kind='fault' ORDER BY rowid",
-        (run_id,))]
+    """(time, message) of each fault that stopped the cell (the cell's own and e-stops, not
+    the faults a branch recovered from by itself), in order."""
+    out = []
+    for t, d in conn.execute("SELECT t, data FROM events WHERE run_id=? AND kind='fault' "
+                             "ORDER BY rowid", (run_id,)):
+        data = json.loads(d or "{}")
+        if data.get("kind") in STOPPING:
+            out.append((t, data.get("message", "?")))
+    return out
+
+
+#: the fault events' kinds that stop the cell (``Cell.fault`` and the e-stop)
+STOPPING = ("cell", "estop")
 
 
 def pick_time(conn: sqlite3.Connection, run_id: int, view: TraceView,

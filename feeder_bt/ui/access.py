@@ -45,6 +45,7 @@ class Settings:
     session_idle_s: float = 8 * 3600.0     # ... or after this long without a request
     control_grace_s: float = 60.0          # control is free this long after its holder left
     readable_users_file: str = "warn"      # or "refuse": a users file others may read
+    camera_fps: float = 2.0                # the camera view's most frames a second
 
     @classmethod
     def of(cls, raw: Mapping[str, Any], where: str = "settings") -> Settings:
@@ -68,6 +69,7 @@ SETTINGS = {
     "session_idle_s": "seconds without a request that end a session",
     "control_grace_s": "seconds control stays with a holder whose every page is closed",
     "readable_users_file": "warn or refuse when others may read the users file",
+    "camera_fps": "the most frames a second the dashboard's camera view shows (0.2-10)",
 }
 _HOST_RE = re.compile(r"[a-z0-9]([a-z0-9.-]{0,252})?|\[?[0-9a-f:.]+\]?")
 
@@ -97,6 +99,14 @@ def parse_setting(key: str, value: Any, where: str = "settings") -> Any:
         return value
     if isinstance(value, list) and len(value) == 1:
         value = value[0]
+    if key == "camera_fps":
+        try:
+            fps = float(value)
+        except (TypeError, ValueError, OverflowError):
+            fps = math.nan
+        if isinstance(value, bool) or not 0.2 <= fps <= 10.0:
+            raise UsersError(f"{here}: frames a second between 0.2 and 10, got {value!r}")
+        return fps
     if isinstance(value, bool) or not isinstance(value, int | float | str) \
             or (isinstance(value, str) and len(value) > MAX_NUMBER_CHARS):
         raise UsersError(f"{here}: seconds, a number, got {value!r}")

@@ -12,8 +12,12 @@ from pathlib import Path
 from typing import Any
 
 from ..cell import Cell
+from ..vision.calibration import Calibration
+from ..vision.latest import LatestLook
 from .access import Settings
-from .bridge import Bridge
+from .belt import BeltPanel
+from .bridge import Bridge, Snapshot
+from .camera import CameraFeed
 from .operate import CellOps
 from .server import UiApp, UiServer, make_notice
 from .status import CellPanel
@@ -51,8 +55,10 @@ class OperatorUi:
         users = check_users(users_path)
         self.ops = CellOps(cell, Path(scenario_path).resolve().parent, Path(cell_file))
         self.panel = CellPanel(cell, self.ops.limits, lambda: sorted(self.ops.scenarios), t0)
-        self.bridge = Bridge(self.ops.execute, self.panel.snapshot)
-        self.web = UiApp(self.bridge, users, host=host)
+        self.cell, self.belt = cell, BeltPanel(cell)
+        self.camera = CameraFeed(LatestLook(), Calibration(cell.cell.camera.calibration))
+        self.bridge = Bridge(self.ops.execute, self._snapshot)
+        self.web = UiApp(self.bridge, users, host=host, camera=self.camera)
         self.trace = trace              # treelog.TreeTrace: the tree view and its timeline
         if trace is not None:
             self.web.trace_view = lambda: trace.published
@@ -71,6 +77,11 @@ class OperatorUi:
     def pump(self) -> None:
         """After each tick, on the tick thread."""
         self.bridge.pump()
+        self.camera.install(self.cell.ctx)       # a start makes a new context
+
+    def _snapshot(self) -> Snapshot:
+        status, history, messages = self.panel.snapshot()
+        return {**status, "belt": self.belt.snapshot()}, history, messages
 
     def closing(self) -> None:
         """The run is ending: refuse commands from now on; keep showing the clean-up."""

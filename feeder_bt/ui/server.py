@@ -46,6 +46,7 @@ from .access import (
     parse_body,
 )
 from .bridge import Bridge, Outcome
+from .camera import CameraFeed, CameraView
 from .control import Control, Session, Sessions, retry_after
 from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
 from .operate import COMMANDS
@@ -84,7 +85,8 @@ class UiApp:
                  control: Control | None = None, guard: LoginGuard | None = None,
                  settings: Settings | None = None, host: str = "127.0.0.1",
                  clock: Callable[[], float] = time.monotonic,
-                 record: AccessRecorder | None = None) -> None:
+                 record: AccessRecorder | None = None,
+                 camera: CameraFeed | None = None) -> None:
         self.bridge, self.users, self.host = bridge, users, host
         self.settings = settings if settings is not None else \
             Settings.of(users.section("settings"))
@@ -105,6 +107,7 @@ class UiApp:
         self._allowed = allowed_hosts(host, st.hosts)
         _dummy_hash()                    # computed now, not on the loop at the first login
         self.trace_view: Callable[[], Any] = lambda: None   # the trees' history (app.py)
+        self.camera = CameraView(camera, self.watcher, lambda: self.settings.camera_fps, clock)
         self.app = Starlette(routes=[
             *tree_routes(lambda: self.trace_view(), self._may_watch, live=True),
             Route("/", self.index),
@@ -114,6 +117,7 @@ class UiApp:
             Route("/api/status", self.status),
             Route("/api/control", self.control_action, methods=["POST"]),
             Route("/api/command", self.command, methods=["POST"]),
+            *self.camera.routes,
             WebSocketRoute("/ws", self.websocket),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),
         ], middleware=[Middleware(SecurityHeaders),
@@ -183,6 +187,12 @@ class UiApp:
         """The caller's live session (this request counts as use), or None."""
         self.tidy()
         return self.sessions.get(conn.cookies.get(COOKIE))
+
+    def watcher(self, conn: HTTPConnection) -> Session | None:
+        """The caller's live session without counting this request as use (a page's
+        polling, like the websocket's pushes, must not keep a forgotten tab alive)."""
+        self.tidy()
+        return self.sessions.peek(conn.cookies.get(COOKIE))
 
     def _end(self, s: Session, why: str, ended: bool = False) -> None:
         if not ended:

@@ -125,6 +125,7 @@ function update(msg) {
   if (msg.type === "logout") { showLogin("your session has ended: log in again"); return; }
   if (msg.session) renderSession(msg.session);
   if (msg.status) renderStatus(msg.status);
+  if (msg.status && window.feederBelt) window.feederBelt.update(msg.status.belt);
   if (msg.history && msg.history.length) {
     history = history.concat(msg.history).slice(-MAX_POINTS);
     drawCharts();

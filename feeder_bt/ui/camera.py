@@ -1,0 +1,248 @@
+"""The dashboard's camera view (issue 17): the last frame with what the locator made of it.
+
+Threading: the locate behaviour only hands a reference to each frame and its result to a
+``LatestLook`` slot (``vision.latest``); nothing is drawn or encoded on the tick thread.
+``CameraFeed.picture()`` runs in the web server's thread pool when a page asks: it takes
+the latest look, draws the located parts (class and pose; x, y and angle in the belt
+frame; an arrow along the angle) and the rejected blobs with the reason each was
+rejected, and encodes a JPEG with OpenCV. One picture serves every page; a new one is
+made at most ``camera_fps`` times a second (a frame that comes sooner is skipped), and a
+session asking more often than that is refused (429), so the view costs a few encodes
+a second whatever the number of pages.
+
+The JSON answer lists exactly what was drawn (``parts``, ``rejected``), so that a test or
+a script can check the picture against the locator's result for that frame.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import HTTPConnection, Request
+from starlette.responses import Response
+from starlette.routing import Route
+
+from ..vision.calibration import Calibration
+from ..vision.latest import KEY, LatestLook, Look
+from ..vision.locator import _grey
+from .responses import json_response, refuse
+
+JPEG_QUALITY = 80
+ARROW_MM = 25.0                 # the angle arrow's length in the belt frame
+PART = (0, 200, 0)              # BGR: located parts
+REJECT = (0, 0, 230)            # rejected blobs
+CONTOUR = (255, 160, 0)         # every blob's outline
+
+
+def draw(image: np.ndarray, result: Any, calibration: Calibration | None
+         ) -> tuple[np.ndarray, list[dict[str, Any]], list[dict[str, Any]]]:
+    """A BGR copy of ``image`` with ``result`` drawn on it, and the parts and rejected
+    blobs drawn, as plain data (rounded as labelled)."""
+    out = cv2.cvtColor(_grey(image), cv2.COLOR_GRAY2BGR)
+    contours = getattr(result, "contours", None)
+    if contours:
+        cv2.drawContours(out, contours, -1, CONTOUR, 1, cv2.LINE_AA)
+    parts: list[dict[str, Any]] = []
+    for det in result.parts:
+        c = (int(round(det.u_px)), int(round(det.v_px)))
+        cv2.circle(out, c, 3, PART, -1, cv2.LINE_AA)
+        if calibration is not None:
+            a = math.radians(det.angle_deg)
+            tip = calibration.mm_to_px(np.array([[det.x_mm + ARROW_MM * math.cos(a),
+                                                  det.y_mm + ARROW_MM * math.sin(a)]]))[0]
+            cv2.arrowedLine(out, c, (int(round(tip[0])), int(round(tip[1]))), PART, 1,
+                            cv2.LINE_AA, tipLength=0.25)
+        d = {"part": det.part, "pose": det.pose, "pickable": bool(det.pickable),
+             "x_mm": round(det.x_mm, 1), "y_mm": round(det.y_mm, 1),
+             "angle_deg": round(det.angle_deg, 1),
+             "u_px": round(det.u_px, 1), "v_px": round(det.v_px, 1)}
+        name = f"{det.part}/{det.pose}" + ("" if det.pickable else " (no pick)")
+        _tag(out, [name, f"x {d['x_mm']:g} y {d['y_mm']:g} a {d['angle_deg']:g}"], c,
+             _radius_px(det, calibration), (0, 120, 0))
+        parts.append(d)
+    rejected: list[dict[str, Any]] = []
+    for det in result.rejected:
+        c = (int(round(det.u_px)), int(round(det.v_px)))
+        cv2.drawMarker(out, c, REJECT, cv2.MARKER_TILTED_CROSS, 10, 2)
+        _tag(out, [det.reason], c, 6, REJECT)
+        rejected.append({"reason": det.reason, "x_mm": round(det.x_mm, 1),
+                         "y_mm": round(det.y_mm, 1), "u_px": round(det.u_px, 1),
+                         "v_px": round(det.v_px, 1)})
+    return out, parts, rejected
+
+
+def _radius_px(det: Any, calibration: Calibration | None) -> int:
+    """About the blob's radius in pixels, to put its label beside it, not on it."""
+    area = det.features.get("area_mm2") if isinstance(det.features, dict) else None
+    scale = calibration.mm_per_px if calibration is not None else 1.0
+    return int(math.sqrt(area / math.pi) / scale) if area else 8
+
+
+def _tag(out: np.ndarray, lines: list[str], at: tuple[int, int], r: int,
+         colour: tuple[int, int, int]) -> None:
+    """Lines of text on a pale box right of ``at`` (left of it near the right edge),
+    kept inside the image, so that they read on dark parts and bright belt alike."""
+    font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.38
+    sizes = [cv2.getTextSize(t, font, scale, 1)[0] for t in lines]
+    w = max(s[0] for s in sizes) + 4
+    lh = max(s[1] for s in sizes) + 5
+    h = lh * len(lines) + 2
+    x = at[0] + r + 3
+    if x + w > out.shape[1]:
+        x = at[0] - r - 3 - w
+    x = min(max(x, 0), max(out.shape[1] - w, 0))
+    y = min(max(at[1] - h // 2, 0), max(out.shape[0] - h, 0))
+    box = out[y:y + h, x:x + w]
+    box[:] = (box.astype(np.uint16) + 3 * 255) // 4          # a pale box, the belt showing
+    for i, t in enumerate(lines):
+        cv2.putText(out, t, (x + 2, y + lh * (i + 1) - 2), font, scale, colour, 1,
+                    cv2.LINE_AA)
+
+
+@dataclass(frozen=True)
+class Picture:
+    """One encoded frame and the JSON that says what is drawn on it."""
+
+    seq: int
+    jpeg: bytes
+    meta_json: str
+
+
+class CameraFeed:
+    """Makes ``Picture``s from the latest look, at most once per ``min_interval_s``.
+
+    ``slot`` is filled by the locate behaviour once ``install`` has put it in a cell's
+    context; ``calibration`` (the cell's) draws the angle arrows."""
+
+    def __init__(self, slot: LatestLook, calibration: Calibration | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.slot, self.calibration, self.clock = slot, calibration, clock
+        self._lock = threading.Lock()          # one encode at a time, in a pool thread
+        self._picture: Picture | None = None
+        self._made_at = -math.inf
+        self.encodes = 0
+
+    def install(self, ctx: Any) -> None:
+        """On the tick thread after each tick: make the current context's locate behaviour
+        hand its frames to our slot (a new context comes with every start)."""
+        if ctx is not None and ctx.extras.get(KEY) is not self.slot:
+            ctx.extras[KEY] = self.slot
+
+    def latest(self) -> Picture | None:
+        """The picture made last, without making one."""
+        return self._picture
+
+    def picture(self, min_interval_s: float) -> Picture | None:
+        """The latest frame's picture: made now if there is a newer frame and the last
+        picture is at least ``min_interval_s`` old, else the one made last. Blocking
+        (drawing and encoding take a few ms): call it off the event loop."""
+        with self._lock:
+            look = self.slot.get()
+            pic = self._picture
+            if look is None or (pic is not None and look.seq == pic.seq):
+                return pic
+            now = self.clock()
+            if pic is not None and now < self._made_at + min_interval_s:
+                return pic
+            self._picture = self._make(look)
+            self._made_at = now
+            self.encodes += 1
+            return self._picture
+
+    def _make(self, look: Look) -> Picture:
+        img, parts, rejected = draw(look.frame.image, look.result, self.calibration)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        if not ok:
+            raise RuntimeError("OpenCV could not encode the camera picture")
+        h, w = img.shape[:2]
+        meta = {"seq": look.seq, "frame": look.frame.index, "t": round(look.frame.t, 3),
+                "width": w, "height": h, "vision_ms": round(float(look.result.ms), 1),
+                "image": f"/api/camera/{look.seq}.jpg", "parts": parts, "rejected": rejected}
+        return Picture(look.seq, buf.tobytes(), json.dumps(meta, separators=(",", ":")))
+
+
+class Pacer:
+    """A token bucket per session: ``rate`` requests a second, ``burst`` at once."""
+
+    MAX_KEYS = 256
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock
+        self._buckets: dict[str, tuple[float, float]] = {}     # key -> (tokens, at)
+
+    def wait_s(self, key: str, rate: float, burst: float = 2.0) -> float:
+        """0 and one token taken if ``key`` may go now; else how long until it may."""
+        now = self.clock()
+        tokens, at = self._buckets.get(key, (burst, now))
+        tokens = min(burst, tokens + (now - at) * rate)
+        if tokens < 1.0:
+            self._buckets[key] = (tokens, now)
+            return (1.0 - tokens) / rate
+        self._buckets[key] = (tokens - 1.0, now)
+        if len(self._buckets) > self.MAX_KEYS:            # forget the long-idle
+            self._buckets = {k: v for k, v in self._buckets.items() if now - v[1] < 60.0}
+        return 0.0
+
+
+class CameraView:
+    """The routes: ``GET /api/camera`` (what is drawn, and where the picture is) and
+    ``GET /api/camera/{seq}.jpg`` (the picture), for signed-in users only.
+
+    ``watcher`` gives the caller's session without counting the request as use (the page
+    polls: a forgotten tab must not keep its session alive); ``fps`` the setting now."""
+
+    def __init__(self, feed: CameraFeed | None,
+                 watcher: Callable[[HTTPConnection], Any],
+                 fps: Callable[[], float], clock: Callable[[], float] = time.monotonic) -> None:
+        self.feed, self.watcher, self.fps = feed, watcher, fps
+        self.pacer = Pacer(clock)
+        self.routes = [Route("/api/camera", self.meta),
+                       Route("/api/camera/{seq:int}.jpg", self.image)]
+
+    def _gate(self, request: Request, what: str) -> Any:
+        """The session, or the refusal to send back."""
+        s = self.watcher(request)
+        if s is None:
+            return refuse("not logged in", 401)
+        if self.feed is None:
+            return refuse("no camera view in this run", 404)
+        wait = self.pacer.wait_s(f"{s.token}:{what}", self.fps())
+        if wait > 0:
+            secs = max(1, math.ceil(wait))
+            return refuse(f"at most {self.fps():g} camera frames a second: try again "
+                          f"in {wait:.2f} s", 429, {"retry-after": str(secs)})
+        return s
+
+    async def meta(self, request: Request) -> Response:
+        got = self._gate(request, "meta")
+        if isinstance(got, Response):
+            return got
+        assert self.feed is not None
+        pic = await run_in_threadpool(self.feed.picture, 1.0 / self.fps())
+        if pic is None:
+            return json_response({"ok": True, "fps": self.fps(), "seq": None,
+                                  "why": "no frame located yet (the cell grabs frames "
+                                         "while it feeds)"})
+        head = f'{{"ok":true,"fps":{self.fps():g},'
+        return Response(head + pic.meta_json[1:], media_type="application/json",
+                        headers={"cache-control": "no-store"})
+
+    async def image(self, request: Request) -> Response:
+        got = self._gate(request, "image")
+        if isinstance(got, Response):
+            return got
+        assert self.feed is not None
+        pic = self.feed.latest()
+        if pic is None or pic.seq != request.path_params["seq"]:
+            return refuse("that frame is gone: ask /api/camera for the latest", 404)
+        return Response(pic.jpeg, media_type="image/jpeg",
+                        headers={"cache-control": "private, max-age=60"})
