@@ -26,6 +26,7 @@ def _capture_hal(monkeypatch) -> dict:
     return seen
 
 
+@pytest.mark.soak          # real time: 40 s of wall clock through the TCP drivers
 def test_emulated_run_feeds_like_the_simulated_cell():
     opts = dict(scenario="scenarios/lenses.yaml", duration=45.0, seed=1, view="none", db=None)
     emulated = run_job(RunOptions(hal="emulated", **opts))

@@ -187,6 +187,7 @@ def test_a_whole_run_survives_a_cut_at_each_step(tmp_path, phase, device):
 # ------------------------------------------------------------- the emulated cell (robot)
 
 
+@pytest.mark.soak          # real time: 40 s of wall clock through the TCP drivers
 def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monkeypatch):
     """The real Adept driver against the V+ emulator (real time, ~40 s): the motion
     server's link cut before a PICK is carried out, after the grip, during a PLACE and
