@@ -10,6 +10,7 @@ import os
 import sys
 from pathlib import Path
 
+from .argtypes import positive
 from .errors import ConfigError, FeederError
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
@@ -20,16 +21,6 @@ TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emul
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
 #: the world or the trees, never the operator's doing): docs/faults.md
 EXIT_ACCOUNTING = 4
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
 
 
 class UsageError(FeederError):
@@ -93,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="feed parts: the main job (simulated cell by default)")
     r.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")
     r.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
-    r.add_argument("--duration", type=_positive, default=None,
+    r.add_argument("--duration", type=positive, default=None,
                    help="seconds of feeding (virtual seconds on the simulated cell); default 60 "
                         "(with --ui: until Ctrl-C)")
     r.add_argument("--fast", action="store_true",

@@ -32,6 +32,7 @@ from typing import Any, TextIO
 
 import yaml
 
+from ..argtypes import positive
 from ..clock import RealClock
 from ..encoder import EncoderSync, diff
 from ..errors import FeederError
@@ -58,22 +59,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                                                      "(instead of asking on standard input)")
     p.add_argument("--report", metavar="FILE", help="where to write the report (default "
                                                     "commission-WHAT.yaml; .json for JSON)")
-    p.add_argument("--jog-mm-s", type=_positive, default=JOG_MM_S, metavar="MM_S",
+    p.add_argument("--jog-mm-s", type=positive, default=JOG_MM_S, metavar="MM_S",
                    help="jog speed (default 20)")
-    p.add_argument("--input-wait", type=_positive, default=INPUT_WAIT_S, metavar="S",
+    p.add_argument("--input-wait", type=positive, default=INPUT_WAIT_S, metavar="S",
                    help="seconds to look for an input change after the answer (default 5)")
     p.set_defaults(handler=cmd_commission)
     return p
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 < v < 1e6:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
 
 
 # ---------------------------------------------------------------------------- asking

@@ -13,6 +13,7 @@ import time
 from contextlib import ExitStack
 from typing import Any
 
+from ..argtypes import positive, positive_int
 from ..errors import FeederError
 from ..tuning.space import SPACES
 
@@ -23,41 +24,21 @@ class TuneUsage(FeederError):
     exit_code = 2
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return v
-
-
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
-
-
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register ``tune`` on the ``feeder`` sub-command parsers."""
     p = subparsers.add_parser(
         "tune", help="search a scenario's speeds, adjuster and pick policy for the best "
                      "parts/min (simulated, virtual time); write the best as an overlay")
     p.add_argument("scenario", help="scenario YAML, e.g. scenarios/lenses.yaml")
-    p.add_argument("--trials", type=_positive_int, default=20,
+    p.add_argument("--trials", type=positive_int, default=20,
                    help="trials in the study in all (a rerun continues to this many; "
                         "default 20)")
-    p.add_argument("--duration", type=_positive, default=600.0,
+    p.add_argument("--duration", type=positive, default=600.0,
                    help="simulated seconds per run (default 600)")
-    p.add_argument("--seeds", type=_positive_int, default=2,
+    p.add_argument("--seeds", type=positive_int, default=2,
                    help="runs per trial, seeds 1..K; the trial's value is their mean "
                         "parts/min (default 2)")
-    p.add_argument("--workers", type=_positive_int, default=None,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="local worker processes (default: the machine's cores; 1 runs the "
                         "trials in this process)")
     p.add_argument("--dask", metavar="ADDRESS",
