@@ -218,13 +218,18 @@ def summary(report: dict) -> str:
 
 
 def _ceiling_line(report: dict) -> str:
-    """The ceiling: the lower of the robot and supply bounds, and how near the run came."""
+    """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
+    run came; with an inflow bound the three bounds get a line of their own (80 columns)."""
     if "ceiling_ppm" not in report:
         return ""
     pct = report["of_ceiling_pct"]
+    of = f": {pct:.0f} % of it" if pct is not None else ""
+    each = (f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f}")
+    if "inflow_bound_ppm" in report:
+        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound)"
+                f"{of}\n  bounds: {each}, inflow {report['inflow_bound_ppm']:.1f}")
     return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
-            f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f})"
-            + (f": {pct:.0f} % of it" if pct is not None else ""))
+            f"{each}){of}")
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

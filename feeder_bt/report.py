@@ -11,7 +11,7 @@ import numpy as np
 from .cell import Cell
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
-from .supply_bound import ceiling, supply_bound_ppm
+from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm
 from .ticker import Ticker
 
 
@@ -47,21 +47,31 @@ def robot_bound(cell_spec: CellSpec, scenario: Scenario,
     return cycle, 60.0 / cycle
 
 
-def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds: float
-           ) -> dict[str, Any]:
-    """The supply bound (``feeder_bt.supply_bound``) beside the robot's; the lower is the
-    ceiling, and parts/min as a % of it."""
+Inflow = tuple[int, list[tuple[float, int]]]      # parts at the start, (s, parts) arrivals
+
+
+def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds: float,
+           inflow: Inflow | None = None, span_s: float | None = None) -> dict[str, Any]:
+    """The supply bound (``feeder_bt.supply_bound``) beside the robot's, and the inflow
+    bound when parts enter only by totes; the lowest is the ceiling, and parts/min as a %
+    of it. The inflow bound counts parts over the run's whole ``span_s`` and is put per
+    minute of feeding, like parts/min."""
     supply = supply_bound_ppm(located_in_reach, feed_seconds)
-    which, ceil = ceiling(robot_ppm, supply)
+    out: dict[str, Any] = {"supply_bound_ppm": round(supply, 3)}
+    inflow_ppm = None
+    if inflow is not None and feed_seconds > 0:
+        parts = inflow_bound_parts(*inflow, robot_ppm, span_s or feed_seconds)
+        inflow_ppm = parts * 60.0 / feed_seconds
+        out["inflow_bound_ppm"] = round(inflow_ppm, 3)
+    which, ceil = ceiling(robot_ppm, supply, inflow_ppm)
     ppm = retrieved * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
-    return {"supply_bound_ppm": round(supply, 3), "ceiling": which,
-            "ceiling_ppm": round(ceil, 3),
+    return {**out, "ceiling": which, "ceiling_ppm": round(ceil, 3),
             "of_ceiling_pct": round(100.0 * ppm / ceil, 1) if ceil > 0 else None}
 
 
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
-                 feed_seconds: float, wall_seconds: float, interrupted: bool = False
-                 ) -> dict[str, Any]:
+                 feed_seconds: float, wall_seconds: float, interrupted: bool = False,
+                 inflow: Inflow | None = None) -> dict[str, Any]:
     s = cell.stats
     retrieved = {name: s.retrieved.get(name, 0) for name in (cell.scenario.parts if cell.scenario
                                                             else {})}
@@ -105,7 +115,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "parts_per_minute": round(total * 60.0 / feed_seconds, 3) if feed_seconds > 0 else 0.0,
         "robot_bound_ppm": round(bound_ppm, 3),
         "robot_bound_cycle_s": round(bound_cycle, 4),
-        **bounds(s.counts["located_in_reach"], bound_ppm, total, feed_seconds),
+        **bounds(s.counts["located_in_reach"], bound_ppm, total, feed_seconds, inflow,
+                 sim_seconds),
         "parts": parts,
         "faults": dict(s.faults),
         "recoveries": dict(s.recoveries),

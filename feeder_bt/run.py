@@ -377,7 +377,8 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
                           sim_seconds=clock.now() - t_start,
                           feed_seconds=feed_seconds(),
-                          wall_seconds=time.monotonic() - wall0, interrupted=interrupted)
+                          wall_seconds=time.monotonic() - wall0, interrupted=interrupted,
+                          inflow=supply.inflow() if supply is not None else None)
     report["speeds"] = final_speeds()
     if injector is not None:
         report["injected"] = dict(injector.injected)

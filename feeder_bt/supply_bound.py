@@ -10,11 +10,20 @@ place parts faster than either; the lower one is the run's ceiling (``feeder_bt.
 It is counted from what the controller sees (``Enqueue`` counts ``located_in_reach``), so
 it is the same on a real cell; ``tests/test_supply.py`` checks it against the simulated
 world's truth. A part that goes round again is supplied again: each pass is a chance.
+
+When placed parts leave the cell and new ones come only in totes (a supply plan with
+``ship_placed``), a third bound holds: the inflow bound. No feeder can place a part before
+it has entered the cell, nor place faster than the robot bound, so by the end of feeding it
+has placed at most ``min over s of A(s) + R (T - s)`` (plus one cycle cut by ``s``), with ``A(s)`` the parts that entered
+by ``s`` and ``R`` the robot bound (the arrival curve met by the robot's service curve, as
+in network calculus). The passes bound cannot see this: a part the hopper holds back goes
+round and is counted at every pass.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from .scenario.model import CellSpec, Scenario
 
@@ -56,9 +65,25 @@ def supply_bound_ppm(located_in_reach: int, feed_seconds: float) -> float:
     return located_in_reach * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
 
 
-def ceiling(robot_ppm: float, supply_ppm: float | None) -> tuple[str, float]:
-    """(which bound, parts/min): the lower of the two is the ceiling (``None``: no supply
-    bound known, the robot's then)."""
-    if supply_ppm is None or robot_ppm <= supply_ppm:
-        return "robot", robot_ppm
-    return "supply", supply_ppm
+def inflow_bound_parts(initial: int, arrivals: Sequence[tuple[float, int]],
+                       robot_ppm: float, span_s: float) -> float:
+    """The most parts any feeder could have placed in ``[0, span_s]`` when the cell held
+    ``initial`` parts at 0 and ``arrivals`` (seconds, parts) came later, with a robot that
+    places at most ``robot_ppm``: ``min over s of A(s) + R (span_s - s) + 1`` (the one
+    for a cycle cut by ``s``). ``A`` is a staircase and ``R (span_s - s)`` falls, so the
+    minimum is at 0, just before an arrival, or at the end (``A(span_s)``)."""
+    rate = robot_ppm / 60.0
+    arrived = float(initial + sum(n for t, n in arrivals if t <= 0))
+    best = arrived + rate * span_s + 1
+    for t, n in sorted(a for a in arrivals if 0 < a[0] <= span_s):
+        best = min(best, arrived + rate * (span_s - t) + 1)      # just before it came
+        arrived += n
+    return min(best, arrived)
+
+
+def ceiling(robot_ppm: float, supply_ppm: float | None, inflow_ppm: float | None = None
+            ) -> tuple[str, float]:
+    """(which bound, parts/min): the lowest bound known is the ceiling (``None``: that
+    bound not known; the robot's is always)."""
+    known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm)]
+    return min(((k, v) for k, v in known if v is not None), key=lambda kv: kv[1])

@@ -67,6 +67,7 @@ def evaluate(job: Job) -> dict[str, Any]:
     parts = report["parts"]
     out = {"ppm": float(report["parts_per_minute"]), "seed": job.seed,
            "robot_bound_ppm": report.get("robot_bound_ppm"),
+           "inflow_bound_ppm": report.get("inflow_bound_ppm"),
            "ceiling_ppm": report.get("ceiling_ppm"),
            "lost": parts.get("lost") or 0, "missed": parts.get("missed") or 0,
            "fault": report.get("fault")}

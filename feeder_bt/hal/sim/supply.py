@@ -59,6 +59,7 @@ class SupplyDriver:
         self.log: list[dict[str, Any]] = []
         self.totes = 0
         self.initial = world.total
+        self.arrivals: list[tuple[float, int]] = []     # (s into the run, parts): each tote
         self.t0 = world.now()
         world.ship_placed = plan.ship_placed
         if plan.totes is not None:
@@ -97,6 +98,7 @@ class SupplyDriver:
         self.rng.shuffle(order)
         self.world.add_parts(order)
         self.totes += 1
+        self.arrivals.append((t - self.t0, len(order)))
         what = ", ".join(f"{n} {k}" for k, n in sorted(counts.items()) if n)
         self._note(t, "tote", f"tote {self.totes}: {what} into the hopper "
                               f"({len(self.world.hopper)} there now)")
@@ -126,6 +128,12 @@ class SupplyDriver:
         self._note(t, "operator", f"robot speed override {pct:g} %")
 
     # ------------------------------------------------------------------ report
+    def inflow(self) -> tuple[int, list[tuple[float, int]]] | None:
+        """(parts at the start, tote arrivals) when placed parts leave the cell, for the
+        report's inflow bound (``feeder_bt.supply_bound``); ``None`` when they go back to
+        the hopper (then nothing bounds what enters)."""
+        return (self.initial, list(self.arrivals)) if self.plan.ship_placed else None
+
     def report(self) -> dict[str, Any]:
         w = self.world
         return {"plan": str(self.plan.path), "totes": self.totes, "initial": self.initial,

@@ -1,0 +1,98 @@
+"""The inflow bound (feeder_bt.supply_bound): when placed parts leave the cell and new ones
+come only in totes, no feeder places more than ``min over s of A(s) + R (T - s) + 1``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from feeder_bt.cli import summary
+from feeder_bt.run import RunOptions, run_job
+from feeder_bt.supply_bound import ceiling, inflow_bound_parts
+
+ROOT = Path(__file__).resolve().parents[1]
+R = 109.598                   # lenses' robot bound, parts/min
+# 30 lenses at the start and one tote of 30 at 20 s; placed parts leave the cell. The
+# belts run fast (a fixed setting within the cell's limits), so the hopper empties.
+PLAN = "start: {lens: 30}\nship_placed: true\ntotes: {first_at_s: 20, every_s: 1000, parts: 30}\n"
+FAST = "present: {horizontal_mm_s: 337.4, incline_pct: 113.1}\nadjust: {algorithm: none}\n"
+RUN_S = 120.0
+
+
+def test_the_bound_by_hand():
+    # supply/batch_refill.yaml over 600 s: 150 at the start, 200 at 180, 360 and 540 s.
+    # Just before the last tote: 550 parts in, and 60 s of robot: 550 + 109.598 + 1.
+    totes = [(180.0, 200), (360.0, 200), (540.0, 200)]
+    assert inflow_bound_parts(150, totes, R, 600.0) == pytest.approx(550 + R + 1)
+    # a tote at 0 is part of the start; a tote after the end does not count
+    assert inflow_bound_parts(0, [(0.0, 150), *totes, (720.0, 200)], R, 600.0) == \
+        pytest.approx(550 + R + 1)
+    # no totes: the start is all there is
+    assert inflow_bound_parts(150, [], R, 600.0) == 150
+    # 10 at the start, 100 at 30 s: 10 + 30 s of robot, not the 110 that came
+    assert inflow_bound_parts(10, [(30.0, 100)], R, 60.0) == pytest.approx(10 + R / 2 + 1)
+    # a tote 0.1 s before the end comes too late to be placed
+    assert inflow_bound_parts(5, [(59.9, 5)], R, 60.0) == pytest.approx(5 + R * 0.1 / 60 + 1)
+
+
+def test_the_ceiling_is_the_lowest_bound_known():
+    assert ceiling(109.6, 90.0) == ("supply", 90.0)
+    assert ceiling(109.6, 120.0, 66.1) == ("inflow", 66.1)
+    assert ceiling(60.0, 90.0, 66.1) == ("robot", 60.0)
+    assert ceiling(109.6, None, None) == ("robot", 109.6)
+    assert ceiling(109.6, 109.6) == ("robot", 109.6)                # a tie: the robot's
+
+
+@pytest.fixture(scope="module")
+def tight(tmp_path_factory) -> dict:
+    d = tmp_path_factory.mktemp("inflow")
+    (d / "plan.yaml").write_text(PLAN)
+    (d / "fast.yaml").write_text(FAST)
+    return run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=RUN_S,
+                              fast=True, seed=1, view="none", supply=str(d / "plan.yaml"),
+                              overlay=str(d / "fast.yaml")))
+
+
+def test_a_run_stays_under_its_inflow_bound_which_is_its_ceiling(tight):
+    r = tight
+    placed = sum(r["parts"]["retrieved"].values())
+    assert [(e["t"], e["kind"]) for e in r["supply"]["log"]] == [(20.0, "tote")]
+    bound = inflow_bound_parts(30, [(20.0, 30)], r["robot_bound_ppm"], r["sim_seconds"])
+    assert bound == 60                                   # everything that came
+    assert r["inflow_bound_ppm"] == pytest.approx(bound * 60 / r["feed_seconds"], abs=1e-3)
+    assert r["ceiling"] == "inflow" and r["ceiling_ppm"] == r["inflow_bound_ppm"]
+    assert r["ceiling_ppm"] < r["supply_bound_ppm"]     # passes count a part again and again
+    assert 0.9 * bound <= placed <= bound               # near it: the bound is not loose
+    census = r["world"]["census"]
+    assert r["parts"]["lost"] == 0
+    assert r["parts"]["shipped"] + census["placed"] + census["gripper"] == placed
+    assert r["of_ceiling_pct"] == pytest.approx(100 * r["parts_per_minute"] / r["ceiling_ppm"],
+                                                abs=0.1)
+
+
+def test_the_bound_binds_a_tote_it_does_not_know_breaks_it(tight):
+    """Evidence that can fail: leave the tote out of the arrivals, and the run has placed
+    more parts than the bound then allows."""
+    r = tight
+    placed = sum(r["parts"]["retrieved"].values())
+    assert placed > inflow_bound_parts(30, [], r["robot_bound_ppm"], r["sim_seconds"])
+
+
+def test_no_inflow_bound_when_placed_parts_go_back_to_the_hopper(tmp_path):
+    plan = tmp_path / "recycled.yaml"
+    plan.write_text("start: {lens: 20}\ntotes: {every_s: 20, parts: 20}\n")
+    r = run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=30.0,
+                           fast=True, seed=1, view="none", supply=str(plan)))
+    assert "inflow_bound_ppm" not in r and r["ceiling"] in ("robot", "supply")
+
+
+def test_the_summary_gives_the_three_bounds_in_80_columns(tight):
+    scarce = tight
+    lines = summary(scarce).splitlines()
+    assert lines[-2] == (f"  ceiling {scarce['ceiling_ppm']:.1f} parts/min (inflow bound): "
+                         f"{scarce['of_ceiling_pct']:.0f} % of it")
+    assert lines[-1] == (f"  bounds: robot {scarce['robot_bound_ppm']:.1f}, supply "
+                         f"{scarce['supply_bound_ppm']:.1f}, inflow "
+                         f"{scarce['inflow_bound_ppm']:.1f}")
+    assert all(len(line) <= 80 for line in lines)
