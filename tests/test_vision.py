@@ -438,7 +438,7 @@ def test_contours_on_bands_equal_the_whole_frame(open_px, close_px):
 
 
 def test_chain_corners_give_the_full_chain():
-    from feeder_bt.vision.locator import _chain_steps, _full_chain
+    from feeder_bt.vision.chains import _chain_steps, _full_chain
     rng = np.random.default_rng(5)
     for _ in range(100):
         mask = _random_mask(rng)
@@ -453,7 +453,8 @@ def test_chain_corners_give_the_full_chain():
 
 
 def test_smoothed_length_is_the_moving_average_length():
-    from feeder_bt.vision.locator import _WINDOW, _smooth_length
+    from feeder_bt.vision.chains import WINDOW as _WINDOW
+    from feeder_bt.vision.chains import _smooth_length
     rng = np.random.default_rng(6)
     for n in list(range(3, 40)) + [100, 101, 250, 255]:
         pts = rng.integers(0, 200, size=(n, 2)).astype(np.int32)
@@ -466,7 +467,7 @@ def test_smoothed_length_is_the_moving_average_length():
 
 
 def test_cut_corner_signatures_at_once_equal_one_by_one():
-    from feeder_bt.vision.locator import _corner_signature, _corner_signatures
+    from feeder_bt.vision.corners import _corner_signature, _corner_signatures
     parts, _ = load("squares")
     outline = pose_outline(parts["square"], "face_up")
     rng = np.random.default_rng(7)

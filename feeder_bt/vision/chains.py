@@ -1,6 +1,6 @@
 """Pixel contours: their full chains, lengths, and the runs the locator packs by.
 
-Helpers of ``feeder_bt.vision.locator`` that need no recipe.
+Helpers of ``feeder_bt.vision`` (segmentation, blobs) that need no recipe.
 """
 
 from __future__ import annotations
@@ -56,6 +56,14 @@ def _chain_steps(contours: list[np.ndarray]) -> list[int]:
     steps = np.abs(nxt - pts).max(axis=1)
     out = np.add.reduceat(steps, ends - sizes).tolist()
     return [n if size > 1 else 1 for n, size in zip(out, sizes, strict=True)]
+
+
+def _boundary_steps(contours: list[np.ndarray], full: bool) -> list[int]:
+    """Boundary pixels of each closed contour (for Pick's theorem): its points if ``full``
+    (``CHAIN_APPROX_NONE``), else counted from its corners (``_chain_steps``)."""
+    if not contours:
+        return []
+    return [len(c) for c in contours] if full else _chain_steps(contours)
 
 
 def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:

@@ -1,7 +1,8 @@
 """The cut-corner signature of a square with one corner cut: its angle and face.
 
-Used by the locator's ``orientation: cut_corner`` (``Locator._faces``, ``Locator._orient``)
-on outlines in mm.
+Used by the locator's ``orientation: cut_corner`` on outlines in mm: each chiral part's
+model signature (``_part_signature``) is matched against a blob's (``Locator._faces``)
+by ``_orient``, which gives the angle and the face.
 """
 
 from __future__ import annotations
@@ -11,6 +12,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from ..geometry import pose_outline, wrap_deg
+from ..scenario.model import PartSpec
 
 
 @dataclass
@@ -114,3 +118,37 @@ def _cross(a: tuple[float, float], b: tuple[float, float]) -> float:
 
 def _angle(v: tuple[float, float]) -> float:
     return math.atan2(v[1], v[0])
+
+
+def _orient(model: _CornerSignature, obs: _CornerSignature | None
+            ) -> tuple[float, bool] | None:
+    """Angle (deg) and face at which the model's signature matches the blob's."""
+    if obs is None:
+        return None
+    mirrored = (_cross(model.corner, model.leg) * _cross(obs.corner, obs.leg)) < 0
+    mc = (model.corner[0], -model.corner[1]) if mirrored else model.corner
+    coarse = _angle(obs.corner) - _angle(mc)
+    # fine angle: the observed rectangle's angle, moved by the model's own, mod 90°
+    fine = obs.alpha - (-model.alpha if mirrored else model.alpha)
+    k = round((coarse - fine) / (math.pi / 2))
+    return wrap_deg(math.degrees(fine + k * math.pi / 2)), mirrored
+
+
+def _cut_corner(model: _CornerSignature, xy: np.ndarray) -> tuple[float, bool] | None:
+    """Angle (deg) and face at which the model outline matches the blob, or None."""
+    return _orient(model, _corner_signature(np.asarray(xy, dtype=float).reshape(-1, 2)))
+
+
+def _part_signature(part: PartSpec) -> _CornerSignature | None:
+    """The signature of the part's own, unmirrored outline (``_face_up``): the model."""
+    return _corner_signature(_densify(pose_outline(part, _face_up(part))))
+
+
+def _face_up(part: PartSpec) -> str:
+    """The pose whose silhouette is the part's own, unmirrored outline."""
+    if "face_up" in part.poses:
+        return "face_up"
+    for name, pose in part.poses.items():
+        if not pose.mirror and pose.silhouette is None:
+            return name
+    return next(iter(part.poses))

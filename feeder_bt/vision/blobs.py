@@ -1,0 +1,187 @@
+"""Blobs: what one contour of the foreground measures, in the belt frame.
+
+Every blob gets its area (mm², corrected for pixelisation by Pick's theorem) and centroid
+from the contour's moments (``find_blobs``); its other features (``features.FEATURES``)
+are measured a group at a time, when asked for (``measure_feature``), so the locator's
+cascade measures only what its checks need. Nothing here knows the recipe's classes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..geometry import wrap_deg
+from .calibration import Calibration
+from .chains import _boundary_steps, _full_chain, _smooth_length
+from .corners import _CornerSignature
+from .features import GROUP_OF
+
+
+@dataclass
+class Detection:
+    """One blob: its class (None if rejected, with ``reason``), pose in the belt frame and
+    in pixels, and the features measured on the way (see ``vision.locator``)."""
+
+    part: str | None
+    pose: str | None
+    pickable: bool
+    x_mm: float
+    y_mm: float
+    angle_deg: float
+    u_px: float
+    v_px: float
+    features: dict[str, float]
+    reason: str = ""           # empty if accepted, else why rejected
+
+
+class Blob:
+    """One contour on its way through the cascade: what has been measured so far."""
+
+    __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
+                 "face", "oriented", "holes")
+
+    def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
+                 mom: dict[str, float], area_px: float, det: Detection, full: bool,
+                 holes: list[np.ndarray] | None = None) -> None:
+        self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
+        self.holes = holes                # its hole contours (None: not looked for)
+        self.full = full                  # every boundary pixel (else the chain's corners)
+        self.box = box                    # bounding box u, v, width, height
+        self.mom = mom                    # its moments (cv2.moments)
+        self.area_px = area_px            # pixel count (Pick's theorem on the contour)
+        self.det = det
+        self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
+        self.hull: np.ndarray | None = None         # convex hull (``hull``)
+        self.faced = False                # ``face`` measured (``Locator._faces``)
+        self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
+        self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
+
+
+def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
+               min_area_mm2: float, full: bool = True,
+               holes: list[list[np.ndarray]] | None = None) -> list[Blob]:
+    """The contours worth reporting (not specks), measured as far as every blob is: area,
+    centroid (mm), the border and size rules (``reason`` "touches border", "too small").
+
+    ``shape``: the frame's (height, width). ``full``: the contours have every boundary
+    pixel (else only the chain's corners). ``holes``: each contour's hole contours, if they
+    were looked for. The centroids go to mm in one call.
+    """
+    h, w = shape
+    s2 = calibration.mm2_per_px2
+    min_px = min_area_mm2 / s2
+    blobs: list[Blob] = []
+    centres = []
+    for i, c in enumerate(contours):
+        box = cv2.boundingRect(c)
+        if box[2] * box[3] < min_px * 0.5:
+            continue
+        bu, bv, bw, bh = box
+        mom = cv2.moments(c)
+        m00 = mom["m00"]
+        # The contour runs through the centres of the boundary pixels; by Pick's theorem
+        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
+        area_px = abs(m00) + 1.0                # + boundary pixels / 2, below
+        if m00 != 0:
+            cu, cv = mom["m10"] / m00, mom["m01"] / m00
+        else:
+            cu, cv = (float(v) for v in c.reshape(-1, 2).mean(axis=0))
+        centres.append((cu, cv))
+        touches = bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
+        det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
+                        "touches border" if touches else "")
+        blobs.append(Blob(c, box, mom, area_px, det, full, None if holes is None else holes[i]))
+    if not blobs:
+        return blobs
+    steps = _boundary_steps([b.contour for b in blobs], full)
+    for b, n in zip(blobs, steps, strict=True):
+        b.area_px += 0.5 * n
+        b.det.features["area_mm2"] = area = b.area_px * s2
+        if not b.det.reason and area < min_area_mm2:
+            b.det.reason = "too small"
+    xy = calibration.px_to_mm(np.array(centres)).tolist()
+    for b, (x, y) in zip(blobs, xy, strict=True):
+        b.det.x_mm, b.det.y_mm = x, y
+    return blobs
+
+
+def measure_feature(b: Blob, name: str, calibration: Calibration,
+                    min_hole_mm2: float) -> float:
+    """One feature of the blob, measuring its group (``features.GROUPS``) if not yet.
+
+    The calibration is a similarity (scale, rotation, reflection), so lengths scale by
+    ``mm_per_px``, areas by its square and the ratios and Hu invariants not at all:
+    shape features are measured on the pixel contour (cheaper) and scaled.
+    ``min_hole_mm2``: smaller holes are not counted.
+    """
+    feats = b.det.features
+    v = feats.get(name)
+    if v is not None:
+        return v
+    s = calibration.mm_per_px
+    c, area_px = b.contour, b.area_px
+    group = GROUP_OF[name]
+    if group == GROUP_OF["holes"]:
+        # A hole contour runs through the blob's pixels around the hole: by Pick's
+        # theorem the hole's pixel count is the polygon's area - boundary pixels / 2 + 1.
+        if b.holes is None:
+            raise RuntimeError("hole features asked of a blob whose holes were not found")
+        s2 = calibration.mm2_per_px2
+        steps = _boundary_steps(b.holes, b.full)
+        areas = [(abs(cv2.contourArea(k)) - 0.5 * n + 1.0) * s2
+                 for k, n in zip(b.holes, steps, strict=True)]
+        big = [a for a in areas if a >= min_hole_mm2]
+        feats["holes"] = float(len(big))
+        feats["hole_area_mm2"] = float(sum(big))
+    elif group == GROUP_OF["hu1"]:
+        # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
+        mom = b.mom
+        if mom["m00"] != 0:
+            n20, n02, n11 = mom["nu20"], mom["nu02"], mom["nu11"]
+            feats["hu1"] = float(n20 + n02)
+            feats["hu2"] = float((n20 - n02) * (n20 - n02) + 4 * n11 * n11)
+        else:
+            feats["hu1"] = feats["hu2"] = 0.0
+    elif group == GROUP_OF["perimeter_mm"]:
+        if b.length is None:
+            b.length = _smooth_length(c if b.full else _full_chain(c))
+        # A pixel staircase is up to 8 % longer than the edge it follows: measure the
+        # contour smoothed along itself instead, then move it out the half pixel to the
+        # blob's edge (which adds 2·π·0.5 to a closed convex outline).
+        perim = b.length + math.pi
+        feats["perimeter_mm"] = perim * s
+        feats["circularity"] = (4 * math.pi * area_px / (perim * perim)
+                                if perim > 0 else 0.0)
+    elif group == GROUP_OF["aspect"]:
+        # the rectangle of the hull is the contour's (the hull is kept for the solidity)
+        (_, _), (rw, rh), _ = cv2.minAreaRect(hull(b))
+        rw, rh = rw + 1.0, rh + 1.0
+        feats["aspect"] = max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0
+        feats["rectangularity"] = area_px / (rw * rh) if rw * rh > 0 else 0.0
+    elif group == GROUP_OF["solidity"]:
+        hl = hull(b)
+        hull_area = cv2.contourArea(hl) + 0.5 * cv2.arcLength(hl, True) + 1.0
+        feats["solidity"] = min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0
+    return feats[name]
+
+
+def hull(b: Blob) -> np.ndarray:
+    """The contour's convex hull, (k, 1, 2) pixels (measured once per blob)."""
+    if b.hull is None:
+        b.hull = cv2.convexHull(b.contour)
+    return b.hull
+
+
+def contour_mm(b: Blob, calibration: Calibration) -> np.ndarray:
+    """The pixel contour mapped to belt mm (float32), for angles."""
+    return calibration.px_to_mm(b.contour.reshape(-1, 2)).astype(np.float32)
+
+
+def principal_angle(mom: dict[str, float]) -> float:
+    """The long axis of a shape from its moments, deg in (-90, 90]."""
+    a = 0.5 * math.atan2(2 * mom["mu11"], mom["mu20"] - mom["mu02"])
+    return wrap_deg(math.degrees(a), 180.0)

@@ -1,0 +1,298 @@
+"""Segmentation: a grey frame -> the contours of what the recipe calls foreground.
+
+The image in which parts are bright (``foreground: dark``: the golden image minus the
+frame, or the inverted frame; ``light``: the frame minus the golden image, or the frame),
+its threshold (``threshold.method``: ``fixed``, ``otsu`` never below ``value``, or
+``adaptive`` with OpenCV's ``C``), the morphology, and the contours of the mask, found only
+in the rectangles that hold foreground (``Segmenter._contours_holes``). Also where a
+contour's edge crosses the threshold between pixels (``Segmenter._edge_points``), for
+angles finer than a pixel.
+
+``Segmenter`` holds what one recipe needs for this and nothing of parts or calibration;
+``Locator`` (``vision.locator``) is a ``Segmenter`` that also measures and classifies the
+blobs. Each frame uses only local state and per-thread scratch images (the golden image is
+read, never written), so one segmenter may serve several threads.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import threading
+
+import cv2
+import numpy as np
+
+from ..scenario.model import VisionRecipe
+from .chains import _first, _runs, _with_holes
+
+# the four 4-neighbours of a pixel (u, v): where the outline may cross between them
+_DU = np.array([1, -1, 0, 0])
+_DV = np.array([0, 0, 1, -1])
+
+
+class Segmenter:
+    """Thresholds frames against one recipe and finds the contours of the foreground."""
+
+    def __init__(self, recipe: VisionRecipe) -> None:
+        self.recipe = recipe
+        self._golden: np.ndarray | None = None
+        self._light = recipe.foreground == "light"   # parts brighter than the belt
+        m = recipe.morphology
+        self._open = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (m.open_px, m.open_px))
+                      if m.open_px > 1 else None)
+        self._close = (cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (m.close_px, m.close_px))
+                       if m.close_px > 1 else None)
+        # Opening then closing reads the thresholded mask up to this far (px) from a pixel:
+        # regions of the image this far clear of foreground are left empty by them.
+        reach = sum(2 * (k.shape[0] // 2) for k in (self._open, self._close) if k is not None)
+        self._margin = reach + 1
+        # kernels symmetric about their centre: an image's mirror stays its mirror
+        self._mirror = all(k.shape[0] % 2 == 1 and k.shape[1] % 2 == 1
+                           and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
+                           for k in (self._open, self._close) if k is not None)
+        self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
+        self._scratch = threading.local()         # per-thread frame-sized images, reused
+
+    # -------------------------------------------------------------- images
+
+    def set_golden(self, image: np.ndarray) -> None:
+        """Remember the cleared belt; later frames are compared against it."""
+        self._golden = _grey(image).copy()
+        th = self.recipe.threshold
+        self._below = None
+        if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
+            if self._light:
+                # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
+                self._below = cv2.add(self._golden, math.floor(th.value))
+            else:
+                # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
+                self._below = cv2.subtract(self._golden, math.floor(th.value))
+
+    def foreground(self, image: np.ndarray) -> np.ndarray:
+        """Binary mask (0/255) of what the recipe considers parts."""
+        return self._morph(self._threshold(_grey(image))[0].copy())
+
+    def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A frame-sized uint8 scratch image of this thread's, reused from frame to frame.
+
+        A fresh frame-sized array each frame costs more than the operation writing it when
+        the allocator hands the pages back and faults them in again (2-3x on the bench).
+        """
+        bufs: dict[str, np.ndarray] | None = getattr(self._scratch, "bufs", None)
+        if bufs is None:
+            bufs = self._scratch.bufs = {}
+        buf = bufs.get(name)
+        if buf is None or buf.shape != shape:
+            buf = bufs[name] = np.empty(shape, dtype=np.uint8)
+        return buf
+
+    def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
+        """The image in which parts are bright: for dark parts the golden image minus the
+        frame (or the inverted frame), for light parts the frame minus the golden image
+        (or the frame itself)."""
+        golden = self._golden
+        if self.recipe.golden_image and golden is not None:
+            if self._light:
+                return cv2.subtract(img, golden, dst=dst)
+            return cv2.subtract(golden, img, dst=dst)
+        if self._light:
+            return img
+        return cv2.bitwise_not(img, dst=dst)
+
+    def _threshold(self, img: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, float | None]:
+        """The thresholded mask (before morphology), the difference image (None if it was
+        not needed) and the level (None: adaptive). The images are this thread's scratch
+        images, valid until its next frame."""
+        th = self.recipe.threshold
+        mask = self._buffer("mask", img.shape)
+        if th.method == "fixed" and self.recipe.golden_image and self._below is not None \
+                and self._below.shape == img.shape:
+            # the same mask as subtract-then-threshold, in one pass over the frame
+            return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
+                                dst=mask), None, float(th.value))
+        diff = self._diff(img, self._buffer("diff", img.shape))
+        if th.method == "fixed":
+            level: float | None = float(th.value)
+            cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
+        elif th.method == "otsu":
+            level, _ = cv2.threshold(diff, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU,
+                                     dst=mask)
+            if level < th.value:
+                level = float(th.value)
+                cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
+        elif th.method == "adaptive":
+            level = None
+            block = max(3, int(th.block_px) | 1)
+            # OpenCV's meaning of C: foreground where the part-bright image is above its
+            # local mean minus c (so c < 0: that far above the mean)
+            cv2.adaptiveThreshold(diff, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
+                                  cv2.THRESH_BINARY, block, th.c, dst=mask)
+        else:
+            raise ValueError(f"unknown threshold method {th.method!r}")
+        return mask, diff, level
+
+    def _morph(self, mask: np.ndarray) -> np.ndarray:
+        if self._open is not None:
+            mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._open)
+        if self._close is not None:
+            mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
+        return mask
+
+    def _rois(self, mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Rectangles (v0, v1, u0, u1) that hold all the foreground, each with a margin of
+        empty pixels wider than the morphology reaches (or the image's edge).
+
+        Rows with foreground are cut into bands where ``2 * margin`` empty rows part them,
+        then each band's columns likewise: most of a frame is empty belt.
+        """
+        h, w = mask.shape
+        m = self._margin
+        rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel().nonzero()[0]
+        if len(rows) == 0:
+            return []
+        out = []
+        for a, b in _runs(rows, 2 * m):
+            cols = cv2.reduce(mask[a:b + 1], 0, cv2.REDUCE_SUM,
+                              dtype=cv2.CV_32S).ravel().nonzero()[0]
+            v0, v1 = max(a - m, 0), min(b + m + 1, h)
+            out += [(v0, v1, max(c0 - m, 0), min(c1 + m + 1, w))
+                    for c0, c1 in _runs(cols, 2 * m)]
+        return out
+
+    def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
+        """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
+        return self._contours_holes(mask, full, holes=False)[0]
+
+    def _contours_holes(self, mask: np.ndarray, full: bool, holes: bool
+                        ) -> tuple[list[np.ndarray], list[list[np.ndarray]] | None]:
+        """External contours of the opened and closed ``mask``, in ``findContours``' order
+        (as on the whole frame: by first point, last found first), and with ``holes`` each
+        one's hole contours (``RETR_CCOMP``; else None).
+
+        The morphology and the contour search run only on ``_rois``: inside each, every
+        pixel comes out as on the whole frame, outside them nothing does. The rectangles
+        are laid side by side in one small image (their margins keep them apart, as on the
+        frame), so a frame costs two morphology calls and one contour search however many
+        blobs it has. Where a rectangle meets the image's edge, which the morphology reads
+        as "nothing there to constrain", it gets a mirror image of itself as wide as the
+        margin: with a symmetric kernel each operation keeps the mirror a mirror, so up to
+        the edge every pixel comes out as on the frame. The mirrors are cleared before the
+        contour search (whose own border is empty, as at the image's edge).
+        """
+        h, w = mask.shape
+        rois = self._rois(mask)
+        if not rois:
+            return [], ([] if holes else None)
+        mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
+        chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
+        morph = self._open is not None or self._close is not None
+        # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
+        # the morphology), which also keeps it one pixel clear of its neighbours
+        pad = self._margin if morph else 1
+        out: list[tuple[int, np.ndarray, list[np.ndarray]]] = []   # (whole frame's raster
+        # index of the 1st point, contour, its holes)
+        srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
+        starts: list[int] = []
+        shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
+        mirrors = []
+        x = height = 0
+        for v0, v1, u0, u1 in rois:
+            src = mask[v0:v1, u0:u1]
+            top = left = 0
+            if v0 == 0 or u0 == 0 or v1 == h or u1 == w:
+                top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
+                    pad * (u0 == 0), pad * (u1 == w)
+                if morph and not self._mirror:
+                    cs, hier = cv2.findContours(self._morph(src), mode, chain, offset=(u0, v0))
+                    out += [(c.item(1) * w + c.item(0), c, hs)
+                            for c, hs in _with_holes(cs, hier, holes)]
+                    continue
+                src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
+                mirrors.append((x, top, bottom, left, right, src.shape))
+            srcs.append((x, src))
+            starts.append(x)
+            shifts.append(u0 - x - left + ((v0 - top) << 32))
+            x += src.shape[1]
+            height = max(height, src.shape[0])
+        if srcs:
+            packed = np.zeros((height, x), dtype=np.uint8)
+            for x0, src in srcs:
+                packed[:src.shape[0], x0:x0 + src.shape[1]] = src
+            if morph:
+                packed = self._morph(packed)
+            for x0, top, bottom, left, right, (sh, sw) in mirrors:
+                if top:
+                    packed[:top, x0:x0 + sw] = 0
+                if bottom:
+                    packed[sh - bottom:sh, x0:x0 + sw] = 0
+                if left:
+                    packed[:, x0:x0 + left] = 0
+                if right:
+                    packed[:, x0 + sw - right:x0 + sw] = 0
+            cs, hier = cv2.findContours(packed, mode, chain)
+            for c, hs in _with_holes(cs, hier, holes):
+                shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
+                for k in (c, *hs):               # a blob's holes lie in its rectangle
+                    flat = k.view(np.int64)
+                    flat += shift
+                out.append((c.item(1) * w + c.item(0), c, hs))
+        # the whole frame's findContours lists contours by first point, last found first
+        out.sort(key=_first, reverse=True)
+        return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
+
+    def _diff_at(self, img: np.ndarray, diff: np.ndarray | None, at: np.ndarray) -> np.ndarray:
+        """``_diff`` at flat pixel indices ``at`` (from the frame's if it was made)."""
+        if diff is not None:
+            return diff.ravel()[at]
+        golden = self._golden
+        if self.recipe.golden_image and golden is not None:
+            g = golden.ravel()[at].astype(np.int16)
+            d = img.ravel()[at] - g if self._light else g - img.ravel()[at]
+            return np.maximum(d, 0).astype(np.uint8)
+        return img.ravel()[at] if self._light else 255 - img.ravel()[at]
+
+    def _edge_points(self, contours: list[np.ndarray], img: np.ndarray,
+                     diff: np.ndarray | None, level: float | None
+                     ) -> tuple[np.ndarray, list[int]]:
+        """Points (pixels, ``(n, 2)``) on the outlines of ``contours`` to a fraction of a
+        pixel, all of them in one set of array operations, and how many each contour has
+        (in order).
+
+        A binary contour moves in whole pixels, which limits the angle of a near-axis edge
+        to about 1°. The grey levels say where the edge is: between each boundary pixel of
+        the contour (a recipe with faces keeps them all) and each of its 4-neighbours
+        outside the level, the difference image (interpolated linearly, as a bilinear image
+        is along that line) crosses the level at one point. Only the blob's own boundary is
+        read, so a neighbour in its box is no trouble. Without a level (adaptive threshold),
+        or if a contour has too few such points, the contours' pixels are returned.
+        """
+        uv = np.concatenate(contours).reshape(-1, 2)
+        counts = [len(c) for c in contours]
+        pts: np.ndarray = uv
+        if level is not None:
+            w = img.shape[1]
+            at = uv[:, 1] * w + uv[:, 0]          # inside the image: touching blobs are out
+            near = at[:, None] + np.array([1, -1, w, -w])        # the 4-neighbours, a row each
+            inside, around = self._diff_at(img, diff, at), self._diff_at(img, diff, near)
+            cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
+            i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
+            found = np.bincount(np.repeat(np.arange(len(contours)), counts)[i],
+                                minlength=len(contours))
+            if found.min() >= 3:
+                a = inside[i].astype(np.float64)
+                t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
+                pts = np.empty((len(i), 2))
+                pts[:, 0] = uv[i, 0] + t * _DU[k]
+                pts[:, 1] = uv[i, 1] + t * _DV[k]
+                counts = found.tolist()
+        return pts, counts
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """The image as uint8 grey (a BGR colour image is converted): what the recipe reads."""
+    if image.ndim == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.dtype != np.uint8:
+        raise TypeError("the locator takes uint8 grey images")
+    return image
