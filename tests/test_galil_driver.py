@@ -126,6 +126,41 @@ def test_move_ends_when_bg_reads_zero():
         assert belt.move(5.0, 0.0).state is JobState.FAILED
 
 
+def test_a_speed_above_max_mm_s_is_refused_and_nothing_is_sent():
+    """As the simulated belt: a failed job naming the conveyor, speed, limit and cell file;
+    never a silent clamp, and no JG/SP reaches the card."""
+    with rig() as r:
+        belt = r.conveyors["horizontal"]
+        top = r.cell.conveyors["horizontal"].max_mm_s
+        n = len(r.emu.commands)
+        job = belt.set_speed(top + 50.0)
+        assert job.state is JobState.FAILED        # at once: nothing was queued
+        assert isinstance(job.error, HalError)
+        assert str(job.error) == (f"horizontal conveyor: {top + 50:g} mm/s commanded, above "
+                                  f"its max_mm_s {top:g} ({r.cell.path}); refused")
+        assert "\n" not in str(job.error) and "sim.yaml" in str(job.error)
+        assert belt.move(10.0, -(top + 1.0)).state is JobState.FAILED
+        assert belt.speed() == 0.0
+        ok(belt.set_speed(20.0))                   # the worker is FIFO: had the refused
+        sent = [c for c in r.emu.commands[n:] if c[:2] in ("JG", "SP", "PR")]
+        assert sent == ["JG ,400"]                 # commands been queued, they came first
+        assert r.plant.axis("B").commanded == pytest.approx(20.0)
+
+
+def test_exactly_max_mm_s_is_accepted():
+    with rig() as r:
+        belt = r.conveyors["horizontal"]
+        top = r.cell.conveyors["horizontal"].max_mm_s
+        n = len(r.emu.commands)
+        ok(belt.set_speed(top))
+        assert [c for c in r.emu.commands[n:] if c[:2] in ("JG", "BG")] == [
+            f"JG ,{round(top * CPM)}", "BGB"]
+        assert belt.speed() == top
+        assert r.plant.axis("B").commanded == pytest.approx(top)
+        ok(belt.move(-20.0, -top))                 # a move's speed is its magnitude
+        assert f"SPB={round(top * CPM)}" in r.emu.commands
+
+
 def test_shake_returns_to_the_speed_it_had():
     with rig() as r:
         belt = r.conveyors["incline"]

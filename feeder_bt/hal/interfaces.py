@@ -12,7 +12,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import HalError
-from ..jobs import Job
+from ..jobs import DoneJob, Job
 
 
 @dataclass(frozen=True)
@@ -116,6 +116,20 @@ class Conveyor(Protocol):
     def servo(self, on: bool) -> Job:
         """Motor (amplifier) on or off. Only the operator's reset turns a motor back on
         after an off-on-error or the e-stop; a simulated belt has no amplifier."""
+
+
+def speed_refused(conveyor: str, job: str, mm_s: float, max_mm_s: float,
+                  cell_file: object = None) -> Job | None:
+    """A failed ``conveyor.job`` when ``mm_s`` is above the conveyor's ``max_mm_s`` (None
+    when it is within). Every conveyor, simulated or real, refuses rather than clamps, so a
+    run keeps to the limits the loader checks and an over-limit command is said in one line
+    (issue 16). Exactly ``max_mm_s`` is allowed (``shake`` runs at it)."""
+    if abs(mm_s) <= max_mm_s * (1.0 + 1e-9):
+        return None
+    where = f" ({cell_file})" if cell_file else ""
+    return DoneJob(f"{conveyor}.{job}", error=HalError(
+        f"{conveyor} conveyor: {abs(mm_s):g} mm/s commanded, above its max_mm_s "
+        f"{max_mm_s:g}{where}; refused"))
 
 
 class Camera(Protocol):

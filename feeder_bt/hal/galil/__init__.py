@@ -29,7 +29,7 @@ def make_galil(cell: CellSpec, clock: Clock, programs_dir: Path | str = PROGRAMS
         conveyors[name] = GalilConveyor(
             ctl, name, axis, cell.encoder.counts_per_mm,
             max_mm_s=spec.max_mm_s if spec else 400.0,
-            accel_mm_s2=spec.accel_mm_s2 if spec else 1500.0)
+            accel_mm_s2=spec.accel_mm_s2 if spec else 1500.0, cell_file=cell.path)
     return ctl, conveyors, GalilIO(ctl, cell.io)
 
 

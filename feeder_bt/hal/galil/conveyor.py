@@ -17,7 +17,7 @@ from ...encoder import diff
 from ...errors import ConveyorFault, HalError
 from ...jobs import DoneJob, FutureJob, Job, JobState
 from ...scenario.model import IoSignal
-from ..interfaces import IoChange
+from ..interfaces import IoChange, speed_refused
 from .driver import RETRY, Delay, GalilController
 from .protocol import (
     DistanceEvent,
@@ -47,13 +47,15 @@ class GalilConveyor:
 
     def __init__(self, controller: GalilController, name: str, axis: str,
                  counts_per_mm: float | None = None, max_mm_s: float = 400.0,
-                 accel_mm_s2: float = 1500.0, clock: Clock | None = None) -> None:
+                 accel_mm_s2: float = 1500.0, clock: Clock | None = None,
+                 cell_file: object = None) -> None:
         self.ctl = controller
         self.name = name
         self.axis = axis.upper()
         self.cpm = float(counts_per_mm if counts_per_mm is not None else controller.cpm)
         self.max_mm_s = float(max_mm_s)
         self.accel = float(accel_mm_s2)
+        self.cell_file = cell_file     # named when a speed above max_mm_s is refused
         self.clock = clock or controller.clock
         self._commanded = 0.0          # mm/s, what we last asked for (speed())
         self._mode = "idle"            # idle | jog | move: what the axis is doing for us
@@ -142,8 +144,12 @@ class GalilConveyor:
 
     # ---------------------------------------------------------------- Conveyor
     def set_speed(self, mm_s: float) -> Job:
-        """Jog at ``mm_s`` (``JG`` + ``BG``; 0 stops); ends when the speed is reached."""
-        mm_s = max(-self.max_mm_s, min(self.max_mm_s, float(mm_s)))
+        """Jog at ``mm_s`` (``JG`` + ``BG``; 0 stops); ends when the speed is reached. Above
+        the cell's ``max_mm_s`` the job fails and nothing is sent (never a silent clamp)."""
+        refused = speed_refused(self.name, "set_speed", mm_s, self.max_mm_s, self.cell_file)
+        if refused is not None:
+            return refused
+        mm_s = max(-self.max_mm_s, min(self.max_mm_s, float(mm_s)))   # the 1e-9 tolerance
         if self._counts(mm_s) == 0:
             return self._stop("set_speed")
         state: dict[str, Any] = {"from_mm_s": self._commanded}
@@ -153,7 +159,11 @@ class GalilConveyor:
         return self._job("set_speed", fut)
 
     def move(self, distance_mm: float, mm_s: float) -> Job:
-        """Relative move (``SP``, ``PR``, ``BG``); ends when ``_BGx`` reads 0."""
+        """Relative move (``SP``, ``PR``, ``BG``); ends when ``_BGx`` reads 0. Above the
+        cell's ``max_mm_s`` the job fails and nothing is sent."""
+        refused = speed_refused(self.name, "move", mm_s, self.max_mm_s, self.cell_file)
+        if refused is not None:
+            return refused
         counts = self._counts(distance_mm)
         speed = self._counts(min(abs(mm_s), self.max_mm_s))
         if speed <= 0:

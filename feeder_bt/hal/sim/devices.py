@@ -55,11 +55,8 @@ class SimConveyor:
     def _refused(self, what: str, mm_s: float) -> Job | None:
         """A speed above the cell's ``max_mm_s`` fails the job: the simulated belt never
         clamps silently, so every setting runs under the same limits (issue 16)."""
-        if not self.axis.above_limit(mm_s):
-            return None
-        return DoneJob(f"{self.name}.{what}", error=HalError(
-            f"{self.name} conveyor: {abs(mm_s):g} mm/s commanded, above its max_mm_s "
-            f"{self.axis.max_speed:g} ({self.world.cell.path}); refused"))
+        from ..interfaces import speed_refused
+        return speed_refused(self.name, what, mm_s, self.axis.max_speed, self.world.cell.path)
 
     def set_speed(self, mm_s: float) -> Job:
         refused = self._refused("set_speed", mm_s)
