@@ -318,7 +318,8 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
                 if not ask.yes(f"servo.{name}", f"The motor of {name} is off. Turn it on?"):
                     return {"ok": False, "error": "motor off"}
                 wait(conv.servo(True), cell.galil.timeout_s + 1)
-            wait(conv.set_speed(opts.jog_mm_s * 2), 10.0)
+            # twice the jog, within the belt's limit (the driver refuses a speed above it)
+            wait(conv.set_speed(min(opts.jog_mm_s * 2, cell.conveyors[name].max_mm_s)), 10.0)
             time.sleep(JOG_S * 2)
             wait(conv.stop(), 10.0)
             g, r = fresh_pair()
