@@ -129,6 +129,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
         report["robot_model"] = fit.summary()
+        # the arm's share of feeding spent on picks and places that ended (a missed grip's
+        # time is not in it): near 100 %, the robot is what limits the cell
+        report["robot_busy_pct"] = (round(100.0 * fit.busy_s / feed_seconds, 1)
+                                    if feed_seconds > 0 else None)
         report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
             robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
         if world is not None:             # the simulated arm's truth, for comparison

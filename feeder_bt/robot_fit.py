@@ -91,6 +91,7 @@ class RobotFit:
         self.mean_sq = 0.0
         self.samples: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
+        self.busy_s = 0.0              # commanded to the end of every pick and place that ended
 
     @property
     def k(self) -> float:
@@ -132,6 +133,7 @@ class RobotFit:
     def pick_done(self, timing: Timing, t_end: float, grip_x: float) -> None:
         """A pick that gripped at ``grip_x`` (the tool point along the belt) ended at
         ``t_end``: its move ran from ``timing.start`` to where the part was at arrival."""
+        self.busy_s += t_end - timing.t0          # a wait for the part is the arm's time too
         if not timing.usable:
             self.rejected["may_have_waited"] += 1
             return
@@ -144,6 +146,7 @@ class RobotFit:
 
     def place_done(self, timing: Timing, t_end: float) -> None:
         sp = self.spec
+        self.busy_s += t_end - timing.t0
         assert timing.end is not None
         self.observe("place", math.dist(timing.start, timing.end), timing.speed_pct,
                      t_end - timing.t0 - sp.command_overhead_s - sp.release_s)
