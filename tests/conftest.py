@@ -5,12 +5,19 @@ test itself (``derandomize``), no example database carried between runs, and nei
 per-example deadline nor the too-slow health check, both of which time the machine rather
 than the code (on a loaded 2-core machine they fail good tests). ``HYPOTHESIS_PROFILE=
 explore`` searches with fresh random examples instead, for finding new bugs by hand.
+
+The browser tests' fixtures (``browser``, ``shots``) and the ``--update-shots`` option are
+here; the rest of their one way of doing things is browser_helpers.py.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from typing import Any
 
+import pytest
+from browser_helpers import ARGS, CHROMIUM, UPDATE_SHOTS, Shots
 from hypothesis import HealthCheck, settings
 
 settings.register_profile("feeder", derandomize=True, database=None, deadline=None,
@@ -30,3 +37,27 @@ WAIT_FIRST = ("test_emulated_run.py", "test_view_pty.py", "test_ui_http.py",
 def pytest_collection_modifyitems(session, config, items) -> None:
     rank = {name: i for i, name in enumerate(WAIT_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))   # stable: file order
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(UPDATE_SHOTS, action="store_true",
+                     help="write the browser tests' screenshots into docs/ (otherwise they go "
+                          "to pytest's temporary directory and the source tree is left as it "
+                          "was)")
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    """One headless Chromium for a browser test module (which called require_browser())."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def shots(request: pytest.FixtureRequest, tmp_path) -> Shots:
+    """The docs' screenshots, taken into tmp_path; into docs/ too with --update-shots."""
+    return Shots(tmp_path, request.config.getoption(UPDATE_SHOTS))

@@ -2,45 +2,34 @@
 over a fast fault run; dragging the timeline back before the fault redraws the trees in
 the colours they had then (the same statuses `feeder replay --at T --json` prints, which
 test_tree_replay.py checks against the live trees), "End" resumes. The live dashboard's
-tree view is checked over HTTP. Writes docs/tree-rewind.png."""
+tree view is checked over HTTP. Its screenshot is docs/tree-rewind.png (with
+--update-shots)."""
 
 from __future__ import annotations
 
 import json
 import re
-import shutil
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
-from test_ui_http import Client, FeederUi, make_users
+from browser_helpers import new_page, require_browser
+from uiutil import ROOT, Client, FeederUi, ReplayUi, feeder_cli, make_users
 
 from feeder_bt.run import RunOptions, run_job
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-ROOT = Path(__file__).resolve().parent.parent
-SHOT = ROOT / "docs" / "tree-rewind.png"
 FAULT_AT = 40.0
 PLAN = f"seed: 0\nscripted:\n  - {{at_s: {FAULT_AT}, kind: estop, release_after_s: 5}}\n"
 FILL = {"invalid": "rgb(238, 240, 242)", "running": "rgb(219, 234, 254)",
         "success": "rgb(209, 250, 229)", "failure": "rgb(254, 226, 226)"}
 
-if not Path(CHROMIUM).exists():
-    pytest.skip(f"{CHROMIUM} not found: install Debian's chromium package",
-                allow_module_level=True)
-sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright not installed")
+sync_api = require_browser()
 expect = sync_api.expect
 
 
 def cli(*args: str) -> str:
-    p = subprocess.run([sys.executable, "-m", "feeder_bt.cli", *args], capture_output=True,
-                       text=True, timeout=60, cwd=ROOT)
+    p = feeder_cli(*args)
     assert p.returncode == 0, p.stderr
     return p.stdout
 
@@ -53,33 +42,16 @@ def replay(tmp_path_factory):
     run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=70.0,
                        fast=True, seed=2, view="none", db=str(db),
                        faults=str(tmp / "plan.yaml")))
-    err = tmp / "stderr.txt"
-    with err.open("w") as f:
-        proc = subprocess.Popen([sys.executable, "-m", "feeder_bt.cli", "replay", str(db),
-                                 "--ui", "127.0.0.1:0"], stderr=f, stdout=subprocess.DEVNULL,
-                                cwd=ROOT)
-    end, url = time.monotonic() + 30, ""
-    while not url:
-        m = re.search(r"replay UI: (http://127\.0\.0\.1:\d+/)", err.read_text())
-        if m:
-            url = m.group(1)
-        elif proc.poll() is not None or time.monotonic() > end:
-            proc.kill()
-            raise AssertionError(err.read_text())
-        else:
-            time.sleep(0.05)
-    yield db, url
-    proc.terminate()
-    proc.wait(10)
+    ui = ReplayUi(tmp, db)
+    yield db, ui.url
+    ui.stop()
 
 
 @pytest.fixture(scope="module")
-def page():
-    with sync_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        pg = b.new_page(viewport={"width": 1400, "height": 1000})
-        yield pg
-        b.close()
+def page(browser):
+    pg = new_page(browser)
+    yield pg
+    pg.context.close()
 
 
 def node(page, name: str):
@@ -105,7 +77,7 @@ def drag_to(page, fraction: float) -> None:
     page.mouse.up()
 
 
-def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page):
+def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page, shots):
     db, url = replay
     page.goto(url)
     expect(page.locator("#tv-time")).to_contain_text("end of the run")
@@ -132,10 +104,7 @@ def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page):
     done = next(n["name"] for n in want["nodes"] if n["status"] == "success")
     assert fill(page, done) == FILL["success"]
     assert page.locator("#tv-board").inner_text().count("/speeds/") == 3
-    SHOT.parent.mkdir(exist_ok=True)
-    tmp = SHOT.with_suffix(".tmp.png")
-    page.screenshot(path=str(tmp), full_page=True)
-    shutil.move(tmp, SHOT)
+    shots.take(page, "tree-rewind.png", 20_000, full_page=True)
 
     # a folded (idle) branch opens on a click, showing its nodes
     before = page.locator("#tv-graph g.tv-node").count()

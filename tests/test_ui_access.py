@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from test_ui_units import FakeClock
+from uiutil import FakeClock
 
 from feeder_bt.cli import main
 from feeder_bt.ui.access import Settings, allowed_hosts, host_name

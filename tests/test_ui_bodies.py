@@ -18,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_ui_access import Browser, make_ui, write_users
-from test_ui_units import FakeClock, SimRig
+from uiutil import FakeClock, SimRig
 
 from feeder_bt.cli import main
 from feeder_bt.eventlog import EventLog

@@ -5,8 +5,9 @@ What must be shown: (1) alice takes control and starts the cell and sees the tot
 rise; bob, in a second browser context, sees the same live and is told that someone else
 has control, and his start/stop/speed requests are refused and change nothing; (3) a
 horizontal speed set in the page reaches the simulated conveyor, the status and the
-report; (4) docs/operator-ui.png is taken here while the cell feeds. (2), wrong passwords,
-is shown here once and in full in test_ui_http.py.
+report; (4) the dashboard's screenshot (docs/operator-ui.png with --update-shots) is
+taken here while the cell feeds. (2), wrong passwords, is shown here once and in full in
+test_ui_http.py.
 
 The tests share one run and one browser, in file order (about 40 s, most of it waiting
 for the first lenses to travel up the incline and reach the robot).
@@ -15,29 +16,18 @@ for the first lenses to travel up the incline and reach the robot).
 from __future__ import annotations
 
 import re
-import shutil
-from pathlib import Path
 
 import pytest
-from test_ui_http import FeederUi, make_users
+from browser_helpers import login, new_page, require_browser
+from uiutil import FeederUi, make_users
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-ROOT = Path(__file__).resolve().parent.parent
-SHOT = ROOT / "docs" / "operator-ui.png"
 PASSWORDS = {"alice": "alice-secret-1", "bob": "bob-secret-22"}
 FEED_WAIT_MS = 60_000        # the first part needs ~20 s from start at the lenses' speeds
 SPEED = 173                  # not a value the water-marks adjuster (5 mm/s steps) would pick
 
-if not Path(CHROMIUM).exists():
-    pytest.skip(f"{CHROMIUM} not found: install Debian's chromium package "
-                "(apt-get install chromium; .ci/run does)", allow_module_level=True)
-sync_api = pytest.importorskip("playwright.sync_api",
-                               reason="Playwright for Python not installed (pip install -e "
-                                      "'.[test]')")
+sync_api = require_browser()
 expect = sync_api.expect
 
 
@@ -50,46 +40,29 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def browser():
-    with sync_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
-        yield b
-        b.close()
-
-
-def login(page, server, user: str, password: str | None = None) -> None:
-    page.goto(server.url)
-    page.fill("#login-user", user)
-    page.fill("#login-password", password or PASSWORDS[user])
-    page.click("#login-submit")
-
-
-@pytest.fixture(scope="module")
 def alice(browser, server):
-    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = ctx.new_page()
-    login(page, server, "alice")
+    page = new_page(browser)
+    login(page, server.url, "alice", PASSWORDS["alice"])
     expect(page.locator("#dashboard")).to_be_visible()
     yield page
-    ctx.close()
+    page.context.close()
 
 
 @pytest.fixture(scope="module")
 def bob(browser, server):
     """bob's page, not logged in yet (he logs in while the cell warms up)."""
-    ctx = browser.new_context(viewport={"width": 1400, "height": 1000})
-    page = ctx.new_page()
+    page = new_page(browser)
     yield page
-    ctx.close()
+    page.context.close()
 
 
 def bob_logs_in(bob, server) -> None:
     if bob.locator("#dashboard").is_visible():
         return
-    login(bob, server, "bob", "not-bobs-password")
+    login(bob, server.url, "bob", "not-bobs-password")
     expect(bob.locator("#login-error")).to_have_text("wrong user name or password")
     expect(bob.locator("#dashboard")).to_be_hidden()
-    login(bob, server, "bob")
+    login(bob, server.url, "bob", PASSWORDS["bob"])
     expect(bob.locator("#dashboard")).to_be_visible()
 
 
@@ -156,16 +129,12 @@ def test_alice_controls_bob_watches(alice, bob, server):
     assert bob.inner_text("#st-state") == "RUNNING"
 
 
-def test_dashboard_screenshot(alice, bob, server):
+def test_dashboard_screenshot(alice, bob, server, shots):
     feeding(alice)
     bob_logs_in(bob, server)                        # two users in the status
     expect(alice.locator("#chart-ppm polyline")).to_have_count(1)
     expect(alice.locator("#tree")).to_contain_text("retrieve")
-    SHOT.parent.mkdir(exist_ok=True)
-    tmp = SHOT.with_suffix(".tmp.png")
-    alice.screenshot(path=str(tmp), full_page=True)
-    shutil.move(tmp, SHOT)
-    assert SHOT.stat().st_size > 20_000
+    shots.take(alice, "operator-ui.png", 20_000, full_page=True)
 
 
 def test_a_closed_page_shows_the_others_when_control_will_be_free(alice, bob, server):

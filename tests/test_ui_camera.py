@@ -3,7 +3,7 @@
 parts are queued. The cell is not ticked while the tests ask: what the server answers
 must match what the cell's locator and queue hold at that moment.
 
-The browser test (test_ui_camera_browser.py) reuses ``Rig``.
+The rig (``ServedRig``, also driven by test_ui_camera_browser.py) is in uiutil.py.
 """
 
 from __future__ import annotations
@@ -12,80 +12,20 @@ import json
 import time
 import urllib.error
 import urllib.request
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from test_ui_http import Client
+from uiutil import Client, FakeClock, ServedRig
 
-from feeder_bt.cell import Cell
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
 from feeder_bt.ui.access import parse_setting
-from feeder_bt.ui.app import OperatorUi
 from feeder_bt.ui.camera import Pacer
-from feeder_bt.ui.users import UsersError, UsersFile
-
-ROOT = Path(__file__).resolve().parent.parent
-LENSES = ROOT / "scenarios" / "lenses.yaml"
-PASSWORD = "alice-secret-1"
-
-
-class FakeClock:
-    def __init__(self, t: float = 100.0) -> None:
-        self.t = t
-
-    def __call__(self) -> float:
-        return self.t
-
-
-class Rig:
-    """The lenses cell in virtual time with its operator UI, served on 127.0.0.1:0, run
-    until the last frame located parts and at least three are queued (~23 s of clock,
-    well under a second of wall time)."""
-
-    def __init__(self, tmp: Path) -> None:
-        users = UsersFile(tmp / "users.json")
-        users.add("alice", PASSWORD)
-        self.scenario, spec = load_scenario(LENSES)
-        self.clock = SimClock()
-        self.cell = Cell(spec, make_sim_hal(self.scenario, spec, self.clock, 1), self.clock)
-        self.cell.load(self.scenario)
-        self.ui = OperatorUi(self.cell, LENSES, self.scenario.cell_path, "127.0.0.1", 0,
-                             users.path)
-        self.ticker = Ticker(self.cell, fast=True)
-        self.cell.start()
-        self.run_until_parts()
-        self.url = self.ui.start()
-
-    def run_until_parts(self, after_seq: int = 0) -> None:
-        """Tick until a look newer than ``after_seq`` located parts and three are queued."""
-        def ready() -> bool:
-            look = self.ui.camera.slot.get()
-            return (look is not None and look.seq > after_seq
-                    and bool(look.result.parts) and len(self.cell.ctx.queue) >= 3)
-
-        self.ticker.run(until=self.clock.now() + 60.0, every=self.ui.pump, stop=ready)
-        assert ready(), "no parts located in a minute of clock"
-        self.ui.bridge.pump(force=True)            # the status the page gets: this moment
-
-    def client(self) -> Client:
-        c = Client(self.url)
-        code, body, _ = c.login("alice", PASSWORD)
-        assert code == 200, body
-        return c
-
-    def close(self) -> None:
-        self.ui.close()
-        self.cell.ctx.vision.close()
+from feeder_bt.ui.users import UsersError
 
 
 @pytest.fixture(scope="module")
 def rig(tmp_path_factory):
-    r = Rig(tmp_path_factory.mktemp("ui_camera"))
+    r = ServedRig(tmp_path_factory.mktemp("ui_camera"))
     yield r
     r.close()
 
@@ -98,7 +38,7 @@ def get(client: Client, path: str) -> tuple[int, bytes, dict]:
         return e.code, e.read(), e.headers
 
 
-def fresh_pacer(rig: Rig) -> None:
+def fresh_pacer(rig: ServedRig) -> None:
     rig.ui.web.camera.pacer = Pacer()
 
 

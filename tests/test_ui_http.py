@@ -1,115 +1,16 @@
 """Issue 6 over HTTP and a websocket, against a real `feeder run --ui` on loopback (the
 simulated cell in real time): logins, the rate limit, cookies, who may command, live
-updates. The browser tests (test_ui_browser.py) reuse ``FeederUi`` and ``make_users``."""
+updates. The rigs (``FeederUi``, ``Client``, ``make_users``) are in uiutil.py."""
 
 from __future__ import annotations
 
 import json
 import re
-import signal
-import subprocess
-import sys
-import time
 import urllib.error
 import urllib.request
-from http.cookiejar import CookieJar
-from pathlib import Path
-from typing import Any
 
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
-LENSES = ROOT / "scenarios" / "lenses.yaml"
-
-
-def feeder_cli(*args: str, stdin: str | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "feeder_bt.cli", *args], input=stdin,
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
-
-
-def make_users(path: Path, users: dict[str, str]) -> Path:
-    """The users file, made the way an administrator would: `feeder users add`."""
-    for name, password in users.items():
-        res = feeder_cli("users", "add", name, "--password-stdin", "--users", str(path),
-                         stdin=password + "\n")
-        assert res.returncode == 0, res.stderr
-    return path
-
-
-class FeederUi:
-    """`feeder run scenarios/lenses.yaml --ui 127.0.0.1:0 ...` in a child process; the port
-    the system chose is read from the line the run prints."""
-
-    def __init__(self, tmp: Path, users: Path, *extra: str) -> None:
-        self.report = tmp / "report.json"
-        self.out, self.err = tmp / "stdout.txt", tmp / "stderr.txt"
-        with self.out.open("w") as out, self.err.open("w") as err:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", "feeder_bt.cli", "run", str(LENSES), "--ui",
-                 "127.0.0.1:0", "--users", str(users), "--duration", "600", "--no-db",
-                 "--view", "none", "--report", str(self.report), *extra],
-                stdout=out, stderr=err, cwd=ROOT)
-        end = time.monotonic() + 60
-        self.url = ""
-        while not self.url:
-            m = re.search(r"operator UI: (http://127\.0\.0\.1:\d+/)", self.err.read_text())
-            if m:
-                self.url = m.group(1)
-            elif self.proc.poll() is not None or time.monotonic() > end:
-                self.kill()
-                raise AssertionError(f"feeder run --ui did not start: {self.err.read_text()}")
-            else:
-                time.sleep(0.05)
-
-    def stop(self, timeout: float = 60.0) -> dict[str, Any]:
-        """Ctrl-C: the cell stops in order and the report is written."""
-        self.proc.send_signal(signal.SIGINT)
-        rc = self.proc.wait(timeout)
-        assert rc == 0, self.err.read_text()
-        return json.loads(self.report.read_text())
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(10)
-
-
-class Client:
-    """One user's HTTP session (cookie jar), as the page would make its requests."""
-
-    def __init__(self, base: str) -> None:
-        self.base = base
-        self.jar = CookieJar()
-        self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(self.jar))
-
-    def call(self, path: str, body: Any = None, headers: dict[str, str] | None = None,
-             raw: bytes | None = None) -> tuple[int, dict[str, Any], Any]:
-        data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
-        hdrs = {"Content-Type": "application/json"} if data is not None else {}
-        req = urllib.request.Request(self.base + path, data=data, headers={**hdrs,
-                                                                            **(headers or {})})
-        try:
-            with self.opener.open(req, timeout=20) as resp:
-                return resp.status, json.loads(resp.read()), resp.headers
-        except urllib.error.HTTPError as e:
-            return e.code, json.loads(e.read()), e.headers
-
-    def login(self, user: str, password: str) -> tuple[int, dict[str, Any], Any]:
-        return self.call("api/login", {"user": user, "password": password})
-
-    def status(self) -> dict[str, Any]:
-        code, body, _ = self.call("api/status")
-        assert code == 200, body
-        return body["status"]
-
-    def command(self, name: str, **args: Any) -> tuple[int, dict[str, Any]]:
-        code, body, _ = self.call("api/command", {"command": name, **args})
-        return code, body
-
-    @property
-    def cookie(self) -> str:
-        return "; ".join(f"{c.name}={c.value}" for c in self.jar)
-
+from uiutil import Client, FeederUi, feeder_cli, make_users
 
 PASSWORDS = {"alice": "alice-secret-1", "bob": "bob-secret-22", "carol": "carol-secret-3"}
 
