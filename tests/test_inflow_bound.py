@@ -96,3 +96,22 @@ def test_the_summary_gives_the_three_bounds_in_80_columns(tight):
                          f"{scarce['supply_bound_ppm']:.1f}, inflow "
                          f"{scarce['inflow_bound_ppm']:.1f}")
     assert all(len(line) <= 80 for line in lines)
+
+
+# ---------------------------------------------------------------- robot busy: who limits
+
+
+def test_robot_busy_tells_a_starved_robot_from_a_saturated_one(tight, tmp_path):
+    """``robot_busy_pct``: the arm's share of feeding on picks and places. Starved of
+    parts (the tight plan), it is mostly idle; on the closed loop at fast belts, it is
+    nearly always moving: the robot is the limit, and the gap to the robot bound is where
+    the picks are, not a lack of parts. Each placed part costs at least the bound's cycle."""
+    (tmp_path / "fast.yaml").write_text(FAST)
+    full = run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=150.0,
+                              fast=True, seed=1, view="none",
+                              overlay=str(tmp_path / "fast.yaml")))
+    for r in (tight, full):
+        placed = sum(r["parts"]["retrieved"].values())
+        busy_s = r["robot_busy_pct"] / 100 * r["feed_seconds"]
+        assert 0.95 * placed * r["robot_bound_cycle_s"] <= busy_s <= r["feed_seconds"]
+    assert tight["robot_busy_pct"] < 75 < 90 < full["robot_busy_pct"]
