@@ -62,6 +62,9 @@ def stats(rows: list[dict]) -> dict:
              for r in rows if r.get("robot_bound_ppm")]
     if len(fixed) == len(rows):
         out["best_possible_ppm"] = round(statistics.mean(fixed), 2)
+    busy = [r.get("robot_busy_pct") for r in rows]
+    if all(b is not None for b in busy):      # near 100 %: the robot limits, not control
+        out["robot_busy_pct"] = round(statistics.mean(busy), 1)
     return out
 
 
@@ -126,8 +129,9 @@ def _cell(s: dict) -> str:
 
 
 def _of(s: dict) -> str:
-    return f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
+    of = f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
         else "-"
+    return of + (f"; robot busy {s['robot_busy_pct']:.0f} %" if "robot_busy_pct" in s else "")
 
 
 def markdown(result: dict) -> str:

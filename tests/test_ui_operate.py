@@ -208,3 +208,21 @@ def test_ui_report_feed_time_is_the_time_between_starts_and_stops():
     now = rig.clock.now()
     earlier = (t1 - t0) if rig.cell.stats is stats else 0.0  # the cell kept counting, or not
     assert span.seconds(now) == pytest.approx(earlier + now - t2)
+
+
+def test_reloading_the_run_scenario_keeps_its_overlay(tmp_path):
+    """``feeder run X --overlay O --ui``: the operator who loads X again (after a stop)
+    gets X with O, as the run had it; another scenario comes without it."""
+    overlay = tmp_path / "o.yaml"
+    overlay.write_text("present: {horizontal_mm_s: 173}\n")
+    rig = SimRig()
+    rig.cell.scenario, _ = load_scenario(LENSES, overlay=overlay)
+    assert rig.cell.scenario.present.horizontal_mm_s == 173
+    out = rig.do("load", scenario="lenses")
+    assert out.ok and out.message == "scenario lenses loaded with its overlay o.yaml"
+    assert rig.cell.scenario.present.horizontal_mm_s == 173
+    assert rig.ops.report()["commands"][-1]["overlay"] == "o.yaml"
+    assert rig.do("load", scenario="squares").ok
+    assert rig.cell.scenario.overlay_path is None
+    assert rig.do("load", scenario="lenses").message == "scenario lenses loaded"
+    assert rig.cell.scenario.present.horizontal_mm_s != 173

@@ -180,7 +180,8 @@ def load_scenario(path: str | Path, cell: str | Path | None = None,
         root = apply_overlay(root, overlay, ctx, _compose, _Ctx)
     cell_path = ctx.collect(_cell_path, path, root, ctx, cell)
     scenario = ctx.collect(ctx.dataclass, Scenario, root, "",
-                           fill={"path": path, "cell_path": cell_path or Path()})
+                           fill={"path": path, "cell_path": cell_path or Path(),
+                                 "overlay_path": Path(overlay) if overlay else None})
     if scenario is not None:
         ctx.collect(_check_scenario, scenario, ctx)
     cell_spec, cell_problems = None, []

@@ -157,6 +157,7 @@ class Scenario:
     retrieve: RetrieveParams = field(default_factory=RetrieveParams)
     adjust: AdjustParams = field(default_factory=AdjustParams)
     tick_hz: float = 50.0
+    overlay_path: Path | None = None     # the overlay merged in (loader-filled, not a key)
 
 
 # ---------------------------------------------------------------------------- cell

@@ -259,7 +259,8 @@ LEAF_RE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*$")
 
 # Model fields that are not YAML keys of their class (filled by a special builder or the
 # loader). Fields typed ``Path`` are always loader-filled.
-_IMPLIED_FIELDS: dict[type, frozenset[str]] = {CellSpec: frozenset({"return_transit_s"})}
+_IMPLIED_FIELDS: dict[type, frozenset[str]] = {CellSpec: frozenset({"return_transit_s"}),
+                                               Scenario: frozenset({"overlay_path"})}
 # YAML keys that are not model fields (read by the loader itself).
 _EXTRA_KEYS: dict[type, frozenset[str]] = {Scenario: frozenset({"cell"})}
 

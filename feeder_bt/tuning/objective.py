@@ -68,6 +68,7 @@ def evaluate(job: Job) -> dict[str, Any]:
     out = {"ppm": float(report["parts_per_minute"]), "seed": job.seed,
            "robot_bound_ppm": report.get("robot_bound_ppm"),
            "inflow_bound_ppm": report.get("inflow_bound_ppm"),
+           "robot_busy_pct": report.get("robot_busy_pct"),
            "ceiling_ppm": report.get("ceiling_ppm"),
            "lost": parts.get("lost") or 0, "missed": parts.get("missed") or 0,
            "fault": report.get("fault")}

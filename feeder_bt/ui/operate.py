@@ -191,15 +191,21 @@ class CellOps:
         if path is None:                      # no server path in what a client is told
             return Outcome.refused(f"no scenario {name[:64]!r} (one of: "
                                    f"{', '.join(self.scenarios) or 'none'})", 400)
+        # the run's scenario again: with the overlay it was run with (feeder run --overlay)
+        now = self.cell.scenario
+        overlay = (now.overlay_path if now is not None and now.overlay_path is not None
+                   and Path(now.path).resolve() == Path(path).resolve() else None)
         try:
-            scenario, _ = load_scenario(path, self.cell_file)
+            scenario, _ = load_scenario(path, self.cell_file, overlay=overlay)
             self.cell.load(scenario)
         except CellCommandError as e:
             return Outcome.refused(f"refused: {self._no_paths(str(e))}")
         except FeederError as e:              # a YAML mistake: FILE:LINE: key: what
             return Outcome.refused(f"cannot load: {self._no_paths(str(e))}", 400)
-        self._log(user, "load", {"scenario": name})
-        return Outcome.done(f"scenario {scenario.name} loaded")
+        self._log(user, "load", {"scenario": name, **({"overlay": overlay.name} if overlay
+                                                       else {})})
+        return Outcome.done(f"scenario {scenario.name} loaded"
+                            + (f" with its overlay {overlay.name}" if overlay else ""))
 
     def _speeds(self, user: str, args: dict[str, Any]) -> Outcome:
         cell = self.cell
