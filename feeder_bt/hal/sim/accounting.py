@@ -28,6 +28,9 @@ AUDIT_EVERY = 32                # steps between full audits when the tallies agr
 
 @dataclass
 class SimPart:
+    """One simulated part: its own record of where it is (``where``, one of ``PLACES``),
+    and its pose and contacts while on the belt."""
+
     id: int
     type: str
     pose: str = ""
