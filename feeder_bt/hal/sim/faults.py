@@ -57,6 +57,14 @@ __all__ = [
 
 SERVO_FRACTION = 0.5            # a servo time-out stops the pick this far into its duration
 _MASK64 = (1 << 64) - 1
+
+
+def plan_rng(plan_seed: int, seed: int, stream: int) -> np.random.Generator:
+    """A plan's own random stream: from the plan's seed, the run's and a stream number, so
+    a plan never draws from the world's generator (nor one plan's kind from another's)."""
+    return np.random.default_rng([plan_seed & _MASK64, seed & _MASK64, stream])
+
+
 _LINKS = ("galil", "adept", "camera")
 _LINK_NAMES = {"galil": "conveyor controller (Galil)", "adept": "robot controller (Adept)",
                "camera": "camera"}
@@ -77,8 +85,7 @@ class FaultInjector:
         self.power_on = True
         self.down: dict[str, bool] = dict.fromkeys(_LINKS, False)
         self.estop_presses = 0
-        self._rngs = {kind: np.random.default_rng([plan.seed & _MASK64, seed & _MASK64, i])
-                      for i, kind in enumerate(FAULT_KINDS)}
+        self._rngs = {kind: plan_rng(plan.seed, seed, i) for i, kind in enumerate(FAULT_KINDS)}
         self._armed: Counter[str] = Counter()     # scripted per-pick/per-frame faults waiting
         self._cuts: list[ScriptedFault] = []      # scripted link cuts waiting for their step
         self._alternate = itertools.cycle(("galil", "adept"))

@@ -19,16 +19,14 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from ...errors import FeederError
 from ...scenario.model import Scenario
 from ...scenario.supply import SupplyPlanSpec, Totes
 from .devices import SimHal
+from .faults import plan_rng
 from .world import World
 
 RAMP_STEP_S = 5.0          # a friction ramp changes the lift in steps this long
-_MASK64 = (1 << 64) - 1
 
 
 def with_start(scenario: Scenario, plan: SupplyPlanSpec | None) -> Scenario:
@@ -55,7 +53,7 @@ class SupplyDriver:
 
     def __init__(self, world: World, plan: SupplyPlanSpec, seed: int) -> None:
         self.world, self.plan = world, plan
-        self.rng = np.random.default_rng([plan.seed & _MASK64, seed & _MASK64, 5])
+        self.rng = plan_rng(plan.seed, seed, 5)
         self.log: list[dict[str, Any]] = []
         self.totes = 0
         self.initial = world.total
