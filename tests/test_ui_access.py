@@ -10,125 +10,17 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-from concurrent.futures import Future
-from pathlib import Path
 from typing import Any
 
 import pytest
-from uiutil import FakeClock
+from uiutil import PASSWORDS, Browser, Recorder, make_ui, write_users
 
 from feeder_bt.cli import main
 from feeder_bt.ui.access import Settings, allowed_hosts, host_name
 from feeder_bt.ui.app import check_users
-from feeder_bt.ui.bridge import Outcome
 from feeder_bt.ui.control import Sessions
 from feeder_bt.ui.server import UiApp
-from feeder_bt.ui.users import FORMAT, UsersError, UsersFile, check_password, hash_password
-
-PASSWORDS = {"alice": "alice-secret-1", "bob": "bob-secret-22", "carol": "carol-secret-3"}
-HOST = "127.0.0.1:8080"
-
-
-def write_users(path: Path, roles: dict[str, str] | None = None,
-                extra: dict[str, Any] | None = None) -> UsersFile:
-    """A users file with cheap scrypt hashes (the lowest cost the checker accepts), so that
-    a test can afford dozens of password checks."""
-    users = {n: {"hash": hash_password(p, n=2 ** 10), **({"role": roles[n]} if roles and
-                                                          n in roles else {})}
-             for n, p in PASSWORDS.items()}
-    path.write_text(json.dumps({"format": FORMAT, "users": users, **(extra or {})}))
-    path.chmod(0o600)
-    return UsersFile(path)
-
-
-class Recorder:
-    """A bridge stand-in: commands are answered at once; access events are kept."""
-
-    def __init__(self) -> None:
-        self.events: list[tuple[str, str, dict[str, Any]]] = []
-        self.notes: list[tuple[str, str]] = []
-
-    def submit(self, name: str, args: dict[str, Any], user: str) -> Future:
-        fut: Future = Future()
-        if name == "access":
-            args = dict(args)
-            self.events.append((args.pop("kind"), user, args))
-        elif name == "note":
-            self.notes.append((user, args["action"]))
-        fut.set_result(Outcome.done(f"{name} done"))
-        return fut
-
-    def latest(self) -> None:
-        return None
-
-    def kinds(self, kind: str) -> list[tuple[str, dict[str, Any]]]:
-        return [(u, d) for k, u, d in self.events if k == kind]
-
-
-class Browser:
-    """One browser (its own cookies) at one address, talking to the app in-process."""
-
-    def __init__(self, ui: UiApp, ip: str = "127.0.0.1", host: str = HOST) -> None:
-        self.ui, self.ip, self.host = ui, ip, host
-        self.cookies: dict[str, tuple[str, str]] = {}      # name: (value, path)
-        self.last_headers: list[tuple[str, str]] = []
-
-    def _cookie_header(self, path: str) -> str:
-        return "; ".join(f"{k}={v}" for k, (v, p) in self.cookies.items()
-                         if path.startswith(p))
-
-    def call(self, method: str, path: str, body: Any = None, raw: bytes | None = None,
-             headers: dict[str, str] | None = None) -> tuple[int, dict[str, Any]]:
-        data = raw if raw is not None else (b"" if body is None else json.dumps(body).encode())
-        hdrs = {"host": self.host, "cookie": self._cookie_header(path),
-                **({"content-type": "application/json"} if method == "POST" else {}),
-                **(headers or {})}
-        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
-                 "method": method, "scheme": "http", "path": path, "raw_path": path.encode(),
-                 "query_string": b"", "root_path": "", "client": (self.ip, 50000),
-                 "server": ("127.0.0.1", 8080),
-                 "headers": [(k.encode(), v.encode()) for k, v in hdrs.items()]}
-        sent: list[dict[str, Any]] = []
-
-        async def receive() -> dict[str, Any]:
-            return {"type": "http.request", "body": data, "more_body": False}
-
-        async def send(message: dict[str, Any]) -> None:
-            sent.append(message)
-
-        asyncio.run(self.ui.app(scope, receive, send))
-        start = next(m for m in sent if m["type"] == "http.response.start")
-        self.last_headers = [(k.decode(), v.decode()) for k, v in start["headers"]]
-        for k, v in self.last_headers:
-            if k == "set-cookie":
-                name, _, rest = v.partition("=")
-                value = rest.split(";")[0]
-                path = next((a.split("=", 1)[1] for a in rest.split("; ")
-                             if a.lower().startswith("path=")), "/")
-                if value in ('""', "") or "max-age=0" in v.lower():
-                    self.cookies.pop(name, None)
-                else:
-                    self.cookies[name] = (value, path)
-        text = b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
-        return start["status"], json.loads(text) if text else {}
-
-    def login(self, user: str, password: str | None = None) -> tuple[int, dict[str, Any]]:
-        return self.call("POST", "/api/login",
-                         {"user": user, "password": PASSWORDS.get(user) if password is None
-                          else password})
-
-    def me(self) -> tuple[int, dict[str, Any]]:
-        return self.call("GET", "/api/me")
-
-
-def make_ui(tmp_path: Path, **kw: Any) -> tuple[UiApp, Recorder, FakeClock]:
-    clock = FakeClock(1000.0)
-    users = write_users(tmp_path / "users.json", kw.pop("roles", None))
-    rec = Recorder()
-    ui = UiApp(rec, users, clock=clock, **kw)
-    ui.record.echo = False
-    return ui, rec, clock
-
+from feeder_bt.ui.users import UsersError, UsersFile, check_password
 
 # ---------------------------------------------------------------------------- lock-outs
 

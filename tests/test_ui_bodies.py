@@ -3,7 +3,7 @@ one-line 400 (a hypothesis fuzz of request bodies against a real simulated cell 
 real bridge, derandomized), refusals name no server paths, and failed logins, lock-outs and
 refused commands reach the event log, `feeder report` and the run's report.
 
-Helpers (in-process browser, cheap users file) come from test_ui_access.py."""
+Helpers (in-process browser, cheap users file) come from uiutil.py."""
 
 from __future__ import annotations
 
@@ -17,8 +17,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_ui_access import Browser, make_ui, write_users
-from uiutil import FakeClock, SimRig
+from uiutil import Browser, FakeClock, SimRig, make_ui, write_users
 
 from feeder_bt.cli import main
 from feeder_bt.eventlog import EventLog

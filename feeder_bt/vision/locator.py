@@ -42,7 +42,6 @@ image is read, never written), so one ``Locator`` may serve several threads.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -61,7 +60,8 @@ from .blobs import (
 from .calibration import Calibration
 from .corners import _corner_signatures, _CornerSignature, _cut_corner, _orient, _part_signature
 from .features import FEATURES, GROUP_OF
-from .segment import Segmenter, _grey
+from .overlay import draw
+from .segment import Segmenter, to_grey
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
@@ -125,7 +125,7 @@ class Locator(Segmenter):
         not only those the cascade needed (see the module docstring).
         """
         t0 = time.perf_counter()
-        img = _grey(image)
+        img = to_grey(image)
         mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
         contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
@@ -152,7 +152,7 @@ class Locator(Segmenter):
         tuning and feeding. ``reason`` marks blobs ``locate`` would reject before
         classification ("touches border", "too small"); ``part`` is always None.
         """
-        img = _grey(image)
+        img = to_grey(image)
         contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
         blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
         return [b.det for b in blobs]
@@ -279,35 +279,6 @@ class Locator(Segmenter):
     # -------------------------------------------------------------- drawing
 
     def annotate(self, image: np.ndarray, result: LocateResult) -> np.ndarray:
-        """A BGR copy of ``image`` with parts (green), rejects (red) and their reasons."""
-        img = _grey(image)
-        out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        if result.contours:
-            cv2.drawContours(out, result.contours, -1, (255, 160, 0), 1, cv2.LINE_AA)
-        cal = self.calibration
-        for det in result.parts:
-            c = (int(round(det.u_px)), int(round(det.v_px)))
-            cv2.circle(out, c, 3, (0, 200, 0), -1, cv2.LINE_AA)
-            a = math.radians(det.angle_deg)
-            tip = cal.mm_to_px(np.array([[det.x_mm + 25 * math.cos(a),
-                                          det.y_mm + 25 * math.sin(a)]]))[0]
-            cv2.arrowedLine(out, c, (int(round(tip[0])), int(round(tip[1]))), (0, 200, 0), 1,
-                            cv2.LINE_AA, tipLength=0.25)
-            label = f"{det.part}/{det.pose}" + ("" if det.pickable else " (no pick)")
-            _label(out, label, c, -6, (0, 160, 0))
-        for det in result.rejected:
-            c = (int(round(det.u_px)), int(round(det.v_px)))
-            cv2.drawMarker(out, c, (0, 0, 230), cv2.MARKER_TILTED_CROSS, 10, 2)
-            _label(out, det.reason, c, 14, (0, 0, 230))
-        return out
-
-
-def _label(out: np.ndarray, text: str, at: tuple[int, int], dy: int,
-           colour: tuple[int, int, int]) -> None:
-    """Text beside a point, kept inside the image."""
-    (tw, th), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.4, 1)
-    x = min(at[0] + 6, out.shape[1] - tw - 2)
-    y = min(max(at[1] + dy, th + 2), out.shape[0] - 4)
-    cv2.putText(out, text, (max(x, 0), y), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
-                cv2.LINE_AA)
+        """A BGR copy of ``image`` with the result drawn as the dashboard draws it."""
+        return draw(image, result, self.calibration)[0]
 

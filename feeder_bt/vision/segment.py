@@ -58,7 +58,7 @@ class Segmenter:
 
     def set_golden(self, image: np.ndarray) -> None:
         """Remember the cleared belt; later frames are compared against it."""
-        self._golden = _grey(image).copy()
+        self._golden = to_grey(image).copy()
         th = self.recipe.threshold
         self._below = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
@@ -71,7 +71,7 @@ class Segmenter:
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
-        return self._morph(self._threshold(_grey(image))[0].copy())
+        return self._morph(self._threshold(to_grey(image))[0].copy())
 
     def _buffer(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """A frame-sized uint8 scratch image of this thread's, reused from frame to frame.
@@ -289,7 +289,7 @@ class Segmenter:
         return pts, counts
 
 
-def _grey(image: np.ndarray) -> np.ndarray:
+def to_grey(image: np.ndarray) -> np.ndarray:
     """The image as uint8 grey (a BGR colour image is converted): what the recipe reads."""
     if image.ndim == 3:
         return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)

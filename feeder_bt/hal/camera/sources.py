@@ -24,7 +24,10 @@ class FrameSource(Protocol):
     def close(self) -> None: ...
 
 
-def _grey(img: np.ndarray) -> np.ndarray:
+def as_frame(img: np.ndarray) -> np.ndarray:
+    """What a camera delivers (colour, 16-bit) made the uint8 grey frame the cell passes
+    on. The locator's ``to_grey`` refuses non-uint8 instead: past this point a frame of
+    another depth is a bug, not a camera's choice."""
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     if img.dtype != np.uint8:
@@ -47,7 +50,7 @@ class VideoCaptureSource:
         ok, img = self.cap.read()
         if not ok or img is None:
             raise GrabFailed(f"camera {self.spec!r} returned no image")
-        return _grey(img)
+        return as_frame(img)
 
     def close(self) -> None:
         self.cap.release()
@@ -86,7 +89,7 @@ class ReplaySource:
                 ok, img = self.cap.read()
             if not ok or img is None:
                 raise GrabFailed(f"{self.path}: no more frames")
-            return _grey(img)
+            return as_frame(img)
         if self.index >= len(self.files):
             if not self.loop:
                 raise GrabFailed(f"{self.path}: no more images")
