@@ -140,6 +140,40 @@ def test_overlay_out_is_the_best_trial_and_reproduces_it(study_file, tmp_path):
                                          ].user_attrs["overlay"]
 
 
+def test_a_new_study_starts_from_the_scenario_as_written(study_file, tmp_path):
+    """Trial 0 is lenses as shipped (the thesis's water marks, FIFO): its overlay changes
+    nothing that matters, and its parts/min is that of a run without an overlay."""
+    import dataclasses
+
+    import optuna
+
+    from feeder_bt.scenario.overlay import write_overlay
+    db = study_file[0]
+    first = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}").trials[0]
+    assert first.user_attrs["start"] == "scenario"
+    write_overlay(tmp_path / "t0.yaml", first.user_attrs["overlay"])
+    plain, _ = load_scenario(LENSES)
+    tuned, _ = load_scenario(LENSES, overlay=tmp_path / "t0.yaml")
+    for part in ("present", "adjust", "locate", "retrieve"):
+        a, b = dataclasses.asdict(getattr(plain, part)), dataclasses.asdict(getattr(tuned, part))
+        assert {k: v for k, v in b.items() if a.get(k) != v} == {}, part
+    report = run_job(RunOptions(scenario=LENSES, duration=20, fast=True, seed=1,
+                                view="none", db=None))
+    assert report["parts_per_minute"] == pytest.approx(first.value)
+
+
+def test_where_the_scenario_is_not_a_point_of_the_space_the_search_starts_anywhere(tmp_path):
+    from feeder_bt.tuning.space import Limits, start_params
+    squares = load_scenario(SQUARES)
+    assert start_params(squares[0], "watermarks", Limits.of(*squares)) is None  # no marks
+    sc = _write(tmp_path / "fast.yaml", Path(LENSES).read_text().replace(
+        "frame_spacing_mm: 300", "frame_spacing_mm: 20").replace(
+        "cell: ../cells/sim.yaml", f"cell: {ROOT / 'cells' / 'sim.yaml'}"))
+    lenses = load_scenario(sc)
+    assert start_params(lenses[0], "ours", Limits.of(*lenses)) is None      # below 0.4 x
+    assert start_params(lenses[0], "fixed", Limits.of(*lenses)) is not None
+
+
 def test_resume_refuses_another_duration(study_file, capsys):
     db = study_file[0]
     assert main(["tune", LENSES, "--trials", "4", "--duration", "25", "--seeds", "1",
@@ -154,6 +188,7 @@ def test_progress_lines_when_not_a_terminal(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "tune: 1 trials on this process" in err
     assert "trial 0 [1/1]: " in err and "parts/min" in err and "none belt" in err
+    assert "(the scenario as written)" in err
 
 
 def test_report_plots_the_study(study_file, tmp_path, capsys):

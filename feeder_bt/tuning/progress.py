@@ -8,6 +8,8 @@ from typing import Any, TextIO
 
 from .search import TrialResult, describe
 
+AS_WRITTEN = " (the scenario as written)"
+
 
 class TrialProgress:
     """Context manager; ``start(done, total)`` then ``trial(result)`` after each trial."""
@@ -57,6 +59,7 @@ class TrialProgress:
 
     def trial(self, r: TrialResult) -> None:
         self.done += 1
+        name = describe(r.overlay) + (AS_WRITTEN if r.start else "")
         if r.value is not None and (self.best is None or r.value > self.best[0]):
             self.best = (r.value, r.number)
         best = (f"best {self.best[0]:.2f} parts/min (trial {self.best[1]})"
@@ -65,10 +68,10 @@ class TrialProgress:
             self._bar.update(self._task, completed=self.done, best=best)
             what = (f"{r.value:.2f} parts/min" if r.value is not None
                     else f"failed: {r.error}")
-            self._bar.console.print(f"trial {r.number}: {what}  {describe(r.overlay)}",
+            self._bar.console.print(f"trial {r.number}: {what}  {name}",
                                     highlight=False, markup=False)
             return
         what = (f"{r.value:.2f} parts/min (seeds {', '.join(f'{v:.2f}' for v in r.per_seed)})"
                 if r.value is not None else f"failed: {r.error}")
-        print(f"trial {r.number} [{self.done}/{self.total}]: {what}  {describe(r.overlay)}; "
+        print(f"trial {r.number} [{self.done}/{self.total}]: {what}  {name}; "
               f"{best}", file=self.out, flush=True)

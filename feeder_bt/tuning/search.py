@@ -18,7 +18,7 @@ from typing import Any
 
 from ..errors import FeederError
 from .objective import Job, evaluate
-from .space import Limits, suggest
+from .space import Limits, start_params, suggest
 
 INTERRUPTED = "interrupted"
 
@@ -51,6 +51,7 @@ class TrialResult:
     per_seed: list[float] = field(default_factory=list)
     overlay: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    start: bool = False                 # the scenario as written (a new study's first trial)
 
 
 class InlineExecutor(cf.Executor):
@@ -134,6 +135,10 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         study.tell(t.number, state=TrialState.FAIL)              # left by an interrupted run
     study.sampler = _sampler(cfg, len(study.trials))
+    if not study.trials:                    # a new study starts from the scenario as written
+        start = start_params(scenario, cfg.space, limits)
+        if start is not None:
+            study.enqueue_trial(start, user_attrs={"start": "scenario"})
     done = len(finished(study))
     todo = max(0, cfg.trials - done)
     if on_start:
@@ -190,11 +195,12 @@ def _tell(study: Any, trial: Any, overlay: dict[str, Any],
           results: list[dict[str, Any]]) -> TrialResult:
     from optuna.trial import TrialState
     results.sort(key=lambda r: r.get("seed", 0))
+    start = trial.user_attrs.get("start") == "scenario"
     errors = [r["error"] for r in results if r.get("error")]
     if errors:
         trial.set_user_attr("error", errors[0])
         study.tell(trial, state=TrialState.FAIL)
-        return TrialResult(trial.number, None, overlay=overlay, error=errors[0])
+        return TrialResult(trial.number, None, overlay=overlay, error=errors[0], start=start)
     per_seed = [r["ppm"] for r in results]
     trial.set_user_attr("per_seed_ppm", per_seed)
     ceiling = [r.get("ceiling_ppm") or r.get("robot_bound_ppm") for r in results]
@@ -202,7 +208,7 @@ def _tell(study: Any, trial: Any, overlay: dict[str, Any],
         trial.set_user_attr("ceiling_ppm", statistics.mean(ceiling))
     value = statistics.mean(per_seed)
     study.tell(trial, value)
-    return TrialResult(trial.number, value, per_seed, overlay)
+    return TrialResult(trial.number, value, per_seed, overlay, start=start)
 
 
 def best_overlay(study: Any) -> tuple[dict[str, Any], Any]:

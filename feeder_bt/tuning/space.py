@@ -10,6 +10,10 @@ by the highest horizontal speed they go with. Three spaces, each with the same b
 * ``watermarks``: only the thesis's water-mark adjuster's parameters (the baseline tuned
   for this cell); the scenario's frame spacing and pick policy stay;
 * ``fixed``: only one constant belt and incline speed, no adjuster.
+
+A new study's first trial is the scenario as written, where it is a point of the space
+(``start_params``): the search starts from what the cell runs now, so the best it
+reports is never worse than that on the tuning seeds.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from ..adjusters import make_adjuster
 from ..scenario.loader import RANGES, RETRIEVE_POLICIES, part_size_mm
 from ..scenario.model import CellSpec, PresentParams, Scenario
 
@@ -110,3 +115,71 @@ def suggest(trial: Any, space: str, lim: Limits) -> dict[str, Any]:
     overlay["retrieve"] = {"policy": trial.suggest_categorical("policy",
                                                                list(RETRIEVE_POLICIES))}
     return overlay
+
+
+class _Check:
+    """A stand-in trial that answers with given parameters and notes the ones outside
+    their range, so that ``start_params`` is checked against the same bounds as a search."""
+
+    def __init__(self, params: dict[str, Any]) -> None:
+        self.params, self.bad = params, []
+
+    def suggest_float(self, name: str, lo: float, hi: float, log: bool = False) -> float:
+        v = self.params[name]
+        if not lo - 1e-9 <= v <= hi + 1e-9:
+            self.bad.append(name)
+        return v
+
+    def suggest_categorical(self, name: str, choices: list[Any]) -> Any:
+        v = self.params[name]
+        if v not in choices:
+            self.bad.append(name)
+        return v
+
+
+def _scenario_params(scenario: Scenario, space: str, lim: Limits) -> dict[str, Any] | None:
+    pr, adj = scenario.present, scenario.adjust
+    algorithm = adj.algorithm if adj.leaf is None else "leaf"
+    if space == "fixed" or (space == "ours" and algorithm == "none"):
+        prefix = "none." if space == "ours" else ""
+        out = {f"{prefix}belt_mm_s": pr.horizontal_mm_s,
+               f"{prefix}incline_mm_s": pr.incline_pct * pr.horizontal_mm_s / 100.0}
+    elif algorithm == "water_marks" and space in ("ours", "watermarks"):
+        prefix = "water_marks." if space == "ours" else ""
+        p = make_adjuster(algorithm, adj.params).params
+        lo, hi, med = p["min_mm_s"], p["max_mm_s"], p["median_mm_s"]
+        out = {f"{prefix}low": p["low"], f"{prefix}band": p["high"] - p["low"],
+               f"{prefix}min_mm_s": lo,
+               f"{prefix}max_over_min": (hi - lo) / (lim.horizontal_mm_s - lo)
+               if lim.horizontal_mm_s > lo else 0.0,
+               f"{prefix}median_at": (med - lo) / (hi - lo) if hi > lo else 0.0,
+               f"{prefix}incline_at_max_mm_s": pr.incline_pct * max(hi, med) / 100.0,
+               f"{prefix}gain": p["gain"], f"{prefix}step": p["step"]}
+    elif algorithm == "supply_queue" and space == "ours":
+        p = make_adjuster(algorithm, adj.params).params
+        h = p["horizontal_mm_s"]
+        out = {"supply_queue.belt_mm_s": h,
+               "supply_queue.max_incline_mm_s": p["max_incline_pct"] * h / 100.0,
+               "supply_queue.target_queue": p["target_queue"],
+               "supply_queue.gain_pct": p["gain_pct"]}
+    else:
+        return None
+    if space == "ours":
+        out.update(adjuster=algorithm, frame_spacing_mm=scenario.locate.frame_spacing_mm,
+                   policy=scenario.retrieve.policy)
+    return out
+
+
+def start_params(scenario: Scenario, space: str, lim: Limits) -> dict[str, Any] | None:
+    """The scenario's own settings as parameters of ``space``, for a study's first trial;
+    None where they are not a point of it (another adjuster, a value out of its bounds)."""
+    params = _scenario_params(scenario, space, lim)
+    if params is None:
+        return None
+    check = _Check({k: (round(v, 6) if isinstance(v, float) else v)
+                    for k, v in params.items()})
+    try:
+        suggest(check, space, lim)
+    except KeyError:
+        return None
+    return None if check.bad else check.params
