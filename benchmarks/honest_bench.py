@@ -160,7 +160,7 @@ def markdown(result: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--supply", metavar="PLAN.yaml", help="tune and evaluate under this plan")
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--duration", type=float, default=600.0, help="s per tuning run")

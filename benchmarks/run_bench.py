@@ -43,7 +43,7 @@ def _counts(r: dict) -> tuple:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=3600.0)
     ap.add_argument("--seeds", type=int, default=1, help="seeds 1..N per scenario")
     ap.add_argument("--repeats", type=int, default=1, help="runs of each (scenario, seed)")

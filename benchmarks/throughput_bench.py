@@ -107,7 +107,7 @@ def targets(summary: list[dict]) -> dict[str, dict]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=3600.0)
     ap.add_argument("--seeds", type=int, default=5, help="seeds 1..N")
     ap.add_argument("--workers", type=int, default=2)

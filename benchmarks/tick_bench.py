@@ -31,7 +31,7 @@ SCENARIOS = ("lenses", "lenses+best", "squares", "lenses_and_squares", "original
 
 
 def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))

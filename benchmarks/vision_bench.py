@@ -436,7 +436,7 @@ def bench_scenario(name: str, n_frames: int, repeats: int, seed: int,
 
 
 def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=200, help="frames per scenario")
     ap.add_argument("--repeats", type=int, default=5, help="timing passes over the frames")
     ap.add_argument("--scenarios", nargs="*", default=["lenses", "squares"])
