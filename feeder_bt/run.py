@@ -383,6 +383,7 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     if injector is not None:
         report["injected"] = dict(injector.injected)
         report["unseen"] = dict(injector.unseen)     # injected, but met by nobody
+        report["watchdog_stops"] = injector.watchdog_stops   # Galil outages #WDOG ended
         report["fault_plan"] = str(opts.faults)
     if supply is not None:
         report["supply"] = supply.report()

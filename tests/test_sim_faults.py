@@ -276,8 +276,10 @@ def test_adept_link_drop_during_a_place_loses_the_reply_and_the_part_is_placed(r
 
 
 def test_galil_link_drop_fails_notifications_but_the_belts_run_on(rig):
+    """An outage shorter than the card's host watchdog (galil.watchdog_s, 1 s): the belts
+    run on as commanded."""
     r = rig(plan(scripted=[ScriptedFault(at_s=WARM_S + 0.2, kind="comms_lost",
-                                         device="galil", outage_s=1.5)]))
+                                         device="galil", outage_s=0.9)]))
     warm(r)
     h = r.hal.conveyors["horizontal"]
     note = h.travelled(100.0)                        # due at +0.667 s at 150 mm/s
@@ -288,14 +290,56 @@ def test_galil_link_drop_fails_notifications_but_the_belts_run_on(rig):
     frozen = h.position()
     for j in (h.set_speed(10), h.stop(), h.move(5, 5), h.shake(5, 1), h.travelled(5)):
         assert j.state is JobState.FAILED and isinstance(j.error, CommsLost)
-    r.to(WARM_S + 1.2, dt=0.1)
+    r.to(WARM_S + 1.0, dt=0.1)
     assert h.position() == frozen and h.speed() == 150.0
-    assert r.world.horizontal.pos(WARM_S + 1.2) - pos0 == pytest.approx(150.0 * 1.2)
-    r.to(WARM_S + 1.7)
-    assert h.position() == r.world.galil_count()
+    assert r.world.horizontal.pos(WARM_S + 1.0) - pos0 == pytest.approx(150.0 * 1.0)
+    r.to(WARM_S + 1.2)
+    assert h.position() == r.world.galil_count() and h.fault() is None
+    assert r.world.horizontal.vel(WARM_S + 1.2) == pytest.approx(150.0)
     note = h.travelled(15.0)
-    r.to(WARM_S + 1.8)
-    assert note.ok and r.inj.injected == {"comms_lost": 1}
+    r.to(WARM_S + 1.4)
+    assert note.ok and r.inj.injected == {"comms_lost": 1} and r.inj.watchdog_stops == 0
+
+
+def test_a_longer_galil_outage_is_ended_by_the_cards_watchdog(rig):
+    """Silent for galil.watchdog_s, the card stops every belt (#WDOG in monitor.dmc); once
+    the link is back each conveyor's fault() says so in the real driver's words, until
+    the next command starts the belt again."""
+    from feeder_bt.hal.interfaces import watchdog_stopped
+    r = rig(plan(scripted=[ScriptedFault(at_s=WARM_S + 0.2, kind="comms_lost",
+                                         device="galil", outage_s=2.0)]))
+    warm(r)
+    h, inc = r.hal.conveyors["horizontal"], r.hal.conveyors["incline"]
+    r.to(WARM_S + 1.2 - EPS, dt=0.1)
+    assert r.world.horizontal.vel(r.clock.now()) == pytest.approx(150.0)
+    r.to(WARM_S + 1.5, dt=0.1)                       # stopped at 1500 mm/s² in 0.1 s
+    assert r.world.horizontal.vel(WARM_S + 1.5) == 0.0
+    assert r.world.incline.vel(WARM_S + 1.5) == 0.0
+    assert h.fault() is None and h.speed() == 150.0  # the link is down: nothing heard yet
+    r.to(WARM_S + 2.3)
+    assert h.speed() == 0.0
+    for conv in (h, inc):
+        err = conv.fault()
+        assert isinstance(err, ConveyorFault)
+        assert str(err) == str(watchdog_stopped(conv.name, 1.0))
+    assert r.inj.watchdog_stops == 1 and "watchdog stopped the belts" in r.inj.log[0]["detail"]
+    job = h.set_speed(150.0)
+    assert h.fault() is None and inc.fault() is not None
+    r.to(WARM_S + 3.0)
+    assert job.ok and r.world.horizontal.vel(WARM_S + 3.0) == pytest.approx(150.0)
+
+
+def test_without_the_watchdog_the_belts_run_through_a_long_outage(lenses):
+    """galil.watchdog_s: 0 (no #WDOG on the card): nothing stops the belts."""
+    scenario, cell = lenses
+    r = Rig((scenario, dataclasses.replace(cell, galil=dataclasses.replace(
+        cell.galil, watchdog_s=0.0))), plan(scripted=[ScriptedFault(
+            at_s=WARM_S + 0.2, kind="comms_lost", device="galil", outage_s=3.0)]))
+    warm(r)
+    r.to(WARM_S + 3.5, dt=0.25)
+    assert r.world.horizontal.vel(WARM_S + 3.5) == pytest.approx(150.0)
+    assert r.hal.conveyors["horizontal"].fault() is None and r.inj.watchdog_stops == 0
+    r.close()
 
 
 def test_galil_link_drop_fails_a_move_in_flight(rig):
@@ -458,8 +502,9 @@ def test_per_hour_arrivals_alternate_links_and_repeat_with_the_same_seeds(lenses
 
 
 def test_faults_leave_the_part_flow_of_the_world_unchanged(rig):
-    """Link drops and failed grabs change nothing in the world: same parts, same places."""
-    faulty = rig(plan({"comms_lost": FaultRate(per_hour=600.0, device="galil"),
+    """Link drops (shorter than the card's watchdog) and failed grabs change nothing in the
+    world: same parts, same places."""
+    faulty = rig(plan({"comms_lost": FaultRate(per_hour=600.0, device="galil", outage_s=0.8),
                        "grab_failed": FaultRate(per_frame=0.5)}))
     clean = rig()
     for r in (faulty, clean):

@@ -11,7 +11,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..errors import HalError
+from ..errors import ConveyorFault, HalError
 from ..jobs import DoneJob, Job
 
 
@@ -130,6 +130,14 @@ def speed_refused(conveyor: str, job: str, mm_s: float, max_mm_s: float,
     return DoneJob(f"{conveyor}.{job}", error=HalError(
         f"{conveyor} conveyor: {abs(mm_s):g} mm/s commanded, above its max_mm_s "
         f"{max_mm_s:g}{where}; refused"))
+
+
+def watchdog_stopped(conveyor: str, watchdog_s: float) -> ConveyorFault:
+    """What a conveyor's ``fault()`` says after the Galil's host watchdog (``#WDOG`` in
+    galil_programs/monitor.dmc) stopped the belts: the real driver and the simulated cell
+    say it alike, so the trees recover from both the same way."""
+    return ConveyorFault(f"{conveyor}: the Galil's host watchdog stopped the belts "
+                         f"(the host was silent for {watchdog_s:g} s)")
 
 
 class Camera(Protocol):

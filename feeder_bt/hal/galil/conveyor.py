@@ -17,7 +17,7 @@ from ...encoder import diff
 from ...errors import ConveyorFault, HalError
 from ...jobs import DoneJob, FutureJob, Job, JobState
 from ...scenario.model import IoSignal
-from ..interfaces import IoChange, speed_refused
+from ..interfaces import IoChange, speed_refused, watchdog_stopped
 from .driver import RETRY, Delay, GalilController
 from .protocol import (
     DistanceEvent,
@@ -241,8 +241,7 @@ class GalilConveyor:
             return ConveyorFault(f"{self.name}: a limit switch tripped on the Galil "
                                  f"(#LIMSWI); axis {self.axis} stopped")
         if "WATCHDOG" in events:
-            return ConveyorFault(f"{self.name}: the Galil's host watchdog stopped the belts "
-                                 f"(the host was silent for {self.ctl.spec.watchdog_s:g} s)")
+            return watchdog_stopped(self.name, self.ctl.spec.watchdog_s)
         if self._mode != "jog" or abs(self._commanded) < 1.0:
             self._stall_ref = None
             return None

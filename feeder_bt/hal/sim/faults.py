@@ -35,7 +35,7 @@ import numpy as np
 from ...errors import CommsLost, ConfigError, ConveyorFault, FeederError, MissedGrab, ServoTimeout
 from ...jobs import DoneJob, Job
 from ...scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
-from ..interfaces import PickTarget, Pose
+from ..interfaces import PickTarget, Pose, watchdog_stopped
 from .devices import SimHal, TimedJob
 from .faulty_devices import (
     POWER_OFF,
@@ -85,6 +85,7 @@ class FaultInjector:
         self.power_on = True
         self.down: dict[str, bool] = dict.fromkeys(_LINKS, False)
         self.estop_presses = 0
+        self.watchdog_stops = 0                   # outages the card's watchdog ended
         self._rngs = {kind: plan_rng(plan.seed, seed, i) for i, kind in enumerate(FAULT_KINDS)}
         self._armed: Counter[str] = Counter()     # scripted per-pick/per-frame faults waiting
         self._cuts: list[ScriptedFault] = []      # scripted link cuts waiting for their step
@@ -273,10 +274,25 @@ class FaultInjector:
             for conv in self.conveyors.values():
                 if conv.freeze(t, err):
                     entry["seen"] = True
+            watchdog_s = self.world.cell.galil.watchdog_s
+            if 0 < watchdog_s < outage_s:
+                self._at(t + watchdog_s, lambda now: self._watchdog(now, entry, watchdog_s))
         else:
             if self.camera.fail_in_flight(err):
                 entry["seen"] = True
         self._at(t + outage_s, lambda now: self._restore(link))
+
+    def _watchdog(self, t: float, outage: dict[str, Any], watchdog_s: float) -> None:
+        """The host has been silent for ``galil.watchdog_s``: the card's ``#WDOG``
+        (galil_programs/monitor.dmc) stops every axis, as on a real card or the emulator;
+        each conveyor's ``fault()`` says so once the link is back."""
+        if self._outage_entry.get("galil") is not outage:
+            return                              # the link came back in time
+        self.watchdog_stops += 1
+        outage["detail"] += f"; the card's watchdog stopped the belts after {watchdog_s:g} s"
+        for name, conv in self.conveyors.items():
+            getattr(self.world, name).jog(t, 0.0)
+            conv.watchdog = watchdog_stopped(name, watchdog_s)
 
     def _restore(self, link: str) -> None:
         self.down[link] = False

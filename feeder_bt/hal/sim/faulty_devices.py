@@ -205,12 +205,14 @@ class FaultyRobotPosition(_Wrapper):
 class FaultyConveyor(_Tracking):
     """A conveyor on the Galil link, which may stall (``fault()``) until the next motion
     command. While the link is down, commands fail at once and reads return the last
-    values; the belt itself goes on as it was commanded."""
+    values; the belt goes on as it was commanded until the card's host watchdog stops it
+    (``FaultInjector._watchdog``), which ``fault()`` reports once the link is back."""
 
     def __init__(self, inner: Any, inj: FaultInjector) -> None:
         super().__init__(inner, inj)
         self.name: str = inner.name
         self.jam: HalError | None = None
+        self.watchdog: HalError | None = None   # the card's watchdog stopped this belt
         self._frozen: tuple[float, int] | None = None
 
     def _motion(self, method: str, *args: Any) -> Job:
@@ -220,6 +222,7 @@ class FaultyConveyor(_Tracking):
         if self.jam is not None:
             self.jam = None
             self._inj.jam_cleared()
+        self.watchdog = None
         return self._track(getattr(self._inner, method)(*args))
 
     def set_speed(self, mm_s: float) -> Job:
@@ -257,7 +260,10 @@ class FaultyConveyor(_Tracking):
         self._inj.world.now()
         if self.jam is not None:
             self._inj.jam_read()
-        return self.jam
+            return self.jam
+        if self.watchdog is not None and not self._inj.is_down("galil"):
+            return self.watchdog                # the card's W, heard once the link is back
+        return None
 
     # -- for the injector --------------------------------------------------------------
     def freeze(self, t: float, err: HalError) -> bool:
