@@ -77,7 +77,7 @@ def _one(job: tuple[str, str | None, int, float]) -> dict:
             "accounting": p.get("accounting", []), "injected": r.get("injected", {}),
             "unseen": r.get("unseen", {}), "cell_faults": r["faults"],
             "recoveries": r["recoveries"], "retried": r.get("retried", {}),
-            "unrecovered": unrecovered(r),
+            "unrecovered": unrecovered(r), "watchdog_stops": r.get("watchdog_stops", 0),
             "wall_seconds": r["wall_seconds"]}
 
 

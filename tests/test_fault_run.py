@@ -4,6 +4,9 @@ counted, recovered or reported as a FAULT, and no part is lost."""
 from __future__ import annotations
 
 import json
+import sqlite3
+
+import pytest
 
 from feeder_bt.cli import main
 from feeder_bt.run import RunOptions, run_job
@@ -38,8 +41,27 @@ def test_every_injected_fault_is_counted_and_recovered(tmp_path):
     for kind in ("servo_timeout", "comms_lost", "grab_failed", "estop"):
         assert recovered.get(kind, 0) == faults[kind], (kind, faults, recovered)
     assert recovered.get("conveyor", 0) == faults.get("conveyor", 0) == injected.get(
-        "conveyor_jam", 0)
+        "conveyor_jam", 0) + r["watchdog_stops"]
     assert r["parts_per_minute"] > 55
+
+
+@pytest.mark.parametrize("outage_s, stops", [(2.5, 1), (0.8, 0)])
+def test_a_galil_outage_longer_than_the_watchdog_stops_the_belts_and_is_recovered(
+        tmp_path, outage_s, stops):
+    """The card's watchdog (galil.watchdog_s, 1 s) stops the belts in a longer outage: the
+    present tree meets it once the link is back and starts them again."""
+    plan = tmp_path / "plan.yaml"
+    plan.write_text(f"scripted:\n  - {{at_s: 60, kind: comms_lost, device: galil, "
+                    f"outage_s: {outage_s}}}\n")
+    r = run_job(RunOptions(scenario="scenarios/lenses.yaml", duration=120.0, fast=True,
+                           seed=1, view="none", faults=str(plan), db=str(tmp_path / "e.db")))
+    assert r["state"] == "STOPPED" and r["parts"]["lost"] == 0
+    assert r["watchdog_stops"] == stops
+    assert r["faults"].get("conveyor", 0) == r["recoveries"].get("conveyor", 0) == stops
+    assert r["recoveries"]["comms_lost"] == r["faults"]["comms_lost"] >= 1
+    with sqlite3.connect(tmp_path / "e.db") as db:       # the speeds commanded again
+        speeds = [t for (t,) in db.execute("SELECT t FROM events WHERE kind = 'speeds'")]
+    assert any(60 + outage_s <= t < 70 for t in speeds) == bool(stops)
 
 
 def test_a_bad_plan_is_one_line_and_exit_2(tmp_path, capsys):

@@ -130,6 +130,31 @@ def test_a_link_cut_during_the_servo_recoverys_place_goes_to_the_link_branch():
     assert bb_get("/faults/escalate") is None
 
 
+def test_a_link_cut_during_the_recovery_program_is_recovered_by_the_next_motion():
+    """RECOVER's reply is lost: the controller may have finished it, but only a motion
+    that succeeds proves the arm's power back, so the servo fault is recovered then,
+    not when the link's reply comes (eight-hour shift, seed 4)."""
+    from feeder_bt.errors import ServoTimeout
+    ctx, root, p = _picking()
+    nxt = part(300.0)
+    ctx.queue.put(nxt)
+    fail(ctx.hal, "robot", "pick", ServoTimeout("motor stalled"))
+    tick(root, ctx)
+    fail(ctx.hal, "robot", "recover", LOST)
+    tick(root, ctx)
+    _back(ctx, root)
+    assert ctx.stats.recoveries == {"comms_lost": 1}         # a reply proves the link only
+    assert pending(ctx.hal, "robot", "pick").args[0].part_id == nxt.id
+    finish(ctx.hal, "robot", "pick")
+    tick(root, ctx)
+    assert ctx.stats.recoveries == {"comms_lost": 1, "servo_timeout": 1}
+    finish(ctx.hal, "robot", "place")
+    tick(root, ctx)
+    assert ctx.stats.retrieved["lens"] == 1
+    assert ctx.stats.faults["servo_timeout"] == 1 and ctx.stats.faults["comms_lost"] == 1
+    assert bb_get("/faults/escalate") is None
+
+
 def test_a_part_the_cell_never_commanded_goes_to_the_operator():
     ctx, root, p = _picking()
     ctx.hal.robot.grip(p.id + 1000)                 # another part, not ours

@@ -209,6 +209,27 @@ def test_travel_failure_after_a_grab_failure_is_not_taken_for_a_grab_failure(tre
     assert bb_get("/faults/escalate") is None
 
 
+def test_a_link_drop_during_a_grab_retry_leaves_both_faults_to_recover(tree):
+    """The next notification proves the link back, the next frame the camera: each is
+    counted recovered by the success that proves it (eight-hour shift, seed 5)."""
+    ctx, root = tree
+    tick(root, ctx)
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    fail(ctx.hal, "camera", "grab", GrabFailed("no frame"))
+    tick(root, ctx, n=15)
+    fail(ctx.hal, "horizontal", "travelled", CommsLost("galil gone"))
+    tick(root, ctx, n=60)                           # the link's back-off, 1 s (2nd in a row)
+    finish(ctx.hal, "horizontal", "travelled")
+    tick(root, ctx)
+    assert dict(ctx.stats.recoveries) == {"comms_lost": 1}
+    finish(ctx.hal, "camera", "grab", frame(0))
+    tick(root, ctx)
+    assert dict(ctx.stats.recoveries) == {"comms_lost": 1, "grab_failed": 1}
+    assert dict(ctx.stats.faults) == {"grab_failed": 1, "comms_lost": 1}
+    assert ctx.stats.pending == {}
+
+
 def test_recipe_failure_is_counted_like_a_camera_fault(tree):
     ctx, root = tree
     tick(root, ctx)

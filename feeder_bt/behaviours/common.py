@@ -45,9 +45,11 @@ class Stats:
         self.started_at: float | None = None
         self.last_retrieved: str | None = None
         self.scenario: str | None = None
-        # faults a branch is retrying through, by blackboard key: the next success of a job
-        # reporting to that key is the recovery; ``attempts`` counts the retries meanwhile
-        self.pending: dict[str, str] = {}
+        # faults a branch is retrying through, by blackboard key, oldest first: the next
+        # success of a job reporting to that key that proves a kind recovered (``recovers``)
+        # is that kind's recovery; ``attempts`` counts the retries meanwhile. A key can hold
+        # two: a link dropping while a failed grab is retried leaves both to recover.
+        self.pending: dict[str, list[str]] = {}
         self.counted: dict[str, object] = {}      # key -> the error CountFault last counted
         self.attempts: Counter[str] = Counter()
         #: failures met while a branch retried through the same fault, by kind: each one
@@ -70,20 +72,35 @@ class Stats:
 
     def retrying(self, key: str, kind: str) -> None:
         """A branch will retry past a fault of ``kind``: its next success recovers it."""
-        self.pending[key] = kind
+        self.recovering(key, kind)
         self.attempts[key] += 1
 
+    def recovering(self, key: str, kind: str) -> None:
+        """A fault of ``kind`` on ``key`` is being recovered (not retried: no attempt)."""
+        kinds = self.pending.setdefault(key, [])
+        if kind not in kinds:
+            kinds.append(kind)
+
+    def is_retrying(self, key: str, kind: str) -> bool:
+        """A failure of ``kind`` now is an attempt of an episode under way, not a new fault."""
+        return kind in self.pending.get(key, ())
+
     def succeeded(self, key: str, t: float, kinds: tuple[str, ...] | None = None) -> None:
-        """A job reporting to ``key`` succeeded: a fault of one of ``kinds`` (any, if None)
-        that the branch retried through is recovered."""
-        kind = self.pending.get(key)
-        if kind is not None and kinds is not None and kind not in kinds:
+        """A job reporting to ``key`` succeeded: the faults of ``kinds`` (any, if None)
+        the branch was recovering from are recovered; the others stay pending."""
+        waiting = self.pending.get(key, [])
+        done = [k for k in waiting if kinds is None or k in kinds]
+        if waiting and not done:
             return
-        self.pending.pop(key, None)
-        if kind is not None:
+        for kind in done:
             self.recoveries[kind] += 1
             self.emit(t, "recovered", kind=kind, attempts=self.attempts[key])
-        self.attempts[key] = 0
+        left = [k for k in waiting if k not in done]
+        if left:
+            self.pending[key] = left
+        else:
+            self.pending.pop(key, None)
+        self.attempts[key] = 0                  # a success ends the retries in a row
 
     @property
     def total_retrieved(self) -> int:
@@ -253,7 +270,7 @@ class CountFault(Leaf):
         kind = err.kind if err is not None else "unknown"
         stats = self.ctx.stats
         stats.counted[self.key] = err
-        if stats.pending.get(self.key) == kind:     # the same fault, still being retried
+        if stats.is_retrying(self.key, kind):       # the same fault, still being retried
             stats.retried[kind] += 1
             stats.emit(self.ctx.now(), "retry_failed", kind=kind, message=str(err),
                        attempt=stats.attempts[self.key])
@@ -334,7 +351,7 @@ class Escalate(Leaf):
                 and self.bb.get("/faults/escalate") is None):
             if stats.counted.get(self.key) is not err:
                 stats.counted[self.key] = err
-                if stats.pending.get(self.key) == err.kind:     # the same outage, still
+                if stats.is_retrying(self.key, err.kind):       # the same outage, still
                     stats.retried[err.kind] += 1
                     stats.emit(self.ctx.now(), "retry_failed", kind=err.kind,
                                message=str(err), attempt=stats.attempts[self.key])
@@ -347,7 +364,7 @@ class Escalate(Leaf):
         reason = f"{self.what}: {err}" if err is not None else self.what
         if self.bb.get("/faults/escalate") is None:
             self.bb.set("/faults/escalate", reason)
-            episode = err is not None and stats.pending.get(self.key) == err.kind
+            episode = err is not None and stats.is_retrying(self.key, err.kind)
             if err is None or (stats.counted.get(self.key) is not err and not episode):
                 self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1
         self.feedback_message = reason

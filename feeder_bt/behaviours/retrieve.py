@@ -181,6 +181,8 @@ class Reconcile(PartJob):
       as retrieved; released anywhere else: counted as dropped (the world has it);
     - the gripper holds something no pick of ours gripped: ``UnknownPart``."""
 
+    recovers = ("comms_lost",)      # a reply proves the link, not the arm's power
+
     def start(self) -> Job:
         self.feedback_message = "asking the robot what it holds"
         return self.ctx.hal.robot.held()
@@ -240,16 +242,15 @@ class Holding(Leaf):
 
 
 class Recover(JobLeaf):
-    """Servo time-out: run the controller's recovery program and re-enable power."""
+    """Servo time-out: run the controller's recovery program and re-enable power. Its
+    success is the servo fault's recovery; if a link drop cuts its reply, the controller
+    may have finished it anyway, and the next motion that succeeds is the recovery."""
 
     fault_key = "/retrieve/error"
 
     def start(self) -> Job:
+        self.ctx.stats.recovering(self.fault_key, "servo_timeout")
         return self.ctx.hal.robot.recover()
-
-    def on_success(self, result: object) -> Status:
-        self.ctx.stats.recoveries["servo_timeout"] += 1
-        return Status.SUCCESS
 
 
 class MoveSafe(JobLeaf):
