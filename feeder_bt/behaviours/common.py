@@ -88,9 +88,12 @@ class Stats:
     def succeeded(self, key: str, t: float, kinds: tuple[str, ...] | None = None) -> None:
         """A job reporting to ``key`` succeeded: the faults of ``kinds`` (any, if None)
         the branch was recovering from are recovered; the others stay pending."""
-        waiting = self.pending.get(key, [])
+        waiting = self.pending.get(key)
+        if not waiting:                         # the usual case, on every job's success
+            self.attempts[key] = 0
+            return
         done = [k for k in waiting if kinds is None or k in kinds]
-        if waiting and not done:
+        if not done:
             return
         for kind in done:
             self.recoveries[kind] += 1
