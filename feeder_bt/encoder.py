@@ -99,16 +99,21 @@ class DriftWatch:
     robot's count with the conveyor's translated through the sync. The two counts are
     cached reads taken at different moments (``ages``), so the conveyor's count is carried
     forward by the belt's measured speed to the moment of the robot's read; a read older
-    than ``max_age_s`` (a link down, a stalled poller) gives no sample. The verdict is the
+    than ``max_age_s`` (a link down, a stalled poller) gives no sample. The robot controller
+    samples its belt channel once a ``robot_sample_s`` and holds it, so its count shows the
+    belt half a period earlier on average; the prediction allows for that. The verdict is the
     median of the last ``window`` samples: one read caught mid-acceleration moves nothing.
     """
 
     def __init__(self, sync: EncoderSync, counts_per_mm: float, window: int = 9,
-                 max_age_s: float = 0.25) -> None:
+                 max_age_s: float = 0.25, robot_sample_s: float = 0.0) -> None:
         if window < 1:
             raise ValueError("window must be at least 1")
         self.sync, self.counts_per_mm = sync, counts_per_mm
         self.window, self.max_age_s = window, max_age_s
+        # the robot's count is a sample held for a period: on average it shows the belt
+        # half a period before the read
+        self.sample_delay_s = robot_sample_s / 2.0
         self.samples: list[float] = []
         self._prev: tuple[float, int] | None = None      # (time of read, conveyor count)
         self.max_abs_mm = 0.0
@@ -121,7 +126,7 @@ class DriftWatch:
         if (not self.sync.is_reset or conveyor_age is None or robot_age is None
                 or conveyor_age > self.max_age_s or robot_age > self.max_age_s):
             return None
-        t_conv, t_robot = now - conveyor_age, now - robot_age
+        t_conv, t_robot = now - conveyor_age, now - robot_age - self.sample_delay_s
         prev, self._prev = self._prev, (t_conv, conveyor)
         if prev is None or t_conv - prev[0] <= 1e-6:
             return None                                  # no speed yet to carry it forward

@@ -90,10 +90,12 @@ def test_a_slipping_robot_counter_faults_the_run_within_seconds(tmp_path):
                            seed=1, view="none", faults=str(plan)))
     assert r["state"] == "FAULT"
     got = re.search(r"belt encoders disagree by \+([\d.]+) mm", r["fault"])
-    assert got and float(got.group(1)) == pytest.approx(10.0, abs=0.3)   # 200 counts
+    # 200 counts; the robot's count is a sample held for 16 ms, so one reading is off by up
+    # to half a cycle of belt travel (2.4 mm at 300 mm/s) and the median of 9 by less
+    assert got and float(got.group(1)) == pytest.approx(10.0, abs=1.6)
     assert r["faults"].get("encoder_drift") == 1
     assert r["sim_seconds"] < 75                              # slip at 60 s, window of 9 s
-    assert r["encoder_drift"]["max_abs_mm"] == pytest.approx(10.0, abs=0.5)
+    assert r["encoder_drift"]["max_abs_mm"] == pytest.approx(10.0, abs=1.6)
     assert r["parts"]["lost"] == 0
 
 
@@ -102,7 +104,7 @@ def test_a_clean_run_sees_no_drift():
                            seed=1, view="none"))
     assert r["state"] == "STOPPED"
     assert r["encoder_drift"]["samples"] > 60
-    assert r["encoder_drift"]["max_abs_mm"] < 0.5
+    assert r["encoder_drift"]["max_abs_mm"] < 1.0            # below the warning level
 
 
 def test_a_warning_above_the_limit_is_refused(tmp_path):

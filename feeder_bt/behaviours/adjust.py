@@ -10,6 +10,7 @@ from ..encoder import DriftWatch
 from .common import Ctx, Leaf, client
 
 SPEED_KEYS = ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct")
+GOLDEN = 0.6180339887498949    # the golden ratio's fraction: evenly spread, never repeating
 
 
 class Adjust(Leaf):
@@ -48,16 +49,22 @@ class CheckDrift(Leaf):
         super().__init__(name, ctx)
         enc = ctx.cell.encoder
         self.spec = enc
-        self.watch = DriftWatch(ctx.encoder, enc.counts_per_mm)
+        self.watch = DriftWatch(ctx.encoder, enc.counts_per_mm,
+                                robot_sample_s=enc.robot_sample_s)
         self.bb = client(self, write=("/faults/escalate",), read=("/faults/escalate",))
         self._next = 0.0
+        self._k = 0
         self._warned = False
 
     def update(self) -> Status:
         now = self.ctx.now()
         if self.spec.drift_check_s <= 0 or now < self._next:
             return Status.SUCCESS
-        self._next = now + self.spec.drift_check_s
+        # irregular spacing (0.75..1.25 of the period, a golden-ratio sequence): reads
+        # spaced by a multiple of the robot's sampling period would all catch its held
+        # sample at the same age, and the median would not average the age out (aliasing)
+        self._k += 1
+        self._next = now + self.spec.drift_check_s * (0.75 + 0.5 * ((self._k * GOLDEN) % 1.0))
         conv = self.ctx.hal.conveyors["horizontal"]
         pos = self.ctx.hal.robot_position
         conv_age = getattr(conv, "position_age", lambda: None)()

@@ -261,6 +261,10 @@ class EncoderSpec:
     drift_check_s: float = 1.0          # seconds between samples
     drift_warn_mm: float = 1.0          # an ``encoder_drift`` warning event
     drift_limit_mm: float = 3.0         # the cell faults: picks land this far off
+    # how often the robot controller samples its belt channel (V+'s trajectory cycle, 16 ms
+    # on older controllers): a BELT read is up to this old, half of it on average, and the
+    # drift check allows for it. Check at commissioning (docs/real-cell.md).
+    robot_sample_s: float = 0.016
 
 
 @dataclass
@@ -326,7 +330,7 @@ class SimImperfections:
     # encoders (both counters count the same belt encoder)
     encoder_noise_counts: float = 0.5    # sigma of a reading, counts, before rounding
     encoder_scale_pct: float = 0.1       # true counts/mm differ from the cell's by this
-    robot_sample_s: float = 0.001        # the robot's belt channel: sampled and held
+    robot_sample_s: float = 0.016        # the robot's belt channel: sampled and held
     # the camera's true mapping against the cell's calibration
     calib_offset_mm: tuple[float, float] = (0.5, -0.4)
     calib_scale_pct: float = 0.1

@@ -143,6 +143,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (EncoderSpec, "drift_check_s"): Range(0, 60),
     (EncoderSpec, "drift_warn_mm"): POSITIVE,
     (EncoderSpec, "drift_limit_mm"): POSITIVE,
+    (EncoderSpec, "robot_sample_s"): Range(0, 0.1),
     (EncoderSpec, "robot_start"): NON_NEGATIVE,
     (HopperSpec, "release_per_mm"): NON_NEGATIVE,
     (HopperSpec, "nominal_fill"): Range(lo=1),

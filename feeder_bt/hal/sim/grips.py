@@ -63,7 +63,8 @@ class RobotGrips:
         ox, oy, _ = target.tool_offset
         x = target.x_mm + ox
         if target.tracking:
-            moved = diff(self.robot_count(t), target.latch, self.cell.encoder.robot_bits)
+            moved = diff(self.robot_track_count(t), target.latch,
+                         self.cell.encoder.robot_bits)
             x += moved / self.cpm
         return x, target.y_mm + oy
 

@@ -44,6 +44,10 @@ __all__ = [
     "TOUCH_GAP_MM", "Notification", "SimPart", "World",
 ]
 
+#: belt samples the robot controller averages the belt's speed over for tracking (the
+#: ``vavg`` of DEFBELT in vplus/a_server.v2)
+TRACK_VAVG = 16
+
 
 @dataclass
 class Notification:
@@ -310,11 +314,29 @@ class World(PartAccounting, Landing, RobotGrips):
                     self.cell.encoder.conveyor_bits)
 
     def robot_count(self, t: float | None = None) -> int:
+        """What the robot controller's belt channel reads at ``t``: the last sample, held
+        for a sampling period (``sim.robot_sample_s``)."""
         t = self.now() if t is None else t
         enc = self.cell.encoder
         ts = self.imperfect.robot_sample_time(t)
         counts = self.imperfect.robot_counts(self.horizontal.pos(ts), ts)
         return wrap(enc.robot_start + self.robot_slip + counts, enc.robot_bits)
+
+    def robot_track_count(self, t: float) -> int:
+        """The belt count the arm's tracking follows at ``t``: the held sample carried
+        forward by the belt speed averaged over the last ``TRACK_VAVG`` samples (V+'s
+        DEFBELT velocity averaging, ``vavg`` in vplus/a_server.v2), so between samples the
+        arm follows the belt, and after a speed change it lags until the average catches up."""
+        T = self.imperfect.spec.robot_sample_s
+        if self.imperfect.ideal or T <= 0:
+            return self.robot_count(t)
+        ts = self.imperfect.robot_sample_time(t)
+        t_old = ts - TRACK_VAVG * T
+        c_now = self.imperfect.robot_counts(self.horizontal.pos(ts), ts)
+        c_old = self.imperfect.robot_counts(self.horizontal.pos(max(t_old, 0.0)), t_old)
+        carried = c_now + round((c_now - c_old) / (TRACK_VAVG * T) * (t - ts))
+        enc = self.cell.encoder
+        return wrap(enc.robot_start + self.robot_slip + carried, enc.robot_bits)
 
     def visible_outlines(self, t: float, x_range: tuple[float, float]) -> list[np.ndarray]:
         """Outlines (belt frame, mm) of parts near the camera window at ``t``, for rendering."""
