@@ -160,12 +160,12 @@ def test_a_signal_in_a_called_program_while_the_arm_moves_is_refused(cp):
 
 
 def test_a_motion_on_one_branch_only_counts_a_returning_branch_does_not():
-    body = ["    AUTO a", "    IF a THEN", "        MOVE x.loc", "        RETURN", "    END",
+    body = ["    IF a THEN", "        MOVE x.loc", "        RETURN", "    END",
             "    SIGNAL 1", "    IF a THEN", "        MOVES x.loc", "    ELSE",
             "        SIGNAL 2", "    END", "    SIGNAL 3"]
-    text = "\n".join([".PROGRAM demo()", *body, ".END", ""])
+    text = "\n".join([".PROGRAM demo(a)", *body, ".END", ""])
     found = [(f.line, f.rule) for f in check_text(text, "d.v2")]
-    assert found == [(13, "forward-processing")]       # only SIGNAL 3
+    assert found == [(12, "forward-processing")]       # only SIGNAL 3
 
 
 # ---------------------------------------------------------------------------- text
@@ -285,4 +285,24 @@ def test_constructs_the_servers_use_are_accepted(cp):
         "    IF SIG(-1001) THEN", "        BRAKE", "    END", ".END", "",
         ".PROGRAM f.stop()", "    BRAKE", "    RETURN", ".END", "",
         ".PROGRAM f.trap()", "    DISABLE POWER", "    RETURNE", ".END", ""])
+    assert cp.refused() == set()
+
+
+# ---------------------------------------------------------------------------- values
+def test_an_auto_variable_read_before_it_is_given_a_value_is_refused(cp):
+    line = cp.replace(MS, "do.place", lambda c: c.startswith("AUTO"), "AUTO ", "AUTO tries, ")
+    read = cp.insert(MS, "do.place", "tries = tries+1")
+    assert_only(cp, MS, read, "unassigned")
+    assert read > line
+
+
+def test_a_global_no_program_assigns_is_refused(cp):
+    line = cp.insert(MS, "do.place", "ok = stop.requested")          # typo of stop.req
+    assert_only(cp, MS, line, "unassigned")
+
+
+def test_a_variable_a_call_or_read_fills_counts_as_given(cp):
+    cp.replace(MS, "do.place", lambda c: c.startswith("AUTO"), "AUTO ", "AUTO w, $word, ")
+    cp.insert(MS, "do.place", "CALL next.word($args, $word)")
+    cp.insert(MS, "do.place", "w = LEN($word)")
     assert cp.refused() == set()

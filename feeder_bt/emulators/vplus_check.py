@@ -1,4 +1,5 @@
-"""A checker for the V+ programs of ``vplus/``: it refuses what a V+ controller's LOAD refuses.
+"""A checker for the V+ programs of ``vplus/``: it refuses what a V+ controller's LOAD refuses,
+and what the programs would do wrong at run time where a static check can see it.
 
 The Adept emulator runs only programs this checker accepts (``AdeptEmulator.start``), and the
 tests check every shipped program with it, so a program that would not load on the robot
@@ -42,8 +43,12 @@ Rules, each with its source (docs/real-cell.md, "The Adept controller (V+)"):
   no BREAK between, on some path through the program (``vplus_flow.py`` defines which
   statements are which, and its limits).
 
-Not checked: a variable read before any assignment (V+ stops with *Undefined value* at run
-time); which signal numbers are outputs; anything a release or an option adds.
+- ``unassigned``: an AUTO variable read before any step could give it a value, or a global
+  read while no step of any program could give it one (V+ stops with *Undefined value* at
+  run time; ``vplus_vars.py`` says what counts as a read).
+
+Not checked: which signal numbers are outputs, run-time values, the way round a loop
+(``vplus_flow.py``), anything a V+ release or an option adds.
 
 ``python -m feeder_bt.emulators.vplus_check [DIR] [--max-line N]`` prints one line per finding,
 ``FILE:LINE: rule: what``, and exits 1 if there is any.
@@ -59,6 +64,7 @@ from pathlib import Path
 
 from ..errors import ConfigError
 from .vplus_flow import FlowProgram, ForwardChecker
+from .vplus_vars import unassigned
 from .vplus_words import INSTRUCTIONS, reserved
 
 VPLUS_DIR = Path(__file__).resolve().parents[2] / "vplus"
@@ -194,7 +200,7 @@ class Checker:
         params = [p.strip() for p in m.group(2).split(",")] if m.group(2).strip() else []
         for param in params:
             self._name(file, n, param.split("[")[0].strip(), "parameter")
-        flow = FlowProgram(name, file)
+        flow = FlowProgram(name, file, params=[q.split("[")[0].strip() for q in params])
         if name.lower() not in self.flow:
             self.flow[name.lower()] = flow
             self.params[name.lower()] = len(params)
@@ -333,6 +339,8 @@ class Checker:
                                            "RETURNE returns from an error trap only")
         for file, n, message in ForwardChecker(self.flow).findings():
             self._add(file, n, "forward-processing", message)
+        for file, n, message in unassigned(self.flow, globals_too=whole):
+            self._add(file, n, "unassigned", message)
         self.called.clear()
         self.returne.clear()
         return sorted(set(self.findings), key=lambda f: (f.file, f.line, f.rule, f.message))

@@ -49,6 +49,7 @@ class FlowProgram:
     name: str
     file: str
     steps: list[tuple[int, str]] = field(default_factory=list)
+    params: list[str] = field(default_factory=list)
 
 
 @dataclass
