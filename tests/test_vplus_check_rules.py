@@ -199,6 +199,14 @@ def test_a_motion_on_one_branch_only_counts_a_returning_branch_does_not():
     assert found == [(12, "forward-processing")]       # only SIGNAL 3
 
 
+@pytest.mark.parametrize("wait,found", [([], [(3, "forward-processing")]),
+                                        (["        BREAK"], [])])
+def test_a_motion_at_the_end_of_a_loop_reaches_its_start(wait, found):
+    body = ["    WHILE a DO", "        SIGNAL 1", "        MOVE x.loc", *wait, "    END"]
+    text = "\n".join([".PROGRAM demo(a)", *body, ".END", ""])
+    assert [(f.line, f.rule) for f in check_text(text, "d.v2")] == found
+
+
 # ---------------------------------------------------------------------------- text
 def test_non_ascii_is_refused(cp):
     line = cp.insert(MS, "do.place", "; the arm \u2014 at the place")

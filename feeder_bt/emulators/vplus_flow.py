@@ -21,10 +21,10 @@ the branch and are merged at END (a motion on either branch counts); a branch th
 RETURN, RETURNE, HALT, STOP or GOTO does not reach the END. A CALL takes the state its
 program leaves (``motion.done``, which starts with BREAK, clears it), and a CALL made while
 the arm moves is refused when the called program would itself signal or read before a
-BREAK. Not modelled: the way back round a loop (a motion at the end of a loop body and a
-SIGNAL at its start), GOTO targets, and other tasks. Deliberately signalling at the start of
-a motion (V+'s own idiom) is not possible with this rule: write BREAK, or move the SIGNAL
-before the motion.
+BREAK. A loop body that leaves the arm moving is walked a second time from its start (a
+motion at the end of the body and a SIGNAL at its start). Not modelled: GOTO targets and
+other tasks. Deliberately signalling at the start of a motion (V+'s own idiom) is not
+possible with this rule: write BREAK, or move the SIGNAL before the motion.
 """
 
 from __future__ import annotations
@@ -60,6 +60,8 @@ class _Frame:
     dead: bool = False           # entered on a path that had already returned
     else_seen: bool = False      # IF: ELSE seen; CASE: a VALUE/ANY seen
     has_any: bool = False
+    start: int = 0               # LOOP: index of its first step, for the way round
+    again: bool = False          # LOOP: this is the walk round a second time
 
 
 def waits_for_arm(code: str) -> str | None:
@@ -113,7 +115,10 @@ class ForwardChecker:
         stack: list[_Frame] = []
         exits: list[Pending] = []
         found: list[tuple[str, int, str]] = []
-        for line, code in prog.steps:
+        i = -1
+        while i + 1 < len(prog.steps):
+            i += 1
+            line, code = prog.steps[i]
             words = code.split()
             head = words[0].upper() if words else ""
             last = words[-1].upper() if words else ""
@@ -125,7 +130,7 @@ class ForwardChecker:
                 stack.append(_Frame("CASE", state, dead=dead))
                 continue
             if head in ("WHILE", "FOR") or (head == "DO" and len(words) == 1):
-                stack.append(_Frame("LOOP", state, dead=dead))
+                stack.append(_Frame("LOOP", state, dead=dead, start=i + 1))
                 continue
             if head == "ELSE" and stack and stack[-1].kind == "IF":
                 frame = stack[-1]
@@ -142,7 +147,14 @@ class ForwardChecker:
                 continue
             if (head == "END" and len(words) == 1) or head == "UNTIL":
                 if stack:
-                    state, dead = self._close(stack.pop(), state, dead)
+                    frame = stack.pop()
+                    if frame.kind == "LOOP" and not (frame.again or frame.dead or dead) \
+                            and state is not None and frame.entry is None:
+                        # the way round: the body again, entered with the arm moving
+                        stack.append(_Frame("LOOP", state, start=frame.start, again=True))
+                        i = frame.start - 1
+                        continue
+                    state, dead = self._close(frame, state, dead)
                 continue
             if dead:
                 continue
