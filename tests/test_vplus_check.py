@@ -119,7 +119,7 @@ def test_unbalanced_control_structures_are_refused(body, line, what):
 
 
 def test_balanced_structures_are_accepted():
-    body = ["    AUTO n, y", "    IF n THEN", "        y = 1", "    ELSE", "        y = 2",
+    body = ["    AUTO n, y", "    n = 1", "    IF n THEN", "        y = 1", "    ELSE", "        y = 2",
             "    END", "    WHILE y DO", "        y = y-1", "    END", "    DO",
             "        y = y+1", "    UNTIL y > 3", "    FOR n = 0 TO 3", "        y = n",
             "    END", "    CASE y OF", "        VALUE 1, 2:", "            y = 0",

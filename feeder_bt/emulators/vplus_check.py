@@ -1,4 +1,5 @@
-"""A checker for the V+ programs of ``vplus/``: it refuses what a V+ controller's LOAD refuses.
+"""A checker for the V+ programs of ``vplus/``: it refuses what a V+ controller's LOAD refuses,
+and what the programs would do wrong at run time where a static check can see it.
 
 The Adept emulator runs only programs this checker accepts (``AdeptEmulator.start``), and the
 tests check every shipped program with it, so a program that would not load on the robot
@@ -6,8 +7,11 @@ controller cannot pass as working against the emulator.
 
 Rules, each with its source (docs/real-cell.md, "The Adept controller (V+)"):
 
-- ``reserved``: a V+ keyword or function name used as a variable, parameter or program name
-  (User's Guide v17 p. 99, "Variable Name Requirements"; list in ``vplus_words.py``).
+- ``reserved``: a V+ keyword (instruction, function, operator, system switch or parameter,
+  monitor command) used as a variable, parameter or program name (User's Guide v17 p. 99,
+  "Variable Name Requirements"). The index, its sources and where it may be incomplete are
+  in ``vplus_words.py``; RX, RY, RZ (transformation functions) are among them, so ``rz`` is
+  refused. The whole name is compared: ``rz.max`` is one word, not RZ (``vplus_words``).
 - ``long-name``: a name over 15 characters. V+ keeps only the first 15 and silently truncates
   the rest (User's Guide p. 99), so two long names can become one variable; refused.
 - ``bad-name``: a name that does not start with a letter or holds other characters than
@@ -17,12 +21,34 @@ Rules, each with its source (docs/real-cell.md, "The Adept controller (V+)"):
   its ``.PROGRAM`` step and ends with ``.END``: User's Guide p. 36).
 - ``long-line``: a line longer than ``max_line`` characters. NOT CONFIRMED: the V+ limit on a
   program step's length was not found; ``max_line`` is a setting, 80 by default.
-- ``structure``: unbalanced control structures: IF ... THEN / ELSE / END, WHILE ... DO / END,
-  DO / UNTIL, FOR / END, CASE ... OF / VALUE / ANY / END (the editor marks such a program
-  not executable: User's Guide p. 36).
+- ``structure``: unbalanced or mismatched control structures: IF ... THEN / ELSE / END,
+  WHILE ... DO / END, DO / UNTIL, FOR / END, CASE ... OF / VALUE / ANY / END (the editor marks
+  such a program not executable: User's Guide p. 36).
 - ``declaration``: AUTO, LOCAL or GLOBAL after an executable step (User's Guide p. 36).
-- ``undefined``: CALL / EXECUTE / REACTE of a program no file defines; ``duplicate``: a
+- ``unknown-instruction``: a step whose first word is not a V+ program instruction
+  (``vplus_words.INSTRUCTIONS``), and not an assignment (a CALL is an instruction): "the
+  operation portion of each step must be a valid V+ language keyword" (User's Guide p. 35).
+- ``type``: a string (a literal, a ``$`` name or ``$`` function, joined by ``+``) assigned
+  to a name without ``$``, or a number to a ``$`` name: string variables are the ``$``
+  names (User's Guide p. 99: the first use fixes a variable's type). Locations (SET, ``#``,
+  ``%``) are not judged.
+- ``undefined``: CALL / EXECUTE / REACTE / REACTI / REACT / WINDOW naming a program no file
+  defines (User's Guide p. 45: *Undefined program or variable name*); ``duplicate``: a
   program defined twice.
+- ``arguments``: a CALL or EXECUTE with another number of arguments than the program has
+  parameters. More is an error; fewer is legal V+ (the rest are passed undefined, User's
+  Guide p. 45) but none of our programs relies on it, so it is refused as a slip.
+- ``trap``: RETURNE in a program no REACTE names (RETURNE returns from an error trap).
+- ``forward-processing``: a SIGNAL, BELT read or HERE read after a motion instruction with
+  no BREAK between, on some path through the program (``vplus_flow.py`` defines which
+  statements are which, and its limits).
+
+- ``unassigned``: an AUTO variable read before any step could give it a value, or a global
+  read while no step of any program could give it one (V+ stops with *Undefined value* at
+  run time; ``vplus_vars.py`` says what counts as a read).
+
+Not checked: which signal numbers are outputs, run-time values, the way round a loop
+(``vplus_flow.py``), anything a V+ release or an option adds.
 
 ``python -m feeder_bt.emulators.vplus_check [DIR] [--max-line N]`` prints one line per finding,
 ``FILE:LINE: rule: what``, and exits 1 if there is any.
@@ -37,7 +63,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
-from .vplus_words import reserved
+from .vplus_flow import FlowProgram, ForwardChecker
+from .vplus_vars import unassigned
+from .vplus_words import INSTRUCTIONS, reserved
 
 VPLUS_DIR = Path(__file__).resolve().parents[2] / "vplus"
 MAX_NAME = 15                 # V+ significant characters in a name (User's Guide p. 99)
@@ -48,7 +76,11 @@ _VALID = re.compile(r"^[$#%]?[A-Za-z][A-Za-z0-9._]*$")
 _PROGRAM = re.compile(r"^\.PROGRAM\s+(\S+?)\s*\((.*)\)\s*$", re.IGNORECASE)
 _ASSIGN = re.compile(r"^\s*(?:SET\s+)?([$#%]?[A-Za-z_][\w.]*)\s*(?:\[[^\]]*\])?\s*=(?!=)",
                      re.IGNORECASE)
-_CALLED = re.compile(r"\b(?:CALL|EXECUTE(?:\s+\d+)?|REACTE)\s+([A-Za-z_][\w.]*)", re.IGNORECASE)
+_CALLED = re.compile(r"\b(CALLS?|EXECUTE(?:\s+[\w.]+)?|REACTE)\s+([A-Za-z_][\w.]*)\s*(\()?")
+_REACT = re.compile(r"\b(REACTI?)\s+[^,]+,\s*([A-Za-z_][\w.]*)")
+_LABEL = re.compile(r"^\d+\s+")
+_HEAD = re.compile(r"^[$#%]?[A-Za-z][\w.]*")
+_LOGIC = re.compile(r"==|<>|<=|>=|<|>|\b(?:AND|OR|NOT|XOR)\b")
 _WINDOW_PROG = re.compile(r"^\s*WINDOW\s+%[\w.]+\s*=.*,\s*([a-z_][\w.]*)\s*,\s*\d+\s*$",
                           re.IGNORECASE)
 _STRING = re.compile(r'"[^"]*"')
@@ -70,7 +102,18 @@ class Finding:
 class _Program:
     name: str
     line: int
+    params: int = 0
     executable: bool = False
+    flow: FlowProgram | None = None
+
+
+@dataclass(frozen=True)
+class _Call:
+    kind: str                    # CALL, EXECUTE, REACTE, REACTI, WINDOW
+    name: str
+    file: str
+    line: int
+    args: int | None = None      # argument count of a CALL/EXECUTE, None when not given
 
 
 def _code(raw: str) -> str:
@@ -93,7 +136,10 @@ class Checker:
         self.max_line, self.max_name = max_line, max_name
         self.findings: list[Finding] = []
         self.defined: dict[str, tuple[str, int]] = {}
-        self.called: list[tuple[str, str, int]] = []
+        self.params: dict[str, int] = {}
+        self.called: list[_Call] = []
+        self.flow: dict[str, FlowProgram] = {}
+        self.returne: list[tuple[str, str, int]] = []      # (program, file, line)
 
     def _add(self, file: str, line: int, rule: str, message: str) -> None:
         self.findings.append(Finding(file, line, rule, message))
@@ -151,14 +197,25 @@ class Checker:
             self._add(file, n, "duplicate", f"program {name} also in {other[0]}:{other[1]}")
         else:
             self.defined[name.lower()] = (file, n)
-        for param in filter(None, (p.strip() for p in m.group(2).split(","))):
+        params = [p.strip() for p in m.group(2).split(",")] if m.group(2).strip() else []
+        for param in params:
             self._name(file, n, param.split("[")[0].strip(), "parameter")
-        return _Program(name, n)
+        flow = FlowProgram(name, file, params=[q.split("[")[0].strip() for q in params])
+        if name.lower() not in self.flow:
+            self.flow[name.lower()] = flow
+            self.params[name.lower()] = len(params)
+        return _Program(name, n, len(params), flow=flow)
 
     def _statement(self, file: str, n: int, code: str, program: _Program,
                    stack: list[tuple[str, int]]) -> None:
+        code = _LABEL.sub("", code)                # a step label (GOTO target)
+        if not code:
+            return
         words = code.split()
-        head = words[0].upper()
+        head_m = _HEAD.match(code)
+        head = (head_m.group() if head_m else words[0]).upper()
+        if program.flow is not None:
+            program.flow.steps.append((n, code))
         # names: declared, assigned, or written as names anywhere
         if head in ("AUTO", "LOCAL", "GLOBAL"):
             if program.executable:
@@ -170,17 +227,52 @@ class Checker:
             return
         program.executable = True
         target = _ASSIGN.match(code)
-        if target and head not in ("FOR", "IF", "WHILE", "UNTIL"):
+        if target and head in ("FOR", "IF", "WHILE", "UNTIL"):
+            target = None
+        if target:
             self._name(file, n, target.group(1), "variable")
+            self._types(file, n, target.group(1), code[target.end():],
+                        code.upper().startswith("SET"))
+        elif head not in INSTRUCTIONS:
+            self._add(file, n, "unknown-instruction",
+                      f"{words[0]!r} is not a V+ program instruction, a CALL or an "
+                      "assignment")
         seen = {target.group(1)} if target else set()
         for tok in _NAME.findall(code):
             if tok not in seen and _is_user_name(tok):
                 seen.add(tok)
                 self._name(file, n, tok, "name")
-        for rx in (_CALLED, _WINDOW_PROG):
-            self.called.extend((m.group(1), file, n) for m in rx.finditer(code))
-        if not (target and head not in ("FOR", "IF", "WHILE", "UNTIL")):
+        self._calls(file, n, code)
+        if head == "RETURNE":
+            self.returne.append((program.name, file, n))
+        if not target:
             self._structure(file, n, words, stack)     # an assignment opens nothing
+
+    def _calls(self, file: str, n: int, code: str) -> None:
+        """Record the programs this step names (checked in ``finish``)."""
+        for m in _CALLED.finditer(code):
+            kind = m.group(1).split()[0].upper().rstrip("S")
+            args = _count_args(code, m.end() - 1) if m.group(3) else None
+            self.called.append(_Call(kind, m.group(2), file, n, args))
+        for m in _REACT.finditer(code):
+            self.called.append(_Call(m.group(1).upper(), m.group(2), file, n))
+        for m in _WINDOW_PROG.finditer(code):
+            self.called.append(_Call("WINDOW", m.group(1), file, n))
+
+    def _types(self, file: str, n: int, target: str, rhs: str, located: bool) -> None:
+        """``type``: a ``$`` name holds a string, a plain name a number (User's Guide p. 99:
+        the first use of a variable fixes its type; string names start with ``$``)."""
+        if located or target[0] in "#%":
+            return                                     # locations: SET, precision, belt
+        rhs = rhs.strip()
+        is_string = rhs[:1] in ('"', "$") and not _LOGIC.search(rhs)
+        if target[0] == "$" and not is_string:
+            self._add(file, n, "type", f"string variable {target} is assigned a number "
+                                       f"({rhs[:30]})")
+        elif target[0] != "$" and is_string:
+            self._add(file, n, "type", f"real variable {target} is assigned a string "
+                                       f"({rhs[:30]}); a string variable's name starts "
+                                       "with $")
 
     def _structure(self, file: str, n: int, words: list[str], stack: list[tuple[str, int]]
                    ) -> None:
@@ -227,12 +319,30 @@ class Checker:
                 stack.pop()
 
     # ------------------------------------------------------------------ many files
-    def finish(self) -> list[Finding]:
-        """Cross-file rules (programs called but never defined); every finding, sorted."""
-        for name, file, n in self.called:
-            if name.lower() not in self.defined:
-                self._add(file, n, "undefined", f"program {name} is not defined in any file")
+    def finish(self, whole: bool = True) -> list[Finding]:
+        """Cross-program rules; every finding, sorted. ``whole``: the files are the whole
+        program set (calls to programs no file defines are judged)."""
+        traps = {c.name.lower() for c in self.called if c.kind == "REACTE"}
+        for call in self.called:
+            key = call.name.lower()
+            if key not in self.defined:
+                if whole:
+                    self._add(call.file, call.line, "undefined",
+                              f"{call.kind} names program {call.name}, which no file defines")
+            elif call.args is not None and call.args != self.params[key]:
+                self._add(call.file, call.line, "arguments",
+                          f"{call.kind} {call.name} with {call.args} argument(s); "
+                          f"{call.name} takes {self.params[key]}")
+        for name, file, n in self.returne:
+            if name.lower() not in traps:
+                self._add(file, n, "trap", f"RETURNE in {name}, which no REACTE names: "
+                                           "RETURNE returns from an error trap only")
+        for file, n, message in ForwardChecker(self.flow).findings():
+            self._add(file, n, "forward-processing", message)
+        for file, n, message in unassigned(self.flow, globals_too=whole):
+            self._add(file, n, "unassigned", message)
         self.called.clear()
+        self.returne.clear()
         return sorted(set(self.findings), key=lambda f: (f.file, f.line, f.rule, f.message))
 
 
@@ -240,8 +350,7 @@ def check_text(text: str, file: str = "<text>", max_line: int = MAX_LINE) -> lis
     """Findings in one source (calls to programs it does not define are not judged)."""
     checker = Checker(max_line=max_line)
     checker.check_text(text, file)
-    checker.called.clear()
-    return checker.finish()
+    return checker.finish(whole=False)
 
 
 def check_dir(directory: Path | str = VPLUS_DIR, max_line: int = MAX_LINE) -> list[Finding]:
@@ -259,6 +368,28 @@ def check_dir(directory: Path | str = VPLUS_DIR, max_line: int = MAX_LINE) -> li
             continue
         checker.check_text(text, _display(path))
     return checker.finish()
+
+
+def _count_args(code: str, open_at: int) -> int:
+    """Arguments between the parenthesis at ``open_at`` and its match (blank ones count:
+    ``a, , b`` is three, as V+ reads it, User's Guide p. 45)."""
+    depth, count, empty = 0, 1, True
+    for c in code[open_at:]:
+        if c in "([":
+            depth += 1
+            if depth == 1:
+                continue
+        elif c in ")]":
+            depth -= 1
+            if depth == 0:
+                break
+        elif c == "," and depth == 1:
+            count += 1
+            empty = False
+            continue
+        if depth >= 1 and not c.isspace():
+            empty = False
+    return 0 if empty else count
 
 
 def _display(path: Path) -> str:
