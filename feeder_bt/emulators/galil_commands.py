@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 import threading
 
+from ..hal.galil.conveyor import active_low
 from ..hal.galil.protocol import ERROR_TEXT, MODEL
 from .dmc import AXES, DmcError, DmcInterpreter, format_number, is_axis_command
 from .galil_axes import _num
@@ -101,7 +102,7 @@ class ControllerCommands:
             name = self._signal(bit, "in")
             if name is None:
                 continue
-            low = getattr(self.plant.cell.io[name], "active_low", False)
+            low = active_low(self.plant.cell.io[name])
             if self.plant.signal(name) != low:
                 mask |= 1 << (bit - 1)
         return mask

@@ -353,6 +353,13 @@ class _TravelJob(Job):
         return self.state
 
 
+def active_low(sig: IoSignal) -> bool:
+    """The input reads 0 while the signal is active: ``active: low`` (or the older
+    ``active_low: true``). An e-stop or a limit wired normally closed is one (a broken
+    wire then reads as pressed); its polarity is a cell setting, checked at commissioning."""
+    return bool(getattr(sig, "active_low", False)) or getattr(sig, "active", "high") == "low"
+
+
 class GalilIO:
     """The digital I/O of a Galil controller under the cell's signal names.
 
@@ -367,7 +374,7 @@ class GalilIO:
         self.inputs = {n: s.bit for n, s in signals.items()
                        if s.controller == "galil" and s.dir == "in"}
         self.active_low = {n for n, s in signals.items()
-                           if s.controller == "galil" and s.dir == "in" and s.active_low}
+                           if s.controller == "galil" and s.dir == "in" and active_low(s)}
         self.outputs = {n: s.bit for n, s in signals.items()
                         if s.controller == "galil" and s.dir != "in"}
         self._lock = threading.Lock()
