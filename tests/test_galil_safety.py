@@ -180,7 +180,7 @@ def test_the_loader_refuses_galil_bit_0_and_a_wrong_latch_input(tmp_path: Path):
     assert len(errors) == 1 and "io.estop.bit" in errors[0] and "galil.inputs: 16" in errors[0]
     assert _cell_with(tmp_path, "estop: {controller: adept, bit: 1, dir: in}",
                       "estop: {controller: galil, bit: 16, dir: in, active_low: true}",
-                      extra=("latch_input: 2", "latch_input: 2\n  inputs: 16")) == []
+                      extra=("  inputs: 8 ", "  inputs: 16 ")) == []
     errors = _cell_with(tmp_path, "estop: {controller: adept, bit: 1, dir: in}",
                         "estop: {controller: galil, bit: 17, dir: in}")
     assert len(errors) == 1 and "io.estop.bit" in errors[0] and "1-16" in errors[0]
