@@ -237,3 +237,24 @@ def test_an_active_low_estop_reads_pressed_when_its_input_is_low():
             assert ctl.inputs_mask == 0
         finally:
             ctl.close()
+
+
+def test_a_wrong_limit_switch_polarity_shows_at_the_first_motion():
+    """Switches wired to pull their input low when pressed, the cell file saying high: at
+    rest the card sees both limits active and refuses BG (code 22), said at once."""
+    with plant_and_emulator() as (_plant, emu, cell):
+        cell.galil.limit_switches = "high"
+        ctl, conveyors, _io = make_galil(cell, RealClock())
+        try:
+            assert ctl.ready.result(WAIT_S)
+            assert emu.cn[0] == 1                          # CN 1,...: sent from the cell file
+            belt = conveyors["horizontal"]
+            ok(belt.servo(True))
+            job = wait_job(belt.set_speed(50.0))
+            assert job.state is JobState.FAILED and getattr(job.error, "code", None) == 22
+            cell.galil.limit_switches = "low"              # corrected, and reconnected
+            emu.drop_clients()
+            assert wait_until(lambda: ctl.connects >= 2 and emu.cn[0] == -1)
+            ok(belt.set_speed(50.0))
+        finally:
+            ctl.close()
