@@ -90,17 +90,18 @@ def test_a_reversed_encoder_trips_on_a_small_error():
 def test_automatic_subroutines_report_once_until_the_reset():
     with rig() as r:
         belt = r.conveyors["horizontal"]
-        q = r.ctl.events()
-        for _ in range(3):
+        monitor = r.emu.interp._threads[0]
+        for _ in range(3):                                # the card enters #POSERR 3 times
             r.emu.trip_position_error("B")
+            assert wait_until(lambda: not monitor.pending)
+            assert wait_until(lambda: r.emu.interp.variables.get("ERSEEN") == 1)
         assert wait_until(lambda: any(k == "POSERR" for k, _, _ in r.ctl.card_events))
-        time.sleep(0.3)                                   # room for repeats to arrive
+        r.ctl.command("MG _TPB").result(WAIT_S)           # anything sent after is in now
         assert [k for k, _, _ in r.ctl.card_events].count("POSERR") == 1
         assert r.emu.interp.running() == [0, 1, 2]        # RE: back to the input monitor
         ok(belt.servo(True))                              # the operator's reset re-arms
         r.emu.trip_position_error("B")
         assert wait_until(lambda: [k for k, _, _ in r.ctl.card_events].count("POSERR") == 2)
-        assert q is not None
 
 
 # ---------------------------------------------------------------------------- card faults
