@@ -356,13 +356,15 @@ def serve(plant: Plant, host: str = "127.0.0.1", port: int = 0,
 
 
 def run_forever(host: str, port: int, scenario: str, cell: str | None = None,
-                seed: int = 1) -> None:
-    """``feeder emulate galil``: a plant and an emulator until Ctrl-C."""
+                seed: int = 1, reversed_encoders: str = "") -> None:
+    """``feeder emulate galil``: a plant and an emulator until Ctrl-C. ``reversed_encoders``
+    (axis letters) wires those encoders reversed, to rehearse the error-limit trip."""
     from ..scenario.loader import load_scenario
 
     sc, cell_spec = load_scenario(scenario, cell)
     plant = Plant(sc, cell_spec, seed=seed).start()
     emu = serve(plant, host, port)
+    emu.reversed_encoders.update(c for c in reversed_encoders.upper() if c in AXES)
     print(f"Galil {MODEL} emulator on {host}:{emu.port} (scenario {scenario}); Ctrl-C stops",
           flush=True)
     try:
@@ -384,8 +386,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default="scenarios/lenses.yaml")
     ap.add_argument("--cell", default=None, help="cell description overriding the scenario's")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--reversed-encoder", default="", metavar="AXES",
+                    help="axes whose encoder is wired reversed (e.g. B): the first motion "
+                         "after SH trips the error limit")
     args = ap.parse_args(argv)
-    run_forever(args.host, args.port, args.scenario, args.cell, args.seed)
+    run_forever(args.host, args.port, args.scenario, args.cell, args.seed,
+                args.reversed_encoder)
     return 0
 
 
