@@ -95,6 +95,7 @@ class Cell:
             storage["/retrieve/phase"] = phase or "held"
         if self.stats.started_at is None:
             self.stats.started_at = self.clock.now()
+        self.hal.motors_on()            # the operator's Start: the first SH is a person's
         self.feeding = build_feeding(self.ctx)
         self._switch(CellState.STARTING, build_setup(self.ctx))
 

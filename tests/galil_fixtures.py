@@ -1,6 +1,8 @@
 """Shared set-up for the Galil tests: a plant, the emulator on it, the driver on that.
 
-Everything runs on 127.0.0.1 (port 0) or a pty, and is stopped in teardown.
+Everything runs on 127.0.0.1 (port 0) or a pty, and is stopped in teardown. Waits are
+event-driven with generous limits, and the driver's reply time-out is generous too
+(``TIMEOUT_S``): the tests must pass on a fully loaded machine.
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ from feeder_bt.scenario.model import CellSpec, IoSignal, SimImperfections
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "lenses.yaml"
 JAM_BIT = 3                  # a Galil input added to the cell for the tests
+TIMEOUT_S = 5.0              # the driver's reply time-out in the tests (a cell setting)
+WAIT_S = 15.0                # how long an event-driven wait may take on a loaded machine
 
 
-def wait_until(cond: Callable[[], object], timeout: float = 2.0, step: float = 0.005) -> bool:
+def wait_until(cond: Callable[[], object], timeout: float = WAIT_S, step: float = 0.005) -> bool:
     """Poll ``cond`` until true or ``timeout`` (wall) seconds; returns the last value."""
     end = time.monotonic() + timeout
     while True:
@@ -35,7 +39,7 @@ def wait_until(cond: Callable[[], object], timeout: float = 2.0, step: float = 0
         time.sleep(step)
 
 
-def wait_job(job: Job, timeout: float = 3.0) -> Job:
+def wait_job(job: Job, timeout: float = WAIT_S) -> Job:
     """Poll a job as a tree would, until it ends (or ``timeout``)."""
     wait_until(lambda: job.done, timeout)
     return job
@@ -47,7 +51,7 @@ def make_cell() -> tuple[object, CellSpec]:
     # simulated encoder scale error (docs/simulator.md) would set 0.1 % apart
     cell.sim = SimImperfections(ideal=True)
     cell.io["jam"] = IoSignal("galil", JAM_BIT, "in")
-    cell.galil.timeout_s = 0.5
+    cell.galil.timeout_s = TIMEOUT_S
     return sc, cell
 
 
@@ -59,6 +63,7 @@ class Rig:
     ctl: GalilController
     conveyors: dict[str, GalilConveyor]
     io: GalilIO
+    connect_commands: list[str] | None = None    # what the connect sent, before any SH
 
 
 @contextmanager
@@ -77,12 +82,20 @@ def plant_and_emulator(faults: FaultPlan | None = None, pty: bool = False
 
 @contextmanager
 def rig(faults: FaultPlan | None = None, pty: bool = False,
-        programs_dir: Path = PROGRAMS_DIR) -> Iterator[Rig]:
-    """Plant + emulator + connected driver (conveyors and I/O of the cell)."""
+        programs_dir: Path = PROGRAMS_DIR, servo: bool = True) -> Iterator[Rig]:
+    """Plant + emulator + connected driver (conveyors and I/O of the cell). ``servo``: then
+    the person turns the motors on (``servo(True)``, as the operator's Start does); the
+    driver itself never does."""
     with plant_and_emulator(faults, pty) as (plant, emu, cell):
         ctl, conveyors, io = make_galil(cell, RealClock(), programs_dir)
         try:
-            assert ctl.ready.result(5.0) is True
-            yield Rig(plant, emu, cell, ctl, conveyors, io)
+            assert ctl.ready.result(WAIT_S) is True
+            r = Rig(plant, emu, cell, ctl, conveyors, io)
+            r.connect_commands = list(emu.commands)
+            if servo:
+                for conv in conveyors.values():
+                    job = wait_job(conv.servo(True))
+                    assert job.ok, job.error
+            yield r
         finally:
             ctl.close()

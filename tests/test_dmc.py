@@ -263,6 +263,7 @@ def test_shipped_programs_run(interp):
     lines = read_programs(PROGRAMS_DIR, sorted(p.name for p in PROGRAMS_DIR.glob("*.dmc")))
     interp.load(Program.parse([pl.text for pl in lines]))
     interp.assign("DSTEP", "100")
+    interp.assign("INBANKS", "2")                     # a 16-input card: _TI1 is read
     interp.set_axis_var("a", "1")
     host = interp.fake
     interp.execute("#INMON", 0)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from galil_fixtures import JAM_BIT, plant_and_emulator, rig, wait_job, wait_until
+from galil_fixtures import JAM_BIT, TIMEOUT_S, plant_and_emulator, rig, wait_job, wait_until
 
 from feeder_bt.clock import RealClock
 from feeder_bt.emulators.faults import FaultPlan
@@ -42,13 +42,19 @@ def drain(q) -> list:
 
 def test_connect_downloads_and_starts_the_programs():
     with rig() as r:
-        cmds = r.emu.commands
+        cmds = r.connect_commands
         assert cmds[:5] == ["EO 0", "CW 1", "WH", "CF A", "MG _XQ0"]   # EO 0 first (finding 8)
         assert "HX" not in cmds                          # no HX of every thread (finding 6)
         dl = cmds.index("DL")
-        assert all(c.startswith("MG _XQ") for c in cmds[4:dl]) and len(cmds[4:dl]) == 8
-        assert {"DSTEP=100", "~a=1", "WDMS=1000", "XQ #INMON,0", "XQ #DIST,1", "XQ #WDOG,2",
-                "OE 1,1", "SHAB"} <= set(cmds)
+        assert all(c.startswith("MG _XQ") for c in cmds[4:12])
+        # the cell file's safety settings, before the programs and before anything moves:
+        # ER 5 mm at 20 counts/mm, TL 5 V with no peak above it, OE 1, limit switches and
+        # latch active low, inputs 5-8 general, the abort input leaves our programs running
+        assert cmds[12:dl] == ["ER 100,100", "TL 5,5", "TK 0,0", "OE 1,1", "CN -1,-1,-1,0,1"]
+        assert {"DSTEP=100", "~a=1", "WDMS=1000", "WDAXES=3", "INBANKS=1", "ERSEEN=0",
+                "XQ #INMON,0", "XQ #DIST,1", "XQ #WDOG,2"} <= set(cmds)
+        assert not any(c.startswith("SH") for c in cmds)     # no SH without the person
+        assert "MG _TI1" not in cmds                          # an 8-input card
         assert r.emu.cw_msb and r.emu.interp.running() == [0, 1, 2]
         assert r.ctl.handle == "A" and r.emu.cf == "A"
         assert r.ctl.connects == 1 and r.ctl.connected
@@ -63,7 +69,7 @@ def test_dl_of_every_program_file(name):
         cell.galil.programs = [name]
         ctl = GalilController(cell.galil, RealClock(), PROGRAMS_DIR, counts_per_mm=CPM)
         try:
-            assert ctl.ready.result(5.0) is True
+            assert ctl.ready.result(15.0) is True
             want = {pl.text.upper() for pl in read_programs(PROGRAMS_DIR, [name])
                     if pl.text.startswith("#")}
             assert emu.interp.program is not None
@@ -201,7 +207,7 @@ def test_latch_armed_and_read_at_the_camera_trigger():
         ok(belt.set_speed(100.0))
         ok(belt.arm_latch())
         assert "ALB" in r.emu.commands
-        reading = belt.read_latch(timeout_s=2.0)
+        reading = belt.read_latch(timeout_s=10.0)
         time.sleep(0.15)
         assert not reading.done                    # _ALB still 1: not tripped
         r.plant.trigger()
@@ -265,11 +271,11 @@ def test_outputs_and_input_changes():
 
 def test_rejected_command_raises_galil_error_from_tc1():
     with rig() as r:
-        err = r.ctl.command("XX").exception(3)
+        err = r.ctl.command("XX").exception(10)
         assert isinstance(err, GalilError)
         assert (err.code, err.text, err.command) == (1, "Unrecognized command", "XX")
         assert r.emu.commands[-2:] == ["XX", "TC1"]
-        err = r.ctl.command("bg").exception(3)     # lower case is not a command
+        err = r.ctl.command("bg").exception(10)     # lower case is not a command
         assert isinstance(err, GalilError) and err.code == 1
         assert r.ctl.command("TPB").result(3).strip() == "0"
         with pytest.raises(HalError):
@@ -305,9 +311,9 @@ def test_drop_fault_surfaces_as_comms_lost_and_the_driver_reconnects():
     faults.add("drop", "galil", "TPB", nth=2)
     with rig(faults) as r:
         belt = r.conveyors["horizontal"]
-        err = r.ctl.command("TPB").exception(3)
+        err = r.ctl.command("TPB").exception(10)
         assert isinstance(err, CommsLost) and not isinstance(err, GalilError)
-        assert wait_until(lambda: r.ctl.command("TPB").exception(3) is None, timeout=3.0)
+        assert wait_until(lambda: r.ctl.command("TPB").exception(10) is None, )
         assert r.ctl.connects == 2
         assert r.emu.commands.count("DL") == 2 and r.emu.interp.running() == [0, 1, 2]
         assert "IHA=>-2" in r.emu.commands           # the stale handle freed (finding 5)
@@ -318,24 +324,27 @@ def test_drop_fault_surfaces_as_comms_lost_and_the_driver_reconnects():
 def test_server_side_socket_kill_and_stall():
     faults = FaultPlan()
     with rig(faults) as r:
-        faults.add("stall", "galil", "TPA", nth=1, stall_s=1.0)
+        faults.add("stall", "galil", "TPA", nth=1, stall_s=4.0)
         # in flight when the server closes the socket: CommsLost at once
+        n = r.emu.commands.count("TPA")
         fut = r.ctl.command("TPA")
-        time.sleep(0.1)
+        assert wait_until(lambda: r.emu.commands.count("TPA") > n)   # in flight, held back
         r.emu.drop_clients()
-        err = fut.exception(3)
+        err = fut.exception(10)
         assert isinstance(err, CommsLost) and "lost" in str(err)
-        assert wait_until(lambda: r.ctl.command("TPA").exception(3) is None, timeout=3.0)
+        assert wait_until(lambda: r.ctl.command("TPA").exception(10) is None)
         assert r.ctl.connects == 2
         # killed while idle: the next command reconnects on its own
         r.emu.drop_clients()
         assert wait_until(lambda: not r.ctl.connected)
-        assert r.ctl.command("TPA").exception(3) is None and r.ctl.connects == 3
+        assert r.ctl.command("TPA").exception(10) is None and r.ctl.connects == 3
         # a reply held back past timeout_s is a lost link too
-        faults.add("stall", "galil", "TPB", nth=1, stall_s=1.0)
-        err = r.ctl.command("TPB").exception(3)
+        r.ctl.spec.timeout_s = 1.0
+        faults.add("stall", "galil", "TPB", nth=1, stall_s=4.0)
+        err = r.ctl.command("TPB").exception(10)
         assert isinstance(err, CommsLost) and "no reply" in str(err)
-        assert wait_until(lambda: r.ctl.command("TPB").exception(3) is None, timeout=3.0)
+        r.ctl.spec.timeout_s = TIMEOUT_S
+        assert wait_until(lambda: r.ctl.command("TPB").exception(10) is None)
 
 
 def test_reconnect_back_off_until_the_controller_is_there():
@@ -347,14 +356,14 @@ def test_reconnect_back_off_until_the_controller_is_there():
         ctl = GalilController(cell.galil, RealClock(), PROGRAMS_DIR, counts_per_mm=CPM)
         late = None
         try:
-            assert isinstance(ctl.ready.exception(3), CommsLost)
-            err = ctl.command("TPB").exception(3)      # within the back-off: refused at once
+            assert isinstance(ctl.ready.exception(10), CommsLost)
+            err = ctl.command("TPB").exception(10)      # within the back-off: refused at once
             assert isinstance(err, CommsLost) and "next attempt" in str(err)
             time.sleep(0.15)
-            assert isinstance(ctl.command("TPB").exception(3), CommsLost)   # tried, failed
+            assert isinstance(ctl.command("TPB").exception(10), CommsLost)   # tried, failed
             assert ctl._backoff == pytest.approx(0.4)
             late = serve(plant, "127.0.0.1", port)
-            assert wait_until(lambda: ctl.command("TPB").exception(3) is None, timeout=4.0)
+            assert wait_until(lambda: ctl.command("TPB").exception(10) is None)
             assert ctl.connects == 1 and late.interp.running() == [0, 1, 2]
         finally:
             ctl.close()
@@ -385,14 +394,14 @@ def test_the_same_driver_over_a_pty_serial_port():
         assert any(isinstance(e, DistanceEvent) for e in drain(q))
         r.plant.set_signal("jam", True)
         assert wait_until(lambda: r.io.get("jam"))
-        err = r.ctl.command("XX").exception(3)
+        err = r.ctl.command("XX").exception(10)
         assert isinstance(err, GalilError) and err.code == 1
         assert belt.position() == r.plant.position_counts("B")
         assert InputsEvent(1 << (JAM_BIT - 1)) in [e for e in drain(q)] or r.io.get("jam")
         # a lost reply on the serial line: CommsLost, then the port is reopened
         faults.add("drop", "galil", "TPA", nth=1)
-        assert isinstance(r.ctl.command("TPA").exception(3), CommsLost)
-        assert wait_until(lambda: r.ctl.command("TPA").exception(3) is None, timeout=3.0)
+        assert isinstance(r.ctl.command("TPA").exception(10), CommsLost)
+        assert wait_until(lambda: r.ctl.command("TPA").exception(10) is None, )
         assert r.ctl.connects == 2
         ok(belt.set_speed(20.0))
 

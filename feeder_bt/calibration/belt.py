@@ -99,6 +99,7 @@ def belt_procedure(hal: Hal, wait: Waiter, touch_marker: Callable[[], Job],
     runs after each touch, before the pose and count are read.
     """
     belt = hal.conveyors[conveyor]
+    hal.motors_on()                  # the person who runs the calibration asks for the SH
     touches = []
     for k in range(len(steps_mm) + 1):
         if k:

@@ -486,8 +486,16 @@ class DmcInterpreter:
         elif kind == "axis":
             self.set_axis_var(st.target, st.toks or [])
         else:
-            self.host.command(st.text, t.number)
+            self.host.command(self._axis_letters(st.text), t.number)
         return pc, None
+
+    def _axis_letters(self, text: str) -> str:
+        """``ST ~b`` -> ``ST B``: a variable axis designator in a command is its axis."""
+        if "~" not in text:
+            return text
+        with self.lock:
+            return re.sub(r"~([a-h])", lambda m: AXES[self.axis_vars.get(m.group(1), 0)],
+                          text)
 
 
 __all__ = ["DmcError", "DmcHost", "DmcInterpreter", "Program", "format_number", "tokenize"]

@@ -26,6 +26,10 @@ As strict as the controller (docs/real-cell.md has the sources):
 - Amplifiers are off (``_MO`` 1) until ``SH``; the e-stop input (the cell's ``estop``
   signal, wired into the amplifier enable chain) and an off-on-error trip (``OE``) turn
   them off again, and only a new ``SH`` turns them on.
+- The position error (``TE``) against ``ER``, ``OE``, ``TL``/``TK`` and ``CN`` as in
+  ``galil_axes``; an encoder wired reversed (``reversed_encoders``) trips ``ER``.
+- ``_TI1``/``TI 1`` exist only on a card with 16 inputs (``inputs``; a 5-8 axis card).
+- A bare ``ST`` from the host ends every program as well as the motion.
 - The serial port echoes every character until ``EO 0``.
 - The latch of an axis is its fixed latch input (input 1 for A ... 8 for H); the camera
   trigger is wired to ``galil.latch_input``.
@@ -67,7 +71,7 @@ class GalilEmulator(AxisCommands, ControllerCommands):
 
     def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
                  faults: FaultPlan | None = None, pty: bool = False,
-                 handles: int = HANDLES) -> None:
+                 handles: int = HANDLES, inputs: int | None = None) -> None:
         self.plant = plant
         self.host = host
         self.port = port
@@ -84,6 +88,12 @@ class GalilEmulator(AxisCommands, ControllerCommands):
                 st.ac = st.dc = axis.accel * plant.cpm
         self.cw_msb = False
         self.echo = True                       # serial port only; EO 0 turns it off
+        # the card's digital inputs: 8 on a 1-4 axis card, 16 on a 5-8 axis card (TI 1);
+        # by default the card the cell describes, so a test can give it the other
+        self.input_count = inputs or spec.inputs
+        self.reversed_encoders: set[str] = set()   # a wiring fault a test sets
+        self.limit_wiring = "low"              # a pressed limit switch pulls its input low
+        self.cn: list[float] = [-1, -1, -1, 0, 0]  # CN's power-on defaults
         self.max_handles = handles
         self.cf: str | None = None             # handle letter for program output; None: serial
         self._local = threading.local()        # the link whose command is being run
@@ -346,13 +356,15 @@ def serve(plant: Plant, host: str = "127.0.0.1", port: int = 0,
 
 
 def run_forever(host: str, port: int, scenario: str, cell: str | None = None,
-                seed: int = 1) -> None:
-    """``feeder emulate galil``: a plant and an emulator until Ctrl-C."""
+                seed: int = 1, reversed_encoders: str = "") -> None:
+    """``feeder emulate galil``: a plant and an emulator until Ctrl-C. ``reversed_encoders``
+    (axis letters) wires those encoders reversed, to rehearse the error-limit trip."""
     from ..scenario.loader import load_scenario
 
     sc, cell_spec = load_scenario(scenario, cell)
     plant = Plant(sc, cell_spec, seed=seed).start()
     emu = serve(plant, host, port)
+    emu.reversed_encoders.update(c for c in reversed_encoders.upper() if c in AXES)
     print(f"Galil {MODEL} emulator on {host}:{emu.port} (scenario {scenario}); Ctrl-C stops",
           flush=True)
     try:
@@ -374,8 +386,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default="scenarios/lenses.yaml")
     ap.add_argument("--cell", default=None, help="cell description overriding the scenario's")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--reversed-encoder", default="", metavar="AXES",
+                    help="axes whose encoder is wired reversed (e.g. B): the first motion "
+                         "after SH trips the error limit")
     args = ap.parse_args(argv)
-    run_forever(args.host, args.port, args.scenario, args.cell, args.seed)
+    run_forever(args.host, args.port, args.scenario, args.cell, args.seed,
+                args.reversed_encoder)
     return 0
 
 

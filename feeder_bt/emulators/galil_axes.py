@@ -1,8 +1,18 @@
 """The Galil emulator's simulated axes: the state of each axis (``_Axis``), the motion
 and latch commands (``AC`` ``DC`` ``SP`` ``PR`` ``JG`` ``BG`` ``AB`` ``SH`` ``OE`` ``ER``
-``MO`` ``ST`` ``TP`` ``TV`` ``AL`` ``RL``), their argument forms, the amplifier chain and
-the axis faults tests trip. A mixin of ``GalilEmulator`` (``emulators.galil``), which
-holds the state named below."""
+``TL`` ``TK`` ``CN`` ``MO`` ``ST`` ``TP`` ``TV`` ``AL`` ``RL``), their argument forms, the
+amplifier chain, the position error and the axis faults tests trip. A mixin of
+``GalilEmulator`` (``emulators.galil``), which holds the state named below.
+
+The card as the Galil command reference describes it (docs/real-cell.md has the sources):
+``TE`` is the commanded minus the measured position; past ``ER`` (default 16384 counts)
+with ``OE 1`` the motor goes off (stop code 8) and ``#POSERR`` runs; ``SH`` takes the
+present position as the command, clearing the error. An axis whose encoder is wired
+reversed (``reversed_encoders``, a fault a test sets) measures the opposite of the motion
+the motor makes, so its error grows at twice the speed from its first motion after ``SH``
+until ``ER`` trips it. ``CN n0`` says at which level a limit switch is active; a switch is
+wired so that pressing it pulls its input low (``limit_wiring``), and an axis refuses
+``BG`` towards an active limit (code 22)."""
 
 from __future__ import annotations
 
@@ -32,8 +42,12 @@ class _Axis:
     er: float = 16384.0            # error limit (counts)
     sc: int = 1                    # stop code (see _SC)
     te: float = 0.0                # position error (counts)
-    lf: int = 1                    # forward limit switch: 1 inactive, 0 tripped
+    lf: int = 1                    # forward limit switch pressed: 0 (1: released)
     lr: int = 1
+    tl: float = 9.9982             # continuous torque limit, volts (the card's default)
+    tk: float = 0.0                # peak torque limit (0: off)
+    base: float = 0.0              # plant count at SH (the error is measured from there)
+    tripped: bool = False          # the error is over ER: #POSERR already ran
 
 
 
@@ -49,6 +63,9 @@ class AxisCommands:
     _estop_signal: str | None
     estops: int
     _stop: threading.Event
+    reversed_encoders: set[str]    # axes whose encoder counts against the motor (a fault)
+    limit_wiring: str              # "low": a pressed limit switch pulls its input low
+    cn: list[float]                # CN n0..n4 (limit, home, latch, selective abort, abort)
 
 
     # ================================================================ amplifiers
@@ -64,6 +81,24 @@ class AxisCommands:
             if now:
                 self._motors_off(None, stop_code=6)
             was = now
+            self._position_errors()
+
+    def _position_errors(self) -> None:
+        """``TE`` of each servoed axis; past ``ER`` the card's off-on-error and #POSERR."""
+        trips = []
+        with self.lock:
+            for st in self.axes.values():
+                if not st.servo or self.plant.axis(st.letter) is None:
+                    continue
+                moved = self.plant.position_counts(st.letter) - st.base
+                st.te = 2.0 * moved if st.letter in self.reversed_encoders else 0.0
+                if st.er >= 0 and abs(st.te) > st.er and not st.tripped:
+                    st.tripped = True
+                    trips.append((st.letter, st.oe))
+        for letter, oe in trips:
+            if oe in (1, 3):
+                self._motors_off(letter, stop_code=8)
+            self.interp.interrupt("#POSERR", 0)
 
     def _motors_off(self, letters: str | None, stop_code: int) -> None:
         with self.lock:
@@ -90,18 +125,30 @@ class AxisCommands:
         self.interp.interrupt("#POSERR", 0)
 
     def trip_limit(self, axis: str, forward: bool = True) -> None:
-        """A limit switch of ``axis`` trips: the axis stops; ``#LIMSWI`` runs."""
+        """A limit switch of ``axis`` is pressed. Active at the level ``CN`` names, moving
+        towards it: the axis stops and ``#LIMSWI`` runs (Galil command reference,
+        #LIMSWI); at the wrong polarity the card sees nothing."""
         with self.lock:
             st = self._axis(axis.upper())
             if forward:
                 st.lf = 0
             else:
                 st.lr = 0
-            st.jogging = False
-            st.sc = 2 if forward else 3
-            if self.plant.axis(st.letter) is not None and self._moving(st.letter):
-                self.plant.jog(st.letter, 0.0, st.dc)
-        self.interp.interrupt("#LIMSWI", 0)
+            active = self._limit_active(st, forward)
+            if active:
+                st.jogging = False
+                st.sc = 2 if forward else 3
+                if self.plant.axis(st.letter) is not None and self._moving(st.letter):
+                    self.plant.jog(st.letter, 0.0, st.dc)
+        if active:
+            self.interp.interrupt("#LIMSWI", 0)
+
+    def _limit_active(self, st: _Axis, forward: bool) -> bool:
+        """A limit input at the level ``CN n0`` calls active (-1: low, 1: high)."""
+        pressed = (st.lf if forward else st.lr) == 0
+        level = (0 if self.limit_wiring == "low" else 1) if pressed else \
+            (1 if self.limit_wiring == "low" else 0)
+        return level == (0 if self.cn[0] < 0 else 1)
 
     def trip_amplifier(self, axis: str) -> None:
         """The amplifier of ``axis`` reports a fault: it turns the motor off; ``#AMPERR``
@@ -214,6 +261,9 @@ class AxisCommands:
                     raise DmcError(20, f"axis {st.letter}")
                 if self._moving(st.letter):
                     raise DmcError(21, f"axis {st.letter}")
+                ahead = (st.jg if st.pending == "jog" else st.pr) >= 0
+                if self._limit_active(st, forward=ahead):
+                    raise DmcError(22, f"axis {st.letter}")
             for st in axes:
                 if self.plant.axis(st.letter) is None:
                     continue
@@ -245,14 +295,41 @@ class AxisCommands:
         with self.lock:
             for st in self._axes_arg(rest):
                 st.servo = True
-                st.te = 0.0
+                st.te, st.tripped = 0.0, False
+                if self.plant.axis(st.letter) is not None:
+                    st.base = float(self.plant.position_counts(st.letter))
         return ""
 
     def _cmd_OE(self, rest: str) -> str:
         return self._set_or_query("oe", rest)
 
     def _cmd_ER(self, rest: str) -> str:
-        return self._set_or_query("er", rest, _positive)
+        return self._set_or_query("er", rest, _error_limit)
+
+    def _cmd_TL(self, rest: str) -> str:
+        return self._set_or_query("tl", rest, _volts)
+
+    def _cmd_TK(self, rest: str) -> str:
+        return self._set_or_query("tk", rest, _volts)
+
+    def _cmd_CN(self, rest: str) -> str:
+        """``CN n0,n1,n2,n3,n4``: limit, home and latch polarity (-1 or 1), selective abort
+        inputs (0 or 1), abort input ends programs (0) or not (1)."""
+        fields = [f.strip() for f in rest.split(",")]
+        if not rest.strip() or len(fields) > 5:
+            raise DmcError(50 if not rest.strip() else 4, rest)
+        allowed = ((-1, 1), (-1, 1), (-1, 1), (0, 1), (0, 1))
+        with self.lock:
+            new = list(self.cn)
+            for i, f in enumerate(fields):
+                if not f:
+                    continue
+                v = self.interp.evaluate(f)
+                if v not in allowed[i]:
+                    raise DmcError(6, f"CN field {i}: {f}")
+                new[i] = v
+            self.cn = new
+        return ""
 
     def _cmd_MO(self, rest: str) -> str:
         with self.lock:
@@ -272,8 +349,16 @@ class AxisCommands:
         return ""
 
     def _cmd_TP(self, rest: str) -> str:
-        return ",".join(_num(self.plant.position_counts(st.letter))
-                         for st in self._axes_arg(rest))
+        return ",".join(_num(self._measured(st.letter)) for st in self._axes_arg(rest))
+
+    def _measured(self, letter: str, t: float | None = None) -> float:
+        """What the axis's encoder counts: the plant's count, or, wired reversed, the
+        count at ``SH`` minus the motion since."""
+        count = self.plant.position_counts(letter, t)
+        if letter not in self.reversed_encoders:
+            return count
+        base = self._axis(letter).base
+        return base - (count - base)
 
     def _cmd_TV(self, rest: str) -> str:
         return ",".join(_num(round(self.plant.velocity_counts(st.letter)))
@@ -303,7 +388,7 @@ class AxisCommands:
         st = self.axes.get(letter)
         if st is None or not st.latch_armed:
             return
-        count = self.plant.position_counts(letter, t)
+        count = self._measured(letter, t)
         with self._latch_lock:
             if st.latch_armed:
                 st.latched, st.latch_armed = count, False
@@ -327,6 +412,16 @@ def _num(value: float) -> str:
 
 def _positive(axis: str, value: float) -> None:
     if not 0 < value <= 1.07e9:
+        raise DmcError(6, f"axis {axis}: {value}")
+
+
+def _error_limit(axis: str, value: float) -> None:
+    if not -1 <= value <= 2147483647:
+        raise DmcError(6, f"axis {axis}: {value}")
+
+
+def _volts(axis: str, value: float) -> None:
+    if not 0 <= value <= 9.9982:
         raise DmcError(6, f"axis {axis}: {value}")
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 import threading
 
+from ..hal.galil.conveyor import active_low
 from ..hal.galil.protocol import ERROR_TEXT, MODEL
 from .dmc import AXES, DmcError, DmcInterpreter, format_number, is_axis_command
 from .galil_axes import _num
@@ -33,6 +34,7 @@ class ControllerCommands:
     cw_msb: bool
     echo: bool
     cf: str | None
+    input_count: int
     _links: list[_Link]
     _links_lock: threading.Lock
 
@@ -71,7 +73,10 @@ class ControllerCommands:
             raise DmcError(1, s)
         if from_program and name in ("DL", "ED", "EO", "CW"):
             raise DmcError(3, s)
-        return handler(rest.strip()) or ""
+        out = handler(rest.strip()) or ""
+        if name == "ST" and not rest.strip() and not from_program:
+            self.interp.halt()          # a bare ST from the host ends every program too
+        return out
 
     # ---------------------------------------------------------------- I/O
     def _signal(self, bit: int, direction: str) -> str | None:
@@ -97,7 +102,7 @@ class ControllerCommands:
             name = self._signal(bit, "in")
             if name is None:
                 continue
-            low = getattr(self.plant.cell.io[name], "active_low", False)
+            low = active_low(self.plant.cell.io[name])
             if self.plant.signal(name) != low:
                 mask |= 1 << (bit - 1)
         return mask
@@ -137,7 +142,13 @@ class ControllerCommands:
 
     def _cmd_TI(self, rest: str) -> str:
         bank = int(self.interp.evaluate(rest)) if rest.strip() else 0
+        self._check_bank(bank, DmcError(6, f"TI {rest}"))
         return _num((self._inputs() >> (8 * bank)) & 0xFF)
+
+    def _check_bank(self, bank: int, error: DmcError) -> None:
+        """TI 1 (inputs 9-16) exists on a 5-8 axis card only (Galil command reference)."""
+        if not 0 <= bank < self.input_count // 8:
+            raise error
 
     # ---------------------------------------------------------------- status, settings
     def _cmd_TC(self, rest: str) -> str:
@@ -199,7 +210,7 @@ class ControllerCommands:
             if len(suffix) != 1 or suffix not in AXES:
                 raise DmcError(4, f"_{name}{suffix}")
             if name == "TP":
-                return float(self.plant.position_counts(suffix))
+                return float(self._measured(suffix))
             if name == "TV":
                 return float(round(self.plant.velocity_counts(suffix)))
             if name == "BG":
@@ -215,6 +226,7 @@ class ControllerCommands:
             return float(getattr(st, name.lower()))
         if name == "TI":
             bank = int(suffix or "0")
+            self._check_bank(bank, DmcError(4, f"_TI{suffix}"))
             return float((self._inputs() >> (8 * bank)) & 0xFF)
         if name == "OP":
             bank = int(suffix or "0")
@@ -231,7 +243,7 @@ class ControllerCommands:
             with self.interp.lock:
                 return float(self.interp.error_thread if suffix == "1"
                              else self.interp.error_line)
-        if name in ("MO", "SC", "TE", "LF", "LR", "OE", "ER"):
+        if name in ("MO", "SC", "TE", "LF", "LR", "OE", "ER", "TL", "TK"):
             if len(suffix) != 1 or suffix not in AXES:
                 raise DmcError(4, f"_{name}{suffix}")
             with self.lock:
@@ -240,7 +252,12 @@ class ControllerCommands:
                     return 0.0 if st.servo else 1.0
                 if name == "SC":
                     return float(0 if self._moving(suffix) else st.sc)
+                if name in ("LF", "LR"):        # 0: the switch forbids that direction
+                    return 0.0 if self._limit_active(st, name == "LF") else 1.0
                 return float(getattr(st, name.lower()))
+        if name == "CN" and suffix in ("0", "1", "2", "3", "4"):
+            with self.lock:
+                return float(self.cn[int(suffix)])
         raise DmcError(1, f"_{name}{suffix}")
 
     def function(self, name: str, arg: float) -> float:

@@ -77,6 +77,12 @@ class DriverHal(Hal):
     def step(self, now: float) -> None:
         pass
 
+    def motors_on(self) -> None:
+        """``SH`` of every conveyor axis (it also clears a Galil card fault): the operator
+        pressed Start. The jobs run on the Galil worker ahead of the set-up's motions."""
+        for conv in self.conveyors.values():
+            conv.servo(True)
+
     def changeover(self, scenario: Scenario) -> None:
         plant = self.extras.get("plant")
         if plant is not None:         # the emulated cell refills its hopper like the sim

@@ -215,6 +215,10 @@ class Hal:
     def step(self, now: float) -> None:
         """Advance anything that runs on the clock (the simulated world) to ``now``."""
 
+    def motors_on(self) -> None:
+        """The operator's Start: a real cell's belt amplifiers go on (``SH``) only when a
+        person asks, never at a connect (issue 25). Nothing to do on a simulated belt."""
+
     def changeover(self, scenario) -> None:
         """The operator swaps the parts for another scenario's (the simulated cell refills
         its hopper; a real cell has nothing to do)."""

@@ -45,13 +45,17 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
 
 
 # Galil wiring (issue 15; docs/real-cell.md): I/O bits start at 1, the input monitor reports
-# inputs 1-16, and the DMC-21x3 latches each axis from its own fixed input.
+# inputs 1-8, or 1-16 on a card with 16 (``galil.inputs``: TI 1 is only valid on a 5-8 axis
+# card, Galil command reference, TI), and the DMC-21x3 latches each axis from its own input.
 GALIL_MAX_INPUT = 16
 GALIL_MAX_OUTPUT = 16
 
 
 def _check_galil(cell: CellSpec, ctx: _Ctx) -> None:
     g = cell.galil
+    if g.inputs not in (8, GALIL_MAX_INPUT):
+        ctx.add_problem("galil.inputs", f"8 (a 1-4 axis card) or 16 (a 5-8 axis card), "
+                                        f"got {g.inputs!r}")
     for name, sig in cell.io.items():
         if sig.controller != "galil":
             continue
@@ -59,6 +63,10 @@ def _check_galil(cell: CellSpec, ctx: _Ctx) -> None:
         if not 1 <= sig.bit <= top:
             ctx.add_problem(f"io.{name}.bit", f"Galil {'inputs' if sig.dir == 'in' else 'outputs'}"
                                               f" are numbered 1-{top}, got {sig.bit}")
+        elif sig.dir == "in" and sig.bit > g.inputs:
+            ctx.add_problem(f"io.{name}.bit", f"input {sig.bit} on a card with galil.inputs "
+                                              f"{g.inputs}; inputs 9-16 need a 5-8 axis card "
+                                              f"(galil.inputs: 16)")
     axis = str(g.latch_axis).upper()
     if len(axis) != 1 or axis not in "ABCDEFGH":
         ctx.add_problem("galil.latch_axis", f"one axis letter A-H, got {g.latch_axis!r}")

@@ -279,6 +279,7 @@ class IoSignal:
     bit: int
     dir: str = "out"                     # in | out
     active_low: bool = False             # the input reads 0 while the signal is active
+    active: str = "high"                 # high | low: the level at which the signal is active
 
 
 @dataclass
@@ -297,11 +298,18 @@ class GalilSpec:
     notify_mm: float = 5.0               # distance notifier period on the latch axis
     # --- issue 15: safe reconnects (docs/real-cell.md, "The Galil controller")
     rtscts: bool = False                 # serial ports: RTS/CTS hardware handshake
-    servo_on: str = "start"              # start | reconnect | never: when the driver may SH
+    servo_on: str = "never"              # never | start | reconnect: when the driver may SH
     free_handles: str = "ours"           # ours | others | none: IH clean-up at connect
     watchdog_s: float = 1.0              # host silent this long: the card stops the belts
     off_on_error: bool = True            # OE 1 on our axes: motor off on a position error
     stall_mm: float = 1.0                # jogging, encoder moved less than this in 2 s: stall
+    # --- issue 25: stops that stop (docs/real-cell.md, "Safety settings sent at connect")
+    error_limit_mm: float = 5.0          # ER: position error (mm) that trips the off-on-error
+    torque_limit_v: float = 5.0          # TL: continuous motor command limit, volts (TK 0)
+    limit_switches: str = "low"          # CN n0: the level of an active limit switch: low | high
+    latch_edge: str = "falling"          # CN n2: the latch input's edge: falling | rising
+    inputs: int = 8                      # digital inputs on the card: 8 (1-4 axes) | 16 (5-8)
+    heartbeat_s: float = 1.0             # #INMON silent this long: a cell FAULT, belts stopped
 
 
 @dataclass

@@ -105,7 +105,10 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (TargetSpec, "kind"): TARGET_KINDS,
     (CellSpec, "hal"): CELL_HALS,
     (IoSignal, "dir"): IO_DIRS,
-    (GalilSpec, "servo_on"): ("start", "reconnect", "never"),
+    (GalilSpec, "servo_on"): ("never", "start", "reconnect"),
+    (GalilSpec, "limit_switches"): ("low", "high"),
+    (GalilSpec, "latch_edge"): ("falling", "rising"),
+    (IoSignal, "active"): ("high", "low"),
     (GalilSpec, "free_handles"): ("ours", "others", "none"),
 }
 
@@ -183,6 +186,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (GalilSpec, "notify_mm"): POSITIVE,
     (GalilSpec, "watchdog_s"): Range(0.2, 60),
     (GalilSpec, "stall_mm"): POSITIVE,
+    (GalilSpec, "error_limit_mm"): POSITIVE,
+    (GalilSpec, "torque_limit_v"): Range(0.1, 9.9982),
+    (GalilSpec, "heartbeat_s"): Range(0.3, 10),
     (AdeptSpec, "motion_port"): Range(1, 65535),
     (AdeptSpec, "position_port"): Range(1, 65535),
     (AdeptSpec, "io_port"): Range(1, 65535),

@@ -127,7 +127,10 @@ class GalilConveyor:
         return step
 
     def _begin(self) -> None:
-        """``BG``; a motor that is off is an operator matter, said so (not a bare code 20)."""
+        """``BG``; a motor that is off is an operator matter, said so (not a bare code 20).
+        After a card fault nothing moves until an operator's reset."""
+        if self.ctl.card_fault is not None:
+            raise self._card_fault()
         try:
             self.ctl.ask(f"BG{self.axis}")
         except GalilError as e:
@@ -220,11 +223,20 @@ class GalilConveyor:
         pos = self.ctl.position(self.axis)
         return 0 if pos is None else pos
 
+    def _card_fault(self) -> ConveyorFault:
+        return ConveyorFault(f"{self.name}: Galil card fault, belts stopped: "
+                             f"{self.ctl.card_fault}; an operator's reset restarts the "
+                             f"card's programs")
+
     def fault(self) -> HalError | None:
-        """What stops the belt while we want it to run: the motor off (off-on-error, the
-        e-stop, an operator), a limit switch, the card's watchdog, or a stall — jogging,
-        yet the encoder moved less than ``galil.stall_mm`` (a servo dithers a few counts
-        either way) in ``STALL_S``. Cleared by the next command."""
+        """What stops the belt while we want it to run: a card fault (a program thread
+        that cannot be restarted, a stuck input monitor: reported whatever the belt does,
+        until an operator's reset), the motor off (off-on-error, the e-stop, an operator),
+        a limit switch, the card's watchdog, or a stall — jogging, yet the encoder moved
+        less than ``galil.stall_mm`` (a servo dithers a few counts either way) in
+        ``STALL_S``. Cleared by the next command."""
+        if self.ctl.card_fault is not None:
+            return self._card_fault()
         if self._mode == "idle":
             self._stall_ref = None
             return None
@@ -299,9 +311,18 @@ class GalilConveyor:
         return self._job("abort", self.ctl.command("AB 1"))
 
     def servo(self, on: bool) -> Job:
-        """``SH`` (servo here: motor on) or ``MO`` (motor off). ``SH`` is the operator's
-        reset after an off-on-error or the e-stop: nothing else turns a motor back on."""
-        return self._job("servo", self.ctl.command(f"{'SH' if on else 'MO'}{self.axis}"))
+        """``SH`` (servo here: motor on) or ``MO`` (motor off). ``SH`` is a person's: the
+        operator's Start or Reset, or commissioning's question; nothing else turns a motor
+        on. It also clears a card fault (``GalilController.reset_card``) first."""
+        if not on:
+            return self._job("servo", self.ctl.command(f"MO{self.axis}"))
+
+        def reset_and_servo() -> str:
+            self.ctl.reset_card()
+            if self.ctl.card_fault is not None:
+                raise self._card_fault()
+            return self.ctl.ask(f"SH{self.axis}")
+        return self._job("servo", self.ctl.submit(reset_and_servo))
 
 
 class _TravelJob(Job):
@@ -332,6 +353,13 @@ class _TravelJob(Job):
         return self.state
 
 
+def active_low(sig: IoSignal) -> bool:
+    """The input reads 0 while the signal is active: ``active: low`` (or the older
+    ``active_low: true``). An e-stop or a limit wired normally closed is one (a broken
+    wire then reads as pressed); its polarity is a cell setting, checked at commissioning."""
+    return bool(getattr(sig, "active_low", False)) or getattr(sig, "active", "high") == "low"
+
+
 class GalilIO:
     """The digital I/O of a Galil controller under the cell's signal names.
 
@@ -346,7 +374,7 @@ class GalilIO:
         self.inputs = {n: s.bit for n, s in signals.items()
                        if s.controller == "galil" and s.dir == "in"}
         self.active_low = {n for n, s in signals.items()
-                           if s.controller == "galil" and s.dir == "in" and s.active_low}
+                           if s.controller == "galil" and s.dir == "in" and active_low(s)}
         self.outputs = {n: s.bit for n, s in signals.items()
                         if s.controller == "galil" and s.dir != "in"}
         self._lock = threading.Lock()

@@ -24,16 +24,21 @@ sequence (docs/real-cell.md has the source of each step):
    us; ``IH h=>-2`` frees the handles of our earlier, dropped connections (``free_handles``);
 3. ``HXn`` of *our* threads only (a program on another thread is never killed: the
    connect fails with a clear error instead, as ``DL`` would be refused);
-4. ``DL`` of ``spec.programs``, program variables, ``XQ`` of the input monitor (0), the
-   distance notifier (1) and the host watchdog (2); ``OE 1`` on our axes;
-5. ``SH`` only as ``spec.servo_on`` allows: at the first connect of a job (``start``),
-   never on a reconnect (an amplifier that is off was turned off by an off-on-error, the
-   e-stop or an operator, and stays off until an operator's reset: ``servo(True)``);
-6. initial reads.
+4. the safety settings of the cell file on our axes: ``ER`` (``error_limit_mm`` in
+   counts), ``TL`` and ``TK 0``, ``OE``, ``CN`` (limit switch and latch polarity);
+5. ``DL`` of ``spec.programs``, program variables, ``XQ`` of the input monitor (0), the
+   distance notifier (1) and the host watchdog (2);
+6. no ``SH`` unless ``spec.servo_on`` says so (default ``never``: the first ``SH`` of a
+   session is a person's, ``servo(True)`` from the operator's Start or Reset or from
+   commissioning; a motor that is off stays off);
+7. initial reads.
 
-A *health poll* (every ``HEALTH_S``) pets the card's watchdog, reads ``_XQ0``-``_XQ2``
-(a dead thread is reported in ``program_errors`` and started again) and each axis's
-``_MO``, ``_SC``, ``_TE``, ``_LF``, ``_LR`` into ``status(axis)``.
+A *health poll* (every ``HEALTH_S``) pets the card's watchdog, re-asserts ``CF``, reads
+``_XQ0``-``_XQ2`` and the input monitor's heartbeat ``INBEAT``, and every third poll each
+axis's ``_MO``, ``_SC``, ``_TE``, ``_LF``, ``_LR`` into ``status(axis)``. A dead thread is
+started again; one that cannot be (``XQ`` refused, or dead again and again) or a heartbeat
+that stopped is a *card fault*: the belts are stopped (``ST`` of our axes) and every
+conveyor's ``fault()`` says so until an operator's reset.
 """
 
 from __future__ import annotations
@@ -78,7 +83,6 @@ from .protocol import (
     parse_int,
     parse_tell_code,
     parse_unsolicited,
-    positional,
     read_programs,
 )
 from .startup import (
@@ -122,7 +126,8 @@ class GalilController(CardSetup):
 
     ``counts_per_mm`` (the cell's ``encoder``) turns ``spec.notify_mm`` into the
     notifier's step in counts. ``servo_axes`` (by default the axes of ``spec.axes``) are
-    switched on (``SH``) as ``spec.servo_on`` allows: by default once, at the first connect.
+    switched on (``SH``) only by ``servo(True)`` (a person's action), unless
+    ``spec.servo_on`` allows it at connect.
     Construction prepares the programs (so a bad program fails at once, naming
     ``file:line``, before anything is sent) and starts connecting in the background;
     ``ready`` is that first connect's ``Future``.
@@ -171,6 +176,9 @@ class GalilController(CardSetup):
         self._status: dict[str, AxisStatus] = {}
         self.thread_lines: dict[int, int] = {}
         self.restarts: dict[int, int] = {}
+        self._deaths: dict[int, list[float]] = {}   # thread -> clock times it was found dead
+        self._beat: tuple[int, float] | None = None  # (INBEAT, clock time it last moved)
+        self.card_fault: str | None = None  # a dead thread or heartbeat: belts stopped
         self.servo_refused: str | None = None   # why the start-up SH was not sent or failed
         self._health_busy = False
         self._closed = False
@@ -385,27 +393,21 @@ class GalilController(CardSetup):
             self._ask_on(conn, "CW 1")            # unsolicited bytes with the top bit set
             self._claim_handle(conn)
             self._halt_our_threads(conn)          # DL is refused while a program runs
+            self._send_safety(conn)               # ER, TL, TK, OE, CN before anything moves
             self._ask_on(conn, "DL", payload=download_payload(self.program))
-            if self._has_notifier:
-                step = max(1, round(self.spec.notify_mm * self.cpm))
-                self._ask_on(conn, f"DSTEP={step}")
-                self._ask_on(conn, f"~a={AXES.index(self.notify_axis)}")
-            if self._has_watchdog:
-                self._ask_on(conn, f"WDMS={round(self.spec.watchdog_s * 1000)}")
+            self._set_program_variables(conn)
             if self._has_monitor:
                 self._ask_on(conn, f"XQ {INPUT_MONITOR},0")
             if self._has_notifier:
                 self._ask_on(conn, f"XQ {DIST_NOTIFIER},1")
             if self._has_watchdog:
                 self._ask_on(conn, f"XQ {WATCHDOG},2")
-            if self.spec.off_on_error and self.servo_axes:
-                self._ask_on(conn, positional("OE", {a: 1 for a in self.servo_axes}))
             self._servo_at_connect(conn, first)
-            self.inputs_mask = (parse_int(self._ask_on(conn, "MG _TI0"))
-                                | parse_int(self._ask_on(conn, "MG _TI1")) << 8)
+            self.inputs_mask = self._read_inputs(conn)
             self.outputs_mask = parse_int(self._ask_on(conn, "MG _OP0"))
             for axis in self.servo_axes:
                 self._set_position(axis, parse_int(self._ask_on(conn, f"TP{axis}")))
+            self._beat = None                     # the heartbeat is timed afresh
             for hook in list(self._connect_hooks):
                 hook()
         except BaseException:
