@@ -74,7 +74,7 @@ def pickable_target(plant: Plant, tool_offset=(0.0, 0.0, 0.0), timeout: float = 
         with plant.lock:
             t = plant.world.now()
             rows = plant.world.truth(t)
-            latch = plant.world.robot_count(t)
+            latch = plant.world.robot_track_count(t)
         for r in rows:
             alone = all(math.hypot(o["x_mm"] - r["x_mm"], o["y_mm"] - r["y_mm"]) > 70
                         for o in rows if o["id"] != r["id"])

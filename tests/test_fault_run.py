@@ -20,7 +20,7 @@ rates:
 scripted:
   - {at_s: 1200, kind: conveyor_jam}
   - {at_s: 500, kind: estop, release_after_s: 20}
-  - {at_s: 900, kind: comms_lost, device: camera, outage_s: 1.0}
+  - {at_s: 900, kind: comms_lost, device: camera, outage_s: 3.0}   # longer than a frame's spacing
 """
 
 

@@ -71,7 +71,7 @@ class Rig:
         for r in sorted(w.truth(), key=lambda r: -r["x_mm"]):
             if not (r["pickable"] and r["singulated"]):
                 continue
-            t = PickTarget(r["id"], r["x_mm"], r["y_mm"], r["angle_deg"], w.robot_count())
+            t = PickTarget(r["id"], r["x_mm"], r["y_mm"], r["angle_deg"], w.robot_track_count(w.now()))
             try:
                 w.plan_pick(t, w.now())
             except FeederError:

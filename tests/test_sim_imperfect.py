@@ -80,10 +80,11 @@ def test_encoder_counts_are_quantised_noisy_and_scaled(lenses):
                                         for t in times])
     assert 0.3 < resid.std() < 1.0                # 0.5 counts of noise plus rounding
     assert w.galil_count(1.5) == w.galil_count(1.5)           # a function of time, not of reads
-    # the robot's channel is sampled once a servo period and held
+    # the robot's channel is sampled once a trajectory cycle (16 ms) and held
     t0 = 2.0 + 0.0001
-    assert w.robot_count(t0) == w.robot_count(t0 + 0.0008)
-    assert w.robot_count(t0 + 0.0012) - w.robot_count(t0) >= 2  # 0.2 mm/ms = 4 counts
+    assert w.cell.sim.robot_sample_s == 0.016
+    assert w.robot_count(t0) == w.robot_count(t0 + 0.015)
+    assert w.robot_count(t0 + 0.0161) - w.robot_count(t0) >= 50  # 0.2 mm/ms: 64 counts
 
     ideal, _ = world_of(lenses, ideal=True)
     ideal.horizontal.jog(0.0, 200.0)

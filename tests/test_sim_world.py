@@ -88,7 +88,7 @@ def test_release_rate_grows_with_incline_speed(lenses):
 
 def _target(world, row, t, dx=0.0):
     return PickTarget(part_id=row["id"], x_mm=row["x_mm"] + dx, y_mm=row["y_mm"],
-                      angle_deg=row["angle_deg"], latch=world.robot_count(t), tracking=True)
+                      angle_deg=row["angle_deg"], latch=world.robot_track_count(t), tracking=True)
 
 
 def test_grip_is_judged_against_the_truth(lenses):

@@ -343,7 +343,7 @@ def _grip_and_place(hal, clock, scenario):
     w = hal.world
     for r in sorted(w.truth(), key=lambda r: -r["x_mm"]):
         if r["pickable"] and r["singulated"]:
-            target = PickTarget(r["id"], r["x_mm"], r["y_mm"], r["angle_deg"], w.robot_count())
+            target = PickTarget(r["id"], r["x_mm"], r["y_mm"], r["angle_deg"], w.robot_track_count(w.now()))
             job = hal.robot.pick(target)
             if job.done:
                 continue
