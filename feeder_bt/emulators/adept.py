@@ -81,9 +81,12 @@ class AdeptEmulator(IoServers):
             "motion": {"HELLO": lambda: self._hello("motion"), "PICK": self._pick,
                        "PLACE": self._place, "MOVE": self._move, "SAFE": self._safe,
                        "SPEED": self._speed, "RECOVER": self._recover,
-                       "HOLDING": self._holding, "HELD": self._held},
+                       "HOLDING": self._holding, "HELD": self._held,
+                       "FRAME": lambda x, y, r: "OK", "DEFSAFE": lambda x, y, z, r: "OK",
+                       "ESTOP": lambda s: "OK"},
             "position": {"HELLO": lambda: self._hello("position"), "WHERE": self._where,
-                         "BELT": self._belt, "POLL": self._poll, "STOP": self._stop_robot},
+                         "BELT": self._belt, "POLL": self._poll, "STOP": self._stop_robot,
+                         "HERE": self._where},
             "io": {"HELLO": lambda: self._hello("io"), "SIG": self._sig, "SET": self._set},
         }
 
