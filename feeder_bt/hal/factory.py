@@ -112,7 +112,8 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         closers.append(galil.close)
         adept = AdeptController(cell.adept, clock, inputs=[
             s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"],
-            robot=cell.robot, estop=adept_estop(cell))
+            robot=cell.robot, estop=adept_estop(cell),
+            counts_per_mm=cell.encoder.counts_per_mm)
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")

@@ -27,12 +27,15 @@ class AdeptController:
     motion socket, before any motion (vplus/PROTOCOL.md, "Frames"); without them V+
     answers every motion -9008. ``estop``: the e-stop's V+ input, negative when active low
     (``protocol.estop_signal``), sent as ESTOP; None leaves the V+ default (input 1001).
+    ``counts_per_mm``: the belt encoder's counts per mm, sent (signed by
+    ``spec.belt_direction``) as BELTSCALE; None leaves the V+ program's ``belt.scale``.
     """
 
     def __init__(self, spec: AdeptSpec, clock: Clock, inputs: Iterable[int] = (),
-                 robot: RobotSpec | None = None, estop: int | None = None) -> None:
+                 robot: RobotSpec | None = None, estop: int | None = None,
+                 counts_per_mm: float | None = None) -> None:
         self.spec, self.clock = spec, clock
-        self.robot_spec, self.estop = robot, estop
+        self.robot_spec, self.estop, self.counts_per_mm = robot, estop, counts_per_mm
         host, t = spec.host, spec.timeout_s
         self.clients = {
             "motion": ServerClient("motion", host, spec.motion_port, t),
@@ -80,6 +83,9 @@ class AdeptController:
             client.call("FRAME", *protocol.frame_args(r.base_mm, r.base_deg), timeout=t)
             client.call("DEFSAFE", float(r.safe_mm[0]), float(r.safe_mm[1]), 0.0, 0.0,
                         timeout=t)
+        if self.counts_per_mm:
+            sign = -1.0 if self.spec.belt_direction == "reverse" else 1.0
+            client.call("BELTSCALE", sign / self.counts_per_mm, timeout=t)
         if self.estop is not None:
             client.call("ESTOP", int(self.estop), timeout=t)
 

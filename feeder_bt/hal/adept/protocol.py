@@ -69,6 +69,7 @@ COMMANDS: dict[str, tuple[Command, ...]] = {
         Command("SAFE", (), (), motion=True),
         Command("FRAME", ("x", "y", "rz"), ()),
         Command("DEFSAFE", ("x", "y", "z", "rz"), ()),
+        Command("BELTSCALE", ("mm",), ()),
         Command("ESTOP", ("signal",), ()),
         Command("SPEED", ("pct",), ()),
         Command("RECOVER", ("power",), (), motion=True),
