@@ -9,7 +9,10 @@ p. 33).
 
 Times come from the plant's robot model (``World.robot_model``: the same trapezoidal
 profile the simulated robot uses, at the program speed times the operator's override, and
-the simulator's per-move time factor) over the Cartesian length of each motion. A target
+the simulator's per-move time factor) over the Cartesian length of each motion. A motion
+the program reached while the previous one still ran follows on without a stop
+(continuous path, User's Guide ch. 8): the two take the time of one profile over both
+lengths; after a BREAK, a DELAY or a BRAKE the next starts from rest. A target
 outside the annulus ``inner_reach_mm .. reach_mm`` about the base (robot world) is refused
 with -610 *Location out of range* before the arm moves; a tracked location that leaves
 the reach or the belt's window stops the arm and calls the window program.
@@ -62,6 +65,7 @@ class Arm:
         self.fault_armed = False               # the next motion runs into something
         self.log: list[tuple[str, tuple[float, float, float]]] = []   # (kind, cell xyz)
         self.owner = None                      # the task that moves the arm (task 0)
+        self.path_mm = 0.0                     # path length since the arm was last at rest
 
     # ------------------------------------------------------------ where
     def _at(self, target: Any, count: int) -> Trans:
@@ -96,12 +100,13 @@ class Arm:
         r = math.hypot(x, y)
         return spec.inner_reach_mm <= r <= spec.reach_mm
 
-    def start(self, kind: str, target: Any) -> None:
+    def start(self, kind: str, target: Any, blend: bool = False) -> None:
         """Start a motion now (the caller waited until the arm was free)."""
         if not self.power:
             raise VError(ERR_POWER_OFF, "*Robot power off*")
         now = self.rt.now()
         prev = self.loc
+        before = self.path_mm if blend else 0.0
         start = self.here(now)
         self.loc = start
         self.motion = None
@@ -109,15 +114,17 @@ class Arm:
         if kind == "delay":                    # hold still, or keep tracking the belt
             duration = float(target)
             target = prev if isinstance(prev, BeltLoc) else start
+            self.path_mm = 0.0
         else:
             for _ in range(4):                 # intercept a tracked target
                 end = self._at(target, self.rt.robot_count(now + duration))
-                duration = self._time(start, end)
+                duration = self._time(start, end, before)
             end = self._at(target, self.rt.robot_count(now + duration))
             if not self.in_reach(end) and isinstance(target, BeltLoc):
                 duration, end = self._wait_for_reach(target, now, duration, end)
             if not self.in_reach(end):         # where the arm meets the target
                 raise VError(ERR_RANGE, "*Location out of range*")
+            self.path_mm = before + math.dist(start.xyz, end.xyz)
             if isinstance(target, BeltLoc) and kind == "moves":
                 duration += self.rt.robot_spec().track_settle_s
             self.log.append((kind, tuple((self.true_base @ end).xyz)))  # type: ignore[arg-type]
@@ -140,17 +147,21 @@ class Arm:
                 return t - now, loc
         return duration, end
 
-    def _time(self, a: Trans, b: Trans) -> float:
+    def _time(self, a: Trans, b: Trans, before: float = 0.0) -> float:
+        """The motion's time: one profile over the path since rest, less what the
+        motions before it on that path took."""
         world = self.rt.plant.world
         spec = world.robot_model.spec
         d = math.dist(a.xyz, b.xyz)
         s = max(self.speed, 1e-3) / 100.0 * world.speed_override_pct / 100.0
-        return world.imperfect.time_factor() * trapezoid_time(d, spec.v_max_mm_s * s,
-                                                              spec.a_max_mm_s2 * s * s)
+        v, acc = spec.v_max_mm_s * s, spec.a_max_mm_s2 * s * s
+        t = trapezoid_time(before + d, v, acc) - trapezoid_time(before, v, acc)
+        return world.imperfect.time_factor() * t
 
     def brake(self) -> None:
         """BRAKE: the arm stops where it is; nothing more of this motion runs."""
         now = self.rt.now()
+        self.path_mm = 0.0
         if self.motion is not None and now < self.motion.t1:
             self.loc = self.here(now)
             self.motion = None

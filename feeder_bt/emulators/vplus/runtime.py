@@ -319,11 +319,13 @@ class Runtime:
             self.arm.brake()
 
     def _motion(self, task: Task, kind: str, target: Any) -> None:
+        with self.lock:
+            blend = self.arm.busy()              # reached while the arm still moves
         self._wait_free(task)
         if task.pending:
             return                               # the error comes in at the next step
         with self.lock:
-            self.arm.start(kind, target)
+            self.arm.start(kind, target, blend=blend)
 
     def _s_delay(self, task: Task, args: Any) -> None:
         self._motion(task, "delay", float(args[0][0](task)))
