@@ -7,6 +7,8 @@ motion before FRAME is refused, and a STOP during a pick stops before the descen
 from __future__ import annotations
 
 import dataclasses
+import math
+import shutil
 import socket
 import time
 
@@ -15,21 +17,22 @@ import pytest
 from feeder_bt.clock import RealClock
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.vplus_check import VPLUS_DIR
 from feeder_bt.errors import EnvelopeError, MissedGrab
 from feeder_bt.hal.adept import AdeptController, VplusError
-from feeder_bt.hal.interfaces import Pose
+from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.scenario import load_scenario
 from tests.test_adept_driver import BELT_COUNTS_S, pickable_target, wait_for, wait_job
 
 MOVED = {"base_mm": (1400.0, 330.0), "base_deg": 90.0}   # moved and turned 90 degrees
 
 
-def _rig(robot: dict | None = None, true_base=None, seed: int = 4):
+def _rig(robot: dict | None = None, true_base=None, seed: int = 4, programs=VPLUS_DIR):
     scenario, cell = load_scenario("scenarios/lenses.yaml")
     if robot:
         cell = dataclasses.replace(cell, robot=dataclasses.replace(cell.robot, **robot))
     plant = Plant(scenario, cell, seed=seed).start()
-    emu = AdeptEmulator(plant, true_base=true_base).start()
+    emu = AdeptEmulator(plant, true_base=true_base, programs=programs).start()
     p = emu.ports
     spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
                                position_port=p["position"], io_port=p["io"],
@@ -98,11 +101,11 @@ def test_picks_land_on_parts_with_the_base_moved_and_turned(moved):
     # WHERE answers in the cell frame, HERE in the robot's own (turned) frame
     assert wait_job(ctrl.robot.move_safe()).ok
     wait_for(lambda: ctrl.position.pose() == Pose(*plant.cell.robot.safe_mm), 2.0, "safe")
-    here = _ask(emu.ports["position"], "HERE").split()
+    here = ctrl.clients["position"].call("HERE")
     bx, by = MOVED["base_mm"]
     sx, sy = plant.cell.robot.safe_mm            # Rot(-90) (safe - base)
-    assert [float(v) for v in here[1:3]] == [pytest.approx(sy - by, abs=1e-3),
-                                             pytest.approx(-(sx - bx), abs=1e-3)]
+    assert [float(v) for v in here[:2]] == [pytest.approx(sy - by, abs=1e-3),
+                                            pytest.approx(-(sx - bx), abs=1e-3)]
 
 
 def test_a_target_outside_the_reach_is_refused_with_one_line(moved):
@@ -136,27 +139,78 @@ def test_a_wrong_frame_misses_or_is_refused_never_feeds_silently():
         _close(plant, emu, ctrl)
 
 
+def _part_at_rest_in_reach(plant: Plant) -> PickTarget:
+    """Stop the belts once a lone pickable part is well inside the reach (tests only:
+    from the ground truth); a pick of it that does not track the belt."""
+    def find():
+        with plant.lock:
+            rows = plant.world.truth(plant.world.now())
+        for r in rows:
+            alone = all(math.hypot(o["x_mm"] - r["x_mm"], o["y_mm"] - r["y_mm"]) > 70
+                        for o in rows if o["id"] != r["id"])
+            if r["pickable"] and r["singulated"] and alone and 850 <= r["x_mm"] <= 1000 \
+                    and 150 <= r["y_mm"] <= 450:
+                return r
+        return None
+
+    wait_for(find, 30.0, "a part in reach")
+    plant.jog("A", 0)
+    plant.jog("B", 0)
+    wait_for(lambda: not plant.in_motion("B"), 10.0, "the belt at rest")
+    r = wait_for(find, 5.0, "the part at rest")
+    return PickTarget(part_id=r["id"], x_mm=r["x_mm"], y_mm=r["y_mm"],
+                      angle_deg=r["angle_deg"], latch=0, tracking=False)
+
+
+def test_without_the_check_between_motions_the_descent_runs_after_a_stop(tmp_path):
+    """It bites: the programs as they were (APPROS, then MOVES queued at once) descend
+    after the STOP, which BRAKEs the approach only."""
+    shutil.copytree(VPLUS_DIR, tmp_path / "vplus")
+    path = tmp_path / "vplus" / "motion_server.v2"
+    text = path.read_text()
+    guarded = """        APPROS cell.frame:part.loc, approach
+        CALL motion.halted(halted)  ; STOP: no descent
+        IF NOT halted THEN
+            MOVES cell.frame:part.loc
+        END"""
+    assert guarded in text
+    path.write_text(text.replace(guarded, """        APPROS cell.frame:part.loc, approach
+        MOVES cell.frame:part.loc"""))
+    kinds = _stop_during_a_pick(tmp_path / "vplus", expect_stop=False)
+    assert "moves" in kinds                                    # the descent ran anyway
+
+
 def test_stop_during_a_pick_stops_before_the_descent():
-    plant, emu, ctrl, scenario = _rig()
+    kinds = _stop_during_a_pick(VPLUS_DIR, expect_stop=True)
+    assert kinds[-1] == "appros" and "moves" not in kinds      # no descent was started
+
+
+def _stop_during_a_pick(programs, expect_stop: bool) -> list[str]:
+    plant, emu, ctrl, scenario = _rig(programs=programs)
     try:
+        target = _part_at_rest_in_reach(plant)
+        assert wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 60.0, 0.0))).ok   # up high
         assert wait_job(ctrl.robot.set_speed(10)).ok          # a slow approach
-        target = pickable_target(plant, timeout=20.0)
         job = ctrl.robot.pick(target)
         arm = emu.rt.arm
         wait_for(lambda: arm.motion is not None and arm.motion.kind == "appros"
                  and arm.busy(), 10.0, "the approach under way")
         assert wait_job(ctrl.robot.stop()).ok
         wait_job(job, 15.0)
-        assert isinstance(job.error, VplusError) and job.error.code == -9006
         kinds = [k for k, _ in arm.log]
-        assert kinds[-1] == "appros" and "moves" not in kinds   # no descent was started
+        if not expect_stop:
+            return kinds
+        assert isinstance(job.error, VplusError) and job.error.code == -9006
         approach = plant.cell.robot.approach_mm
         assert all(z >= approach - 1e-6 for _, (_, _, z) in arm.log)
         time.sleep(0.05)                                       # the arm stays where it is
-        assert arm.cell_pose()[2] > approach / 2               # never reached the belt z
+        x, y, z, _ = arm.cell_pose()
+        assert z >= approach - 1e-6                            # never went below the approach
+        assert math.hypot(x - target.x_mm, y - target.y_mm) > 5.0   # stopped on its way
         with plant.lock:
             assert plant.world.gripper is None
         assert wait_job(ctrl.robot.set_speed(100)).ok
         assert wait_job(ctrl.robot.move_safe()).ok             # the next motion runs
+        return kinds
     finally:
         _close(plant, emu, ctrl)
