@@ -18,7 +18,7 @@ from feeder_bt.clock import RealClock
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.plant import Plant
 from feeder_bt.emulators.vplus_check import VPLUS_DIR
-from feeder_bt.errors import EnvelopeError, MissedGrab
+from feeder_bt.errors import EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.hal.adept import AdeptController, VplusError
 from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.scenario import load_scenario
@@ -212,5 +212,58 @@ def _stop_during_a_pick(programs, expect_stop: bool) -> list[str]:
         assert wait_job(ctrl.robot.set_speed(100)).ok
         assert wait_job(ctrl.robot.move_safe()).ok             # the next motion runs
         return kinds
+    finally:
+        _close(plant, emu, ctrl)
+
+
+@pytest.mark.parametrize("active_low", [False, True])
+def test_the_estop_polarity_comes_from_the_cell_file(active_low):
+    """``io.estop`` with ``active_low``: the driver sends ESTOP -1001, the V+ program
+    tests SIG(-1001); a motion is refused (-9007) exactly while the e-stop is active."""
+    from feeder_bt.hal.factory import adept_estop
+
+    scenario, cell = load_scenario("scenarios/lenses.yaml")
+    io = dict(cell.io)
+    io["estop"] = dataclasses.replace(io["estop"], active_low=active_low)
+    cell = dataclasses.replace(cell, io=io)
+    assert adept_estop(cell) == (-1001 if active_low else 1001)
+    plant = Plant(scenario, cell, seed=1).start()
+    emu = AdeptEmulator(plant).start()
+    p = emu.ports
+    spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
+                               position_port=p["position"], io_port=p["io"],
+                               notify_port=p["notify"], timeout_s=2.0)
+    ctrl = AdeptController(spec, RealClock(), robot=cell.robot, estop=adept_estop(cell))
+    try:
+        assert ("motion", f"ESTOP {adept_estop(cell)}") in emu.requests
+        assert wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 0.0, 0.0))).ok
+        plant.set_signal("estop", True)                       # pressed
+        job = wait_job(ctrl.robot.move_safe())
+        assert isinstance(job.error, ServoTimeout) and job.error.code == -9007
+        plant.set_signal("estop", False)                      # released, power back on
+        assert emu.operator_reset()
+        assert wait_job(ctrl.robot.recover()).ok
+        assert wait_job(ctrl.robot.move_safe()).ok
+    finally:
+        _close(plant, emu, ctrl)
+
+
+def test_without_the_polarity_an_active_low_estop_blocks_every_motion():
+    """It bites: an active-low e-stop input read as active high (no ESTOP sent) refuses
+    motion while the e-stop is released."""
+    scenario, cell = load_scenario("scenarios/lenses.yaml")
+    io = dict(cell.io)
+    io["estop"] = dataclasses.replace(io["estop"], active_low=True)
+    cell = dataclasses.replace(cell, io=io)
+    plant = Plant(scenario, cell, seed=1).start()
+    emu = AdeptEmulator(plant).start()
+    p = emu.ports
+    spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
+                               position_port=p["position"], io_port=p["io"],
+                               notify_port=p["notify"], timeout_s=2.0)
+    ctrl = AdeptController(spec, RealClock(), robot=cell.robot)      # no ESTOP
+    try:
+        job = wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 0.0, 0.0)))
+        assert job.error is not None and job.error.code == -9007
     finally:
         _close(plant, emu, ctrl)
