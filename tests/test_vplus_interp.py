@@ -269,3 +269,48 @@ def test_brake_from_another_task_stops_the_motion_where_it_is():
     assert result.get("done")
     x = g(rt, "x.there")
     assert -270.0 + 1.0 < x < 0.0 + 1e-6 and not math.isclose(x, -270.0)
+
+
+def test_belt_locations_move_with_the_belt_count():
+    rt = make_runtime("""
+.PROGRAM main()
+    SET nom = INVERSE(TRANS(1370, 305, 0, 0, 0, 0))
+    DEFBELT %b = nom, 1, 16, 0.05
+    SETBELT %b = BELT(%b, 0)-2000
+    SET loc = TRANS(800, 300, 0, 0, 180, 0)
+    SET w = %b:loc
+    wx = DX(w)
+    wy = DY(w)
+.END
+""")
+    run("", rt=rt)
+    # 2000 counts at 0.05 mm per count: 100 mm along the belt, in robot world
+    assert g(rt, "wx") == pytest.approx(800 + 100 - 1370, abs=1e-6)
+    assert g(rt, "wy") == pytest.approx(300 - 305, abs=1e-6)
+
+
+def test_execute_starts_a_task_that_shares_global_memory():
+    rt = make_runtime("""
+.PROGRAM main()
+    flag = 0
+    EXECUTE 1 helper(41)
+    t0 = TIMER(-3)
+    WHILE flag == 0 DO
+        WAIT
+    END
+.END
+
+.PROGRAM helper(n)
+    flag = n+1
+.END
+""")
+    done = threading.Event()
+
+    def go():
+        run("", rt=rt)
+        done.set()
+
+    threading.Thread(target=go, daemon=True).start()
+    assert done.wait(30)
+    assert g(rt, "flag") == 42 and rt.tasks[1].number == 1
+    rt.stop()
