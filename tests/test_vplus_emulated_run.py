@@ -40,3 +40,25 @@ def test_moved_and_turned_base_feeds_like_the_simulated_cell(tmp_path):
     got, want = emulated["parts_per_minute"], simulated["parts_per_minute"]
     assert want > 20
     assert abs(got - want) <= 0.25 * want, (got, want)
+
+
+@pytest.mark.soak
+def test_a_wrong_frame_does_not_feed_silently(monkeypatch):
+    """The arm is truly turned 90 degrees, the cell file says 0: every pick misses (or is
+    refused), each is counted, nothing is retrieved, the cell stops with a fault."""
+    import feeder_bt.emulators.adept as adept
+
+    real = adept.AdeptEmulator.__init__
+
+    def turned(self, plant, *args, **kw):
+        bx, by = plant.cell.robot.base_mm
+        kw["true_base"] = (bx, by, plant.cell.robot.base_deg + 90.0)
+        real(self, plant, *args, **kw)
+
+    monkeypatch.setattr(adept.AdeptEmulator, "__init__", turned)
+    report = run_job(RunOptions(scenario="scenarios/lenses.yaml", hal="emulated",
+                                duration=45.0, seed=1, view="none", db=None))
+    parts = report["parts"]
+    assert sum(parts["retrieved"].values()) == 0 and parts["lost"] == 0
+    assert parts["missed"] + parts["unreachable"] >= 3
+    assert report["state"] == "FAULT"
