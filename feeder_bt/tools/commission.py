@@ -280,7 +280,8 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
         def connect() -> dict[str, Any]:
             nonlocal adept
             ctl.ready.result(cell.galil.timeout_s * 4 + 5)
-            adept = AdeptController(cell.adept, clock)
+            adept = AdeptController(cell.adept, clock, robot=cell.robot,
+                                    counts_per_mm=cell.encoder.counts_per_mm)
             return {"host": cell.adept.host, "galil": cell.galil.url}
         if not _try(report, "adept.connect", connect):
             return
