@@ -345,3 +345,18 @@ def test_a_variable_a_call_or_read_fills_counts_as_given(cp):
     cp.insert(MS, "do.place", "CALL next.word($args, $word)")
     cp.insert(MS, "do.place", "w = LEN($word)")
     assert cp.refused() == set()
+
+
+def test_a_step_marked_nowait_may_run_while_the_arm_moves_and_only_it(cp):
+    # the shipped do.pick reads the belt count "now" for its window check, marked @nowait;
+    # the mark taken off, the same step is refused
+    at = cp.find(MS, "do.pick", lambda c: c.startswith("CALL belt.moved(BELT("))
+    lines = cp.lines(MS)
+    assert "@nowait" in lines[at]
+    assert not [f for f in check_dir(cp.dir) if f.rule == "forward-processing"]
+    lines[at] = lines[at].split(";", 1)[0].rstrip()
+    cp.write(MS, lines)
+    # refused where the arm is still moving: the server loop's next request comes while
+    # the last PLACE's departure runs
+    found = [f for f in check_dir(cp.dir) if f.rule == "forward-processing"]
+    assert found and "must wait for the arm" in found[0].message

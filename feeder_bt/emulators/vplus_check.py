@@ -63,7 +63,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
-from .vplus_flow import FlowProgram, ForwardChecker
+from .vplus_flow import NOWAIT, FlowProgram, ForwardChecker
 from .vplus_vars import unassigned
 from .vplus_words import INSTRUCTIONS, reserved
 
@@ -186,6 +186,8 @@ class Checker:
                 continue
             if code:
                 self._statement(file, n, code, program, stack)
+                if NOWAIT in raw[len(_code(raw)):] and program.flow is not None:
+                    program.flow.nowait.add(n)
         if program is not None:
             self._add(file, program.line, "structure", f"{program.name} has no .END")
 

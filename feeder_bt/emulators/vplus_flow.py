@@ -16,6 +16,10 @@ signal it is cannot be told statically, so every SIGNAL), a ``BELT(...)`` functi
 a ``HERE`` / ``#PHERE`` read. Such a statement is refused when, on some path through the
 program, a motion instruction comes before it with no ``BREAK`` between.
 
+A step whose comment says ``@nowait`` (with the reason) is meant to run while the arm
+moves (reading the belt count now, not at the grip; letting go of a vacuum that gripped
+nothing as the arm leaves) and is not refused: the marker makes the intent reviewable.
+
 Paths follow the control structures: IF/ELSE and CASE branches start from the state before
 the branch and are merged at END (a motion on either branch counts); a branch that ends in
 RETURN, RETURNE, HALT, STOP or GOTO does not reach the END. A CALL takes the state its
@@ -41,6 +45,7 @@ _CALL = re.compile(r"\bCALLS?\s+([A-Za-z][\w.]*)")
 _BELT_READ = re.compile(r"\bBELT\s*\(")
 _HERE_READ = re.compile(r"(?<![\w.$])(?:HERE|#PHERE)(?![\w.])")
 _DEAD_ENDS = {"RETURN", "RETURNE", "HALT", "STOP", "GOTO"}
+NOWAIT = "@nowait"      # in a step's comment: it is meant to run while the arm moves
 
 
 @dataclass
@@ -50,6 +55,8 @@ class FlowProgram:
     file: str
     steps: list[tuple[int, str]] = field(default_factory=list)
     params: list[str] = field(default_factory=list)
+    nowait: set[int] = field(default_factory=set)   # lines marked ``@nowait``: meant to
+                                                     # run while the arm moves
 
 
 @dataclass
@@ -159,7 +166,7 @@ class ForwardChecker:
             if dead:
                 continue
             # ---- what this step needs and does
-            need = waits_for_arm(code)
+            need = None if line in prog.nowait else waits_for_arm(code)
             if need and state is not None:
                 found.append((prog.file, line, self._message(need, state)))
             if head in MOTION:
