@@ -73,7 +73,7 @@ class Arm:
 
     def here(self, t: float | None = None) -> Trans:
         t = self.rt.now() if t is None else t
-        count = self.rt.robot_count()
+        count = self.rt.track_count()
         m = self.motion
         if m is None or t >= m.t1:
             return self._at(self.loc, count)
@@ -117,9 +117,9 @@ class Arm:
             self.path_mm = 0.0
         else:
             for _ in range(4):                 # intercept a tracked target
-                end = self._at(target, self.rt.robot_count(now + duration))
+                end = self._at(target, self.rt.track_count(now + duration))
                 duration = self._time(start, end, before)
-            end = self._at(target, self.rt.robot_count(now + duration))
+            end = self._at(target, self.rt.track_count(now + duration))
             if not self.in_reach(end) and isinstance(target, BeltLoc):
                 duration, end = self._wait_for_reach(target, now, duration, end)
             if not self.in_reach(end):         # where the arm meets the target
@@ -142,7 +142,7 @@ class Arm:
         t = now + duration
         while t < now + REACH_WAIT_S:
             t += 0.01
-            loc = self._at(target, self.rt.robot_count(t))
+            loc = self._at(target, self.rt.track_count(t))
             if self.in_reach(loc):
                 return t - now, loc
         return duration, end
@@ -190,7 +190,7 @@ class Arm:
             self._post(VError(ERR_STALLED, "*Motor stalled*"))
         if isinstance(self.loc, BeltLoc) and not self.busy(now):   # tracking, arrived
             bl = self.loc
-            count = self.rt.robot_count()
+            count = self.rt.track_count()
             past = bl.belt.window is not None and bl.belt_x(count) > bl.belt.window[1]
             if past or not self.in_reach(bl.at(count)):
                 self.brake()

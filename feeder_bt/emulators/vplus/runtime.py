@@ -126,8 +126,20 @@ class Runtime:
         return self.plant.world.robot_model.spec
 
     def robot_count(self, t: float | None = None) -> int:
+        """The belt channel as BELT() reads it: the sample of the current cycle, held."""
         with self.plant.lock:
             count = self.plant.world.robot_count(t)
+        return self._directed(count)
+
+    def track_count(self, t: float | None = None) -> int:
+        """The belt count the arm's tracking follows (the held sample carried forward by
+        the averaged belt speed: the world's ``robot_track_count``)."""
+        with self.plant.lock:
+            world = self.plant.world
+            count = world.robot_track_count(world.now() if t is None else t)
+        return self._directed(count)
+
+    def _directed(self, count: int) -> int:
         d = self.belt_direction
         return ((count * d + (1 << 23)) % (1 << 24)) - (1 << 23)
 
@@ -203,7 +215,7 @@ class Runtime:
 
     def fixed(self, v: Any) -> Trans:
         if isinstance(v, BeltLoc):
-            return v.at(self.robot_count())
+            return v.at(self.track_count())
         if not isinstance(v, Trans):
             raise VError(-401, "not a transformation")
         return v
@@ -251,7 +263,7 @@ class Runtime:
         ``time`` s from now (negative: outside; NOT CONFIRMED: V+'s exact value)."""
         if not isinstance(loc, BeltLoc) or loc.belt.window is None:
             return 1.0
-        x = loc.belt_x(self.robot_count(self.now() + lead))
+        x = loc.belt_x(self.track_count(self.now() + lead))
         up, down = loc.belt.window
         return min(x - up, down - x)
 
