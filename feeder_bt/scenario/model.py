@@ -181,6 +181,14 @@ class CameraCalibration:
     origin_mm: tuple[float, float] = (80.0, -15.0)
     mm_per_px: float = 1.0
     rotation_deg: float = 0.0
+    # the lens (``feeder calibrate camera`` with several views): focal lengths and principal
+    # point in px, and OpenCV's distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]);
+    # pixels are undistorted before they are mapped to the belt
+    intrinsics: tuple[float, float, float, float] | None = None
+    dist: list[float] = field(default_factory=list)
+    # undistorted pixel -> belt mm as a 3x3 homography, row by row (a tilted camera); when
+    # set it replaces the similarity above, which is then its nearest similarity (for scale)
+    homography: list[float] | None = None
 
 
 @dataclass
