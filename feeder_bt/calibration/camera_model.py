@@ -112,7 +112,9 @@ def calibrate_camera_views(images: Sequence[tuple[str, np.ndarray]], target: Tar
         h, w = np.asarray(first).shape[:2]
         lens = calibrate_views(views, target, (w, h), model)
         rejected = rejected + lens.dropped
-        belt = fit_belt_plane(px, mm, lens)
+        belt = fit_belt_plane(px, mm, lens)   # a new lens: the old homography no prior
     else:
-        belt = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist)
+        belt = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist,
+                              prior=nominal.homography)
     return CameraResult(belt.calibration, belt, lens, rejected, note, first=first_name)
+

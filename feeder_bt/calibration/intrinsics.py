@@ -8,9 +8,9 @@ with each view's reprojection error and the model's uncertainty (one standard de
 each intrinsic, from the Jacobian at the solution). A view whose error is far above the
 others' (``OUTLIER_FACTOR`` times their median and over ``OUTLIER_PX``) is dropped, the worst
 first, the model refitted, and the report says so. Nothing is held fixed but the skew (0)
-and ``k3`` (0) with fewer than ``FULL_VIEWS`` views or when it lowers the rms by no more
-than ``K3_GAIN``: a sixth-order term the views do not need bends the model wildly where
-no view reached (in the window's corners).
+and ``k3`` (0) with fewer than ``FULL_VIEWS`` views; ``k3``, then ``k2``, are held at 0 too
+when freeing them lowers the rms by no more than ``K3_GAIN``: a higher-order term the
+views do not need bends the model wildly where no view reached (the window's corners).
 
 ``fit_belt_plane`` maps the belt: the pixels of the target lying at a known pose, undistorted
 by the model (``cv2.undistortPoints``, back to pixel units), to belt millimetres by a
@@ -107,14 +107,17 @@ _STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", 
 
 
 def _fit(views: list[View], target: Target, size: tuple[int, int], rational: bool,
-         fix_k3: bool = False):
+         fixed: int = 0):
+    """One ``calibrateCameraExtended``; ``fixed``: 1 holds k3 at 0, 2 k2 and k3."""
     board = target.points_board().reshape(-1, 2)
     obj = [np.column_stack([board[v.index], np.zeros(len(v.index))]).astype(np.float32)
            for v in views]
     img = [v.px.astype(np.float32).reshape(-1, 1, 2) for v in views]
     flags = cv2.CALIB_RATIONAL_MODEL if rational else 0
-    if len(views) < FULL_VIEWS or fix_k3:
+    if len(views) < FULL_VIEWS or fixed >= 1:
         flags |= cv2.CALIB_FIX_K3
+    if fixed >= 2:
+        flags |= cv2.CALIB_FIX_K2
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     try:
         rms, k, dist, _, _, std, _, per_view = cv2.calibrateCameraExtended(
@@ -140,10 +143,16 @@ def calibrate_views(views: list[View], target: Target, size: tuple[int, int],
     while True:
         rational = model == "rational"
         rms, k, dist, std, per = _fit(views, target, size, rational)
-        if not rational and len(views) >= FULL_VIEWS:
-            r3 = _fit(views, target, size, False, fix_k3=True)
-            if r3[0] <= K3_GAIN * rms:        # k3 explains nothing: it would only bend
-                rms, k, dist, std, per = r3     # the model where no view reached
+        if not rational:
+            # a term the views do not need would only bend the model where no view reached
+            if len(views) >= FULL_VIEWS:
+                r3 = _fit(views, target, size, False, fixed=1)
+                if r3[0] <= K3_GAIN * rms:
+                    rms, k, dist, std, per = r3
+            if not dist[4]:
+                r2 = _fit(views, target, size, False, fixed=2)
+                if r2[0] <= K3_GAIN * rms:
+                    rms, k, dist, std, per = r2
         if model == "auto" and len(views) >= FULL_VIEWS + 3:
             r2 = _fit(views, target, size, True)
             if r2[0] < RATIONAL_GAIN * rms:
@@ -180,12 +189,23 @@ class BeltPlane:
     similarity_rms_mm: float
 
 
+PRIOR_KEEP = 1.25          # a one-view fit keeps the present tilt unless a new one fits ...
+PRIOR_KEEP_MM = 0.02       # ... this much better (ratio, and mm)
+
+
 def fit_belt_plane(px: np.ndarray, mm: np.ndarray, lens: CameraModel | None = None,
                    intrinsics: tuple[float, float, float, float] | None = None,
-                   dist: Sequence[float] = ()) -> BeltPlane:
+                   dist: Sequence[float] = (), prior: Sequence[float] | None = None
+                   ) -> BeltPlane:
     """The belt plane from one view of the target at a known pose: ``px`` (N, 2) pixels and
     ``mm`` (N, 2) belt points; the lens from ``lens`` (or ``intrinsics``/``dist``, a lens
-    calibrated before), none: the raw pixels."""
+    calibrated before), none: the raw pixels.
+
+    ``prior`` (the present calibration's homography, same lens): the camera has probably
+    only moved or turned on its mount, so the present homography moved by a belt-frame
+    similarity is tried too and kept unless a fresh homography fits clearly better
+    (``PRIOR_KEEP``): a small target fixes the 8 numbers of a homography poorly towards
+    the window's corners, a similarity's 4 well."""
     px = np.asarray(px, dtype=float).reshape(-1, 2)
     mm = np.asarray(mm, dtype=float).reshape(-1, 2)
     if lens is not None:
@@ -203,11 +223,32 @@ def fit_belt_plane(px: np.ndarray, mm: np.ndarray, lens: CameraModel | None = No
     h = h / h[2, 2]
     res = cv2.perspectiveTransform(und.reshape(-1, 1, 2), h).reshape(-1, 2) - mm
     rms, mx = rms_max(res)
+    if prior is not None:
+        h0 = np.array(prior, dtype=float).reshape(3, 3)
+        q = cv2.perspectiveTransform(und.reshape(-1, 1, 2), h0).reshape(-1, 2)
+        a = _similarity(q, mm)
+        hp = a @ h0
+        hp /= hp[2, 2]
+        res_p = cv2.perspectiveTransform(und.reshape(-1, 1, 2), hp).reshape(-1, 2) - mm
+        rms_p, mx_p = rms_max(res_p)
+        if rms_p <= max(PRIOR_KEEP * rms, rms + PRIOR_KEEP_MM):
+            h, rms, mx = hp, rms_p, mx_p
     s = sim.calibration
     cal = CameraCalibration(origin_mm=s.origin_mm, mm_per_px=s.mm_per_px,
                             rotation_deg=s.rotation_deg, intrinsics=base.intrinsics,
                             dist=list(base.dist), homography=[float(v) for v in h.ravel()])
     return BeltPlane(cal, rms, mx, len(px), sim.rms_mm)
+
+
+def _similarity(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares rotation + scale + offset (no reflection) taking ``src`` to ``dst``, 3x3."""
+    n = len(src)
+    x, y = src[:, 0], src[:, 1]
+    one, zero = np.ones(n), np.zeros(n)
+    a_mat = np.vstack([np.column_stack([x, -y, one, zero]), np.column_stack([y, x, zero, one])])
+    (a, b, tx, ty), *_ = np.linalg.lstsq(a_mat, np.concatenate([dst[:, 0], dst[:, 1]]),
+                                         rcond=None)
+    return np.array([[a, -b, tx], [b, a, ty], [0.0, 0.0, 1.0]])
 
 
 def nearest_similarity_scale(cal: CameraCalibration) -> float:

@@ -271,8 +271,9 @@ def _camera(args: argparse.Namespace, cell: CellSpec) -> int:
     if refused and not args.force:
         raise CalibrationRefused(f"calibrate camera: refused, nothing written: {refused}")
     values = calibration_values(result.calibration)
-    values["residual"] = {k: v for k, v in result.as_dict().items()
-                          if k not in ("calibration",)}
+    values["residual_mm"] = {"rms": round(result.belt.rms_mm, 4),
+                             "max": round(result.belt.max_mm, 4)}
+    values["record"] = {k: v for k, v in result.as_dict().items() if k != "calibration"}
     _write(args, cell, "camera", values, default=calibration_path(cell),
            quiet=args.json)
     return 0
@@ -323,17 +324,19 @@ def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
     return shifted(nominal, (dx, dy), scale_pct, deg)
 
 
-def held_poses(n: int, seed: int) -> list[tuple[float, float, float, float, float, float]]:
+def held_poses(n: int, seed: int, room: float = 0.04
+               ) -> list[tuple[float, float, float, float, float, float]]:
     """``n`` views of the target held for a lens calibration: (dx, dy in the window's
     share, angle, tilt about x, tilt about y, lift mm): tilted 15-30 degrees every way
     round (a flat target square to the camera cannot tell the focal length) and kept in
-    view (the cell's board nearly fills the window)."""
+    view: ``room`` is how far (a share of the window) the target's centre may go from the
+    window's, so a small target is moved round the window and a large one kept in it."""
     rng = np.random.default_rng([seed, 77])
     out = []
     for i in range(n):
         a = 2 * math.pi * i / max(n, 1)
         tilt = 15.0 + 15.0 * rng.random()
-        out.append((0.04 * math.cos(a), 0.04 * math.sin(a), float(rng.uniform(-5, 5)),
+        out.append((room * math.cos(a), room * math.sin(a), float(rng.uniform(-5, 5)),
                     tilt * math.cos(a + 0.5), tilt * math.sin(a + 0.5),
                     float(rng.uniform(0, 40))))
     return out
@@ -357,7 +360,10 @@ def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCa
                                "0 or sim: {ideal: true}): nothing to calibrate")
     w, h = cell.camera.width_px, cell.camera.height_px
     span = w * cell.camera.calibration.mm_per_px
-    for i, (du, dv, ang, tx, ty, lift) in enumerate(held_poses(views, seed)):
+    board = target.points_board().reshape(-1, 2)
+    size = (np.ptp(board, axis=0) + 2 * target.pitch_mm) / cell.camera.calibration.mm_per_px
+    room = float(max(0.04, 0.45 * (1.0 - max(size[0] / w, size[1] / h))))
+    for i, (du, dv, ang, tx, ty, lift) in enumerate(held_poses(views, seed, room)):
         p = TargetPose(pose.x_mm + dv * span * h / w, pose.y_mm + du * span, pose.angle_deg + ang)
         camera.hold(target, p, (tx, ty), lift)
         out.append((f"held{i + 1:02d}", camera.grab().result.image))

@@ -85,6 +85,16 @@ class Calibration:
         """Whether the mapping is the plain similarity (no lens, no homography)."""
         return self._k is None and self._h is None
 
+    def local_scale(self, uv: np.ndarray) -> np.ndarray:
+        """mm per px at each of ``(N, 2)`` pixels: the square root of the mapping's area
+        scale there (``mm_per_px`` everywhere for a similarity)."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if self.linear or len(uv) == 0:
+            return np.full(len(uv), self._s)
+        p = self.px_to_mm(np.vstack([uv, uv + [1.0, 0.0], uv + [0.0, 1.0]])).reshape(3, -1, 2)
+        du, dv = p[1] - p[0], p[2] - p[0]
+        return np.sqrt(np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]))
+
     def undistort(self, uv: np.ndarray) -> np.ndarray:
         """``(N, 2)`` pixels -> where an ideal (distortion-free) lens would have put them."""
         uv = np.asarray(uv, dtype=float).reshape(-1, 2)

@@ -44,12 +44,14 @@ def true_calibration(cell: CellSpec, residual: bool = True) -> CameraCalibration
     """How the simulated camera really maps: ``camera.sim_truth`` (the camera as mounted)
     or the cell's calibration; a camera given as a similarity only gets the lens and tilt
     of ``sim.lens_*``/``sim.tilt_deg`` (``lensed``); then, with ``residual``, the error any
-    real calibration leaves (``sim.calib_*``). Only the renderer may see this."""
+    real calibration leaves (``sim.calib_*``). ``sim: {ideal: true}``: exactly the cell's
+    calibration when that is a full one (with a lens), else ``sim_truth`` or it as before.
+    Only the renderer may see this."""
     cam = cell.camera
     base = cam.sim_truth or cam.calibration
     s = cell.sim
-    if s.ideal:
-        return base
+    if s.ideal:                     # no lens error: the camera is as fully calibrated
+        return cam.calibration if cam.calibration.intrinsics is not None else base
     if base.intrinsics is None and base.homography is None and s.lens_focal_px > 0:
         base = lensed(base, cam.width_px, cam.height_px, s.lens_focal_px,
                       (s.lens_k1, s.lens_k2), s.tilt_deg)
