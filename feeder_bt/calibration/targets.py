@@ -138,6 +138,8 @@ SUBPIX_FRACTION = 0.2        # chessboard: cornerSubPix half-window, share of a 
 SUBPIX_MIN, SUBPIX_MAX = 2, 11
 GEOMETRY_PX = 2.0            # a point this far (px) ...
 GEOMETRY_PITCH = 0.1         # ... or this share of the pitch from where its neighbours put it
+SHARPNESS_PX = 6.0           # chessboard: edges rising over more px than this ...
+SHARPNESS_SHARE = 0.15       # ... and this share of a square: blurred
 
 
 def _grey(image: np.ndarray) -> np.ndarray:
@@ -200,11 +202,31 @@ def detect_points(image: np.ndarray, target: Target, px_per_mm: float | None = N
     if not found or pts is None:
         raise CalibrationError(f"no {target.describe()} found in the image: is the whole "
                                "target in view, flat, lit and of that size?")
+    if check and target.kind == "chessboard":
+        _check_sharpness(img, size, pts)
     pts = np.asarray(pts, dtype=float).reshape(-1, 2)
     index = np.arange(len(pts))
     if check:
         _check_geometry(pts, index, target)
     return pts, index
+
+
+def _check_sharpness(img: np.ndarray, size: tuple[int, int], pts: np.ndarray) -> None:
+    """Refuse a blurred chessboard: OpenCV's ``estimateChessboardSharpness`` gives the
+    average width (px) over which the board's edges rise; sharp photos give 2.5-3.3 px
+    (OpenCV's 9x6 samples), a Gaussian blur of sigma 2 px about 6."""
+    try:
+        sharp = float(cv2.estimateChessboardSharpness(img, size, np.asarray(
+            pts, dtype=np.float32).reshape(-1, 1, 2))[0][0])
+    except cv2.error:
+        return
+    grid = np.asarray(pts, dtype=float).reshape(size[1], size[0], 2)
+    side = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=-1)))
+    limit = max(SHARPNESS_PX, SHARPNESS_SHARE * side)
+    if sharp > limit:
+        raise CalibrationError(f"the chessboard is blurred: its edges rise over {sharp:.1f} px "
+                               f"(limit {limit:.1f}): focus the lens, hold the board still or "
+                               "shorten the exposure")
 
 
 def subpix_window(grid: np.ndarray) -> int:

@@ -36,7 +36,6 @@ from ..calibration import (
     CameraFit,
     ToolFit,
     belt_procedure,
-    calibrate_camera_image,
     camera_procedure,
     sim_waiter,
     tool_procedure,
@@ -53,7 +52,7 @@ from ..calibration.camera_model import (
 from ..calibration.common import CalibrationError
 from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from ..calibration.files import calibration_path, write_calibration_file
-from ..calibration.lens import LensFit, fit_lens
+from ..calibration.lens import LensFit
 from ..calibration.targets import parse_board
 from ..clock import SimClock
 from ..errors import FeederError
