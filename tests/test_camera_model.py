@@ -189,8 +189,8 @@ def _grid_image(target: Target, seed: int = 1) -> tuple[np.ndarray, TargetPose]:
 
 @pytest.mark.parametrize("kind", ["chessboard", "acircles"])
 def test_a_point_off_the_board_geometry_is_refused(kind):
-    """A dot or corner moved 6 px (a spurious blob taken for it, a wrong corner): the view
-    is refused, saying which point and by how much."""
+    """A dot or corner moved 10 px, a quarter of the pitch (a spurious blob taken for it, a
+    wrong corner): the view is refused, saying which point and by how much."""
     target = DEFAULT_TARGETS[kind]
     img, _ = _grid_image(target)
     px, index = detect_points(img, target)
@@ -201,13 +201,13 @@ def test_a_point_off_the_board_geometry_is_refused(kind):
     if kind == "acircles":
         r = int(0.5 * target.dot_mm / 1.0) + 2
         bad[v - r:v + r + 1, u - r:u + r + 1] = int(np.median(img))   # the dot goes ...
-        cv2.circle(bad, (u + 6, v), int(0.5 * target.dot_mm), 40, -1, cv2.LINE_AA)  # ... over
+        cv2.circle(bad, (u + 10, v), int(0.5 * target.dot_mm), 40, -1, cv2.LINE_AA)  # ... over
     else:
         from feeder_bt.calibration.targets import geometry_error
         moved = px.copy()
-        moved[k] += (6.0, 0.0)
+        moved[k] += (10.0, 0.0)
         worst, at, pitch = geometry_error(moved, index, target)
-        assert at == k and worst > 5.0
+        assert at == k and worst > 8.0
         with pytest.raises(CalibrationError, match=r"do not fit a flat .*px from where its "
                                                    r"neighbours put it"):
             from feeder_bt.calibration.targets import _check_geometry

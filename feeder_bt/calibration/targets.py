@@ -136,8 +136,8 @@ def parse_board(text: str) -> tuple[int, int]:
 
 SUBPIX_FRACTION = 0.2        # chessboard: cornerSubPix half-window, share of a square's side
 SUBPIX_MIN, SUBPIX_MAX = 2, 11
-GEOMETRY_PX = 2.0            # a point this far (px) ...
-GEOMETRY_PITCH = 0.1         # ... or this share of the pitch from where its neighbours put it
+GEOMETRY_PX = 2.0            # a point more than this far (px) ...
+GEOMETRY_PITCH = 0.15        # ... and this share of the pitch from where its neighbours put it
 SHARPNESS_PX = 6.0           # chessboard: edges rising over more px than this ...
 SHARPNESS_SHARE = 0.15       # ... and this share of a square: blurred
 
