@@ -21,7 +21,14 @@ import numpy as np
 from ..scenario.model import CameraCalibration
 from .camera import correspondences
 from .common import CalibrationError
-from .intrinsics import BeltPlane, CameraModel, calibrate_views, find_views, fit_belt_plane
+from .intrinsics import (
+    MIN_VIEWS,
+    BeltPlane,
+    CameraModel,
+    calibrate_views,
+    find_views,
+    fit_belt_plane,
+)
 from .targets import Target
 
 DEFAULT_MAX_RMS_PX = 1.0       # reprojection rms of the lens model over all views
@@ -104,11 +111,19 @@ def calibrate_camera_views(images: Sequence[tuple[str, np.ndarray]], target: Tar
     px_per_mm = 1.0 / nominal.mm_per_px if nominal.mm_per_px > 0 else None
     first_name, first = images[0]
     # the belt view: its points in the belt frame (its reading decided as before)
-    px, mm, note = correspondences(first, target, pose, nominal, prior)
+    try:
+        px, mm, note = correspondences(first, target, pose, nominal, prior)
+    except CalibrationError as e:
+        raise CalibrationError(f"{first_name} (the view on the belt): {e}") from None
     lens = None
     rejected: list[tuple[str, str]] = []
     if len(images) > 1:
         views, rejected = find_views(images, target, px_per_mm)
+        if len(views) < MIN_VIEWS:
+            why = "; ".join(f"{n}: {r}" for n, r in rejected[:2])
+            raise CalibrationError(f"the lens needs at least {MIN_VIEWS} views of the target, "
+                                   f"{len(views)} of {len(images)} usable"
+                                   + (f" ({why})" if why else ""))
         h, w = np.asarray(first).shape[:2]
         lens = calibrate_views(views, target, (w, h), model)
         rejected = rejected + lens.dropped

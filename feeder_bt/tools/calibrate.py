@@ -13,8 +13,10 @@ from saved images of the target.
 
 The target is the cell's ``camera.target`` unless ``--target``/``--board``/``--square`` (and
 ``--dot``, ``--marker``, ``--dictionary``) say otherwise; ``--no-prior`` trusts the stated
-``--pose`` alone (a first calibration, or one far off); several ``--image`` also estimate
-lens distortion (``calibration.lens``).
+``--pose`` alone (a first calibration, or one far off); several ``--image`` (or, on the
+simulated cell, ``--views``) also give the full lens model (``calibration.camera_model``);
+``--json`` prints one JSON object; a result over the cell's limits is refused (exit 3,
+nothing written) unless ``--force``.
 """
 
 from __future__ import annotations
@@ -23,7 +25,6 @@ import argparse
 import dataclasses
 import datetime
 import json
-import math
 import os
 from pathlib import Path
 
@@ -52,7 +53,6 @@ from ..calibration.camera_model import (
 from ..calibration.common import CalibrationError
 from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from ..calibration.files import calibration_path, write_calibration_file
-from ..calibration.lens import LensFit
 from ..calibration.targets import parse_board
 from ..clock import SimClock
 from ..errors import FeederError
@@ -248,6 +248,8 @@ def _camera(args: argparse.Namespace, cell: CellSpec) -> int:
         _need_sim(cell, "camera")
         base = true_camera(cell)                    # the simulated camera's real mapping
         truth = sim_truth(base, *args.sim_truth)
+        from ..hal.sim.target import SIM_LENS_VIEWS
+
         n = args.views if args.views else (SIM_LENS_VIEWS if truth.intrinsics else 0)
         images = sim_images(cell, target, pose, truth, seed=args.seed, views=n,
                             save=args.save_image)
@@ -303,7 +305,13 @@ def _write(args: argparse.Namespace, cell: CellSpec, what: str, values: dict,
 # ------------------------------------------------------------------------------ simulator
 
 
-SIM_LENS_VIEWS = 12            # held views of the target for the simulated lens
+def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCalibration,
+               seed: int = 1, views: int = 0, save: str | None = None
+               ) -> list[tuple[str, np.ndarray]]:
+    """The simulated camera's images of the target (``hal.sim.target.sim_images``)."""
+    from ..hal.sim.target import sim_images as images
+
+    return images(cell, target, pose, truth, seed, views, save)
 
 
 def true_camera(cell: CellSpec) -> CameraCalibration:
@@ -321,52 +329,6 @@ def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
     from ..hal.sim.imperfect import shifted
 
     return shifted(nominal, (dx, dy), scale_pct, deg)
-
-
-def held_poses(n: int, seed: int, room: float = 0.04
-               ) -> list[tuple[float, float, float, float, float, float]]:
-    """``n`` views of the target held for a lens calibration: (dx, dy in the window's
-    share, angle, tilt about x, tilt about y, lift mm): tilted 15-30 degrees every way
-    round (a flat target square to the camera cannot tell the focal length) and kept in
-    view: ``room`` is how far (a share of the window) the target's centre may go from the
-    window's, so a small target is moved round the window and a large one kept in it."""
-    rng = np.random.default_rng([seed, 77])
-    out = []
-    for i in range(n):
-        a = 2 * math.pi * i / max(n, 1)
-        tilt = 15.0 + 15.0 * rng.random()
-        out.append((room * math.cos(a), room * math.sin(a), float(rng.uniform(-5, 5)),
-                    tilt * math.cos(a + 0.5), tilt * math.sin(a + 0.5),
-                    float(rng.uniform(0, 40))))
-    return out
-
-
-def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCalibration,
-               seed: int = 1, views: int = 0, save: str | None = None
-               ) -> list[tuple[str, np.ndarray]]:
-    """The simulated camera's images of the target: lying at ``pose`` on the belt, then
-    ``views`` held over it turned and tilted (for the lens); ``save``: the first to a file."""
-    from ..hal.sim.target import TargetCamera
-
-    camera = TargetCamera(cell.camera, truth, seed=seed)
-    camera.place(target, pose)
-    out = [("belt", camera.grab().result.image)]
-    if save:
-        from .common import write_image
-        write_image(save, out[0][1])
-    if views and truth.intrinsics is None:
-        raise CalibrationError("--views: the simulated camera has no lens (sim.lens_focal_px "
-                               "0 or sim: {ideal: true}): nothing to calibrate")
-    w, h = cell.camera.width_px, cell.camera.height_px
-    span = w * cell.camera.calibration.mm_per_px
-    board = target.points_board().reshape(-1, 2)
-    size = (np.ptp(board, axis=0) + 2 * target.pitch_mm) / cell.camera.calibration.mm_per_px
-    room = float(max(0.04, 0.45 * (1.0 - max(size[0] / w, size[1] / h))))
-    for i, (du, dv, ang, tx, ty, lift) in enumerate(held_poses(views, seed, room)):
-        p = TargetPose(pose.x_mm + dv * span * h / w, pose.y_mm + du * span, pose.angle_deg + ang)
-        camera.hold(target, p, (tx, ty), lift)
-        out.append((f"held{i + 1:02d}", camera.grab().result.image))
-    return out
 
 
 def sim_camera(cell: CellSpec, target, pose: TargetPose,
@@ -553,17 +515,6 @@ def format_result(r: CameraResult, cell: CellSpec, truth: CameraCalibration | No
     if r.note:
         lines.append(f"  note: {r.note}")
     return "\n".join(lines)
-
-
-def format_lens(fit: LensFit, mm_per_px: float) -> str:
-    verdict = ("negligible for the cell's camera model (no distortion)"
-               if fit.max_shift_px < 0.5 else
-               "the cell's camera model has no distortion: positions there are off by up to "
-               "this much")
-    return (f"lens: k1 {fit.k1:.5f}, k2 {fit.k2:.5f} from {fit.views} views, {fit.points} "
-            f"points: reprojection rms {fit.rms_px:.3f} px\n"
-            f"  distortion shifts the views' area by up to {fit.max_shift_px:.2f} px "
-            f"({fit.max_shift_px * mm_per_px:.2f} mm): {verdict}")
 
 
 def format_belt(fit: BeltFit) -> str:

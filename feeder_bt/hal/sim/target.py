@@ -21,9 +21,10 @@ import cv2
 import numpy as np
 
 from ...calibration.camera import Target, TargetPose
+from ...calibration.common import CalibrationError
 from ...calibration.targets import board_rings
 from ...jobs import DoneJob, Job
-from ...scenario.model import CameraCalibration, CameraSpec
+from ...scenario.model import CameraCalibration, CameraSpec, CellSpec
 from ..interfaces import Frame, Pose, RobotPosition
 from .render import Renderer
 from .world import World
@@ -220,3 +221,52 @@ class SimToucher:
 
     def touch_marker(self, rz_robot_deg: float = 0.0) -> Job:
         return self.touch(self.marker_xy(), rz_robot_deg)
+
+
+# ------------------------------------------------------------------ views for the lens
+
+SIM_LENS_VIEWS = 12            # held views of the target for the simulated lens
+
+
+def held_poses(n: int, seed: int, room: float = 0.04
+               ) -> list[tuple[float, float, float, float, float, float]]:
+    """``n`` views of the target held for a lens calibration: (dx, dy in the window's
+    share, angle, tilt about x, tilt about y, lift mm): tilted 15-30 degrees every way
+    round (a flat target square to the camera cannot tell the focal length) and kept in
+    view: ``room`` is how far (a share of the window) the target's centre may go from the
+    window's, so a small target is moved round the window and a large one kept in it."""
+    rng = np.random.default_rng([seed, 77])
+    out = []
+    for i in range(n):
+        a = 2 * math.pi * i / max(n, 1)
+        tilt = 15.0 + 15.0 * rng.random()
+        out.append((room * math.cos(a), room * math.sin(a), float(rng.uniform(-5, 5)),
+                    tilt * math.cos(a + 0.5), tilt * math.sin(a + 0.5),
+                    float(rng.uniform(0, 40))))
+    return out
+
+
+def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCalibration,
+               seed: int = 1, views: int = 0, save: str | None = None
+               ) -> list[tuple[str, np.ndarray]]:
+    """The simulated camera's images of the target: lying at ``pose`` on the belt, then
+    ``views`` held over it turned and tilted (for the lens); ``save``: the first to a file."""
+    camera = TargetCamera(cell.camera, truth, seed=seed)
+    camera.place(target, pose)
+    out = [("belt", camera.grab().result.image)]
+    if save:
+        from ...tools.common import write_image
+        write_image(save, out[0][1])
+    if views and truth.intrinsics is None:
+        raise CalibrationError("--views: the simulated camera has no lens (sim.lens_focal_px "
+                               "0 or sim: {ideal: true}): nothing to calibrate")
+    w, h = cell.camera.width_px, cell.camera.height_px
+    span = w * cell.camera.calibration.mm_per_px
+    board = target.points_board().reshape(-1, 2)
+    size = (np.ptp(board, axis=0) + 2 * target.pitch_mm) / cell.camera.calibration.mm_per_px
+    room = float(max(0.04, 0.45 * (1.0 - max(size[0] / w, size[1] / h))))
+    for i, (du, dv, ang, tx, ty, lift) in enumerate(held_poses(views, seed, room)):
+        p = TargetPose(pose.x_mm + dv * span * h / w, pose.y_mm + du * span, pose.angle_deg + ang)
+        camera.hold(target, p, (tx, ty), lift)
+        out.append((f"held{i + 1:02d}", camera.grab().result.image))
+    return out
