@@ -281,3 +281,18 @@ def test_cell_file_numbers_are_what_calibration_finds(capsys):
     cell = load_cell(SIM_CELL)
     assert window_error_mm(found, cell.camera.calibration, 640, 484) < 0.3
     assert d["sim_window_error_mm"] < 0.3
+
+
+def test_rational_model_when_asked():
+    """--lens-model rational: OpenCV's eight coefficients, the focal length still right."""
+    cell = load_cell(SIM_CELL, calibration_files=False)
+    truth = calibrate.true_camera(cell)
+    cam = cell.camera
+    target = DEFAULT_TARGETS["chessboard"]
+    pose = centred_pose(cam.calibration, cam.width_px, cam.height_px)
+    images = calibrate.sim_images(cell, target, pose, truth, seed=2, views=12)
+    result = calibrate_camera_views(images, target, pose, cam.calibration, model="rational")
+    assert result.lens.rational and len(result.lens.dist) == 8
+    assert abs(result.lens.fx - truth.intrinsics[0]) < 0.01 * truth.intrinsics[0]
+    assert set(result.lens.std) >= {"k4", "k5", "k6"}
+    assert result.refusal() is None

@@ -126,7 +126,8 @@ def _fit(views: list[View], target: Target, size: tuple[int, int], rational: boo
         msg = str(e).strip().splitlines()[-1][:160]
         raise CalibrationError(f"OpenCV could not calibrate from these views ({msg}): "
                                "give views of the target turned and tilted") from None
-    return float(rms), k, dist.ravel(), std.ravel(), per_view.ravel()
+    n = 8 if rational else 5                   # OpenCV may hand back all 14 (zeros)
+    return float(rms), k, dist.ravel()[:n], std.ravel(), per_view.ravel()
 
 
 def calibrate_views(views: list[View], target: Target, size: tuple[int, int],
