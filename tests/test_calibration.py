@@ -228,13 +228,14 @@ def test_cli_writes_the_file_the_cell_names_and_the_cell_uses_it(tmp_path, capsy
     rc = _cli(["calibrate", "camera", str(cell_file), "--sim-truth", "3", "-2", "0.4", "1.5",
                "--write"])
     out = capsys.readouterr().out
-    assert rc == 0 and "residual over 96 points" in out
+    assert rc == 0 and "belt plane over 96 points" in out
     written = tmp_path / "calib" / "camera.yaml"
     assert written.is_file()
     nominal = load_cell(cell_file, calibration_files=False)
     applied = load_cell(cell_file)               # the loader applies the file the cell names
-    truth = calibrate.sim_truth(nominal.camera.calibration, 3.0, -2.0, 0.4, 1.5)
+    truth = calibrate.sim_truth(calibrate.true_camera(nominal), 3.0, -2.0, 0.4, 1.5)
     assert window_error_mm(applied.camera.calibration, truth, 640, 484) < 0.5
+    assert applied.camera.calibration.intrinsics is not None    # the lens, in the file
     assert apply_calibration_file(load_cell(SIM_CELL)).camera.calibration == \
         load_cell(SIM_CELL).camera.calibration
 

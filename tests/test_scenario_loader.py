@@ -332,7 +332,7 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         "retrieve.sequence[1]", ["unknown part 'nut'"]),
     "frame_spacing_too_large": (
         [("frame_spacing_mm: 300", "frame_spacing_mm: 440")], 23, "locate.frame_spacing_mm",
-        ["433.2", "'lens'"]),
+        ["433.1", "'lens'"]),   # 484 px at the calibrated 0.99995 mm/px, less 50.8 mm
     "frame_spacing_not_positive": (
         [("frame_spacing_mm: 300", "frame_spacing_mm: -1")], 23, "locate.frame_spacing_mm",
         ["> 0"]),
@@ -536,7 +536,7 @@ CELL_CASES: dict[str, tuple[list[tuple[str, str]], str, str, list[str]]] = {
         [("robot_start: 8000000", "robot_start: 80000000")], "robot_start:",
         "encoder.robot_start", ["2**robot_bits"]),
     "camera_mm_per_px": (
-        [("mm_per_px: 1.0", "mm_per_px: 0")], "mm_per_px:", "camera.calibration.mm_per_px",
+        [("mm_per_px: 1.0", "mm_per_px: 0")], "mm_per_px:", "camera.sim_truth.mm_per_px",
         ["> 0"]),
     "robot_inner_reach": (
         [("inner_reach_mm: 160", "inner_reach_mm: 700")], "inner_reach_mm:",

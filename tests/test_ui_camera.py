@@ -21,6 +21,7 @@ from uiutil import Client, FakeClock, ServedRig
 from feeder_bt.ui.access import parse_setting
 from feeder_bt.ui.camera import Pacer
 from feeder_bt.ui.users import UsersError
+from feeder_bt.vision.calibration import Calibration
 
 
 @pytest.fixture(scope="module")
@@ -148,9 +149,15 @@ def test_belt_view_is_the_part_queue_moved_by_the_encoder(rig):
     assert belt["robot"] == {"base_mm": list(spec.robot.base_mm),
                              "reach_mm": spec.robot.reach_mm,
                              "inner_reach_mm": spec.robot.inner_reach_mm}
-    xs = sorted({x for x, _ in belt["camera"]})
-    assert xs == [spec.camera.calibration.origin_mm[0] - 0.5,
-                  spec.camera.calibration.origin_mm[0] + spec.camera.height_px - 0.5]
+    # the window's corners through the cell's calibration (a tilted camera with a lens:
+    # not an axis-aligned rectangle)
+    w, h = spec.camera.width_px, spec.camera.height_px
+    corners = Calibration(spec.camera.calibration).px_to_mm(
+        np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]]))
+    assert belt["camera"] == [[round(x, 1), round(y, 1)] for x, y in corners]
+    xs = sorted(x for x, _ in belt["camera"])
+    assert xs[0] == pytest.approx(spec.camera.calibration.origin_mm[0], abs=3.0)
+    assert xs[-1] - xs[0] == pytest.approx(h * spec.camera.calibration.mm_per_px, rel=0.02)
     assert belt["too_far_mm"] == rig.scenario.retrieve.too_far_mm
     # the part being picked is not in the queue any more, and is shown as such
     if belt["picking"] is not None:

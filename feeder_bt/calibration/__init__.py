@@ -1,5 +1,8 @@
 """Guided calibration (thesis 8.2.1.7): camera <-> belt, belt <-> robot, tool offsets.
 
+The camera: ``calibrate_camera_views`` (named images: the lens from several views, the
+belt plane from the first; ``camera_model``), or ``calibrate_camera_image`` for one view.
+
 Pure fitting functions (``fit_camera``, ``fit_belt``, ``fit_tool``) and small procedures
 that drive a cell through the HAL interfaces only, so they run on the simulated cell now
 and on a real cell once its drivers exist. ``files`` reads and writes calibration files.
@@ -16,12 +19,14 @@ from .camera import (
     fit_camera,
     window_error_mm,
 )
+from .camera_model import CameraResult, calibrate_camera_views
 from .common import CalibrationError, sim_waiter
 from .files import apply_calibration_file, read_camera_calibration, write_calibration_file
 from .tool import ToolFit, ToolTouch, fit_tool, tool_procedure
 
 __all__ = [
-    "DEFAULT_TARGETS", "BeltFit", "BeltTouch", "CalibrationError", "CameraFit", "Target",
+    "DEFAULT_TARGETS", "BeltFit", "BeltTouch", "CalibrationError", "CameraFit", "CameraResult",
+    "Target", "calibrate_camera_views",
     "TargetPose", "ToolFit", "ToolTouch", "apply_calibration_file", "belt_procedure",
     "calibrate_camera_image", "camera_procedure", "fit_belt", "fit_camera", "fit_tool",
     "read_camera_calibration", "sim_waiter", "tool_procedure", "window_error_mm",

@@ -91,16 +91,25 @@ class CameraFit:
     affine_rms_mm: float
     homography_rms_mm: float
     hint: str | None = None
+    similarity_rms_mm: float | None = None   # a belt-plane fit: what a similarity leaves
 
     def as_dict(self) -> dict:
         c = self.calibration
         d = {"origin_mm": [round(float(c.origin_mm[0]), 4), round(float(c.origin_mm[1]), 4)],
              "mm_per_px": round(float(c.mm_per_px), 7),
-             "rotation_deg": round(float(c.rotation_deg), 5),
+             "rotation_deg": round(float(c.rotation_deg), 5)}
+        if c.intrinsics is not None:
+            d["intrinsics"] = [round(float(v), 5) for v in c.intrinsics]
+            d["dist"] = [float(f"{v:.9g}") for v in c.dist]
+        if c.homography is not None:
+            d["homography"] = [float(f"{v:.12g}") for v in c.homography]
+        d.update({
              "residual_mm": {"rms": round(self.rms_mm, 4), "max": round(self.max_mm, 4)},
              "points": self.n_points,
              "affine_rms_mm": round(self.affine_rms_mm, 4),
-             "homography_rms_mm": round(self.homography_rms_mm, 4)}
+             "homography_rms_mm": round(self.homography_rms_mm, 4)})
+        if self.similarity_rms_mm is not None:
+            d["similarity_rms_mm"] = round(self.similarity_rms_mm, 4)
         if self.hint:
             d["hint"] = self.hint
         return d
@@ -169,10 +178,11 @@ def window_error_mm(a: CameraCalibration, b: CameraCalibration, width_px: int,
                     height_px: int) -> float:
     """Largest distance (mm) between where ``a`` and ``b`` put a pixel of the window.
 
-    Both maps are affine, so the largest difference is at a corner."""
-    corners = np.array([[0, 0], [width_px - 1, 0], [0, height_px - 1],
-                        [width_px - 1, height_px - 1]], dtype=float)
-    d = Calibration(a).px_to_mm(corners) - Calibration(b).px_to_mm(corners)
+    Two similarities differ most at a corner; with a lens or a homography the window is
+    sampled (17 x 13 pixels, corners included)."""
+    u, v = np.meshgrid(np.linspace(0, width_px - 1, 17), np.linspace(0, height_px - 1, 13))
+    grid = np.column_stack([u.ravel(), v.ravel()])
+    d = Calibration(a).px_to_mm(grid) - Calibration(b).px_to_mm(grid)
     return float(np.linalg.norm(d, axis=1).max())
 
 
@@ -296,13 +306,20 @@ def correspondences(image: np.ndarray, target: Target, pose: TargetPose,
 
 def calibrate_camera_image(image: np.ndarray, target: Target, pose: TargetPose,
                            nominal: CameraCalibration, prior: bool = True) -> CameraFit:
-    """Fit the camera from one image of ``target`` lying at ``pose`` (``prior``: see
-    ``correspondences``)."""
+    """Fit the belt plane from one image of ``target`` lying at ``pose`` (``prior``: see
+    ``correspondences``): a homography from the pixels, undistorted by the lens ``nominal``
+    has (if any: one view cannot tell the lens), to the belt (``intrinsics.fit_belt_plane``).
+    The fit's calibration keeps that lens, and its similarity fields are the homography's
+    nearest similarity."""
+    from .intrinsics import fit_belt_plane
+
     px, mm, note = correspondences(image, target, pose, nominal, prior)
-    fit = fit_camera(px, mm)
-    if note:
-        fit.hint = f"{fit.hint}; {note}" if fit.hint else note
-    return fit
+    plane = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist,
+                           prior=nominal.homography)
+    und = Calibration(plane.calibration).undistort(px)
+    return CameraFit(plane.calibration, plane.rms_mm, plane.max_mm, plane.n_points,
+                     _affine_rms(und, mm), plane.rms_mm, hint=note,
+                     similarity_rms_mm=plane.similarity_rms_mm)
 
 
 def camera_procedure(camera: Camera, wait: Waiter, target: Target, pose: TargetPose,

@@ -6,9 +6,10 @@ writing the numbers inline::
     camera:
       calibration_file: calibration/camera.yaml     # relative to the cell file
 
-The file's ``origin_mm``, ``mm_per_px`` and ``rotation_deg`` then replace
-``camera.calibration``; anything else in it (residuals, date, target) is a record for
-people. So recalibrating a cell rewrites one small file and never the cell description.
+The file's ``origin_mm``, ``mm_per_px`` and ``rotation_deg`` (and, from a full
+calibration, ``intrinsics``, ``dist`` and ``homography``: ``vision.calibration``) then
+replace ``camera.calibration``; anything else in it (residuals, date, target) is a record
+for people. An old file of the three similarity keys alone is read as before. So recalibrating a cell rewrites one small file and never the cell description.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
@@ -111,7 +113,33 @@ def read_camera_calibration(path: str | Path) -> CameraCalibration:
     if not -180.0 <= r <= 180.0:
         raise ConfigError(f"must be in [-180, 180], got {r:g}", file=file,
                           line=nodes["rotation_deg"].start_mark.line + 1, key="rotation_deg")
-    return CameraCalibration(origin_mm=origin, mm_per_px=s, rotation_deg=r)
+
+    def numbers(key: str, sizes: tuple[int, ...], what: str) -> list[float] | None:
+        node = nodes.get(key)
+        if node is None:
+            return None
+        if not isinstance(node, SequenceNode) or len(node.value) not in sizes:
+            raise ConfigError(f"expected {what}, got {_show(node)}"
+                              + (f" of {len(node.value)}" if isinstance(node, SequenceNode)
+                                 else ""), file=file, line=node.start_mark.line + 1, key=key)
+        return [number(v, key) for v in node.value]
+
+    intr = numbers("intrinsics", (4,), "[fx, fy, cx, cy] in px")
+    if intr is not None and not (intr[0] > 0 and intr[1] > 0):
+        raise ConfigError(f"focal lengths must be > 0, got {intr[0]:g}, {intr[1]:g}", file=file,
+                          line=nodes["intrinsics"].start_mark.line + 1, key="intrinsics")
+    dist = numbers("dist", (4, 5, 8, 12, 14), "OpenCV's 4, 5, 8, 12 or 14 distortion "
+                   "coefficients") or []
+    if dist and intr is None:
+        raise ConfigError("distortion without intrinsics: give intrinsics [fx, fy, cx, cy]",
+                          file=file, line=nodes["dist"].start_mark.line + 1, key="dist")
+    hom = numbers("homography", (9,), "9 numbers (a 3x3 homography, row by row)")
+    if hom is not None and np.linalg.det(np.array(hom).reshape(3, 3)) == 0:
+        raise ConfigError("the homography is singular", file=file,
+                          line=nodes["homography"].start_mark.line + 1, key="homography")
+    return CameraCalibration(origin_mm=origin, mm_per_px=s, rotation_deg=r,
+                             intrinsics=tuple(intr) if intr else None, dist=dist,
+                             homography=hom)
 
 
 def _show(node: Any) -> str:

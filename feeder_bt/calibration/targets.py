@@ -134,17 +134,40 @@ def parse_board(text: str) -> tuple[int, int]:
 
 # ------------------------------------------------------------------------------ detection
 
+SUBPIX_FRACTION = 0.2        # chessboard: cornerSubPix half-window, share of a square's side
+SUBPIX_MIN, SUBPIX_MAX = 2, 11
+GEOMETRY_PX = 2.0            # a point more than this far (px) ...
+GEOMETRY_PITCH = 0.15        # ... and this share of the pitch from where its neighbours put it
+SHARPNESS_PX = 6.0           # chessboard: edges rising over more px than this ...
+SHARPNESS_SHARE = 0.15       # ... and this share of a square: blurred
 
-def detect_points(image: np.ndarray, target: Target) -> tuple[np.ndarray, np.ndarray]:
-    """The target's points found in ``image``: ``(pixels (N, 2), index (N,))``, the index
-    into ``points_board().reshape(-1, 2)``. For a grid without a reading of its own
-    (chessboard, circles) the index is OpenCV's order (row by row from whichever corner
-    OpenCV started at: ``camera.order_grid`` decides)."""
+
+def _grey(image: np.ndarray) -> np.ndarray:
     img = np.asarray(image)
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     if img.dtype != np.uint8 or img.ndim != 2 or img.size == 0:
         raise CalibrationError("the camera image must be an 8-bit grey or colour image")
+    return img
+
+
+def detect_points(image: np.ndarray, target: Target, px_per_mm: float | None = None,
+                  check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The target's points found in ``image``: ``(pixels (N, 2), index (N,))``, the index
+    into ``points_board().reshape(-1, 2)``. For a grid without a reading of its own
+    (chessboard, circles) the index is OpenCV's order (row by row from whichever corner
+    OpenCV started at: ``camera.order_grid`` decides).
+
+    OpenCV's own detectors, tuned for the target: the chessboard's sub-pixel window is
+    ``SUBPIX_FRACTION`` of the square's side in pixels as found (a fixed window either
+    reaches the neighbouring corners of a small board or is too small for a large one;
+    ``findChessboardCornersSB`` if the classic detector fails); the circle grid's blob
+    detector looks for dots of the expected area (``px_per_mm``, the cell's present scale,
+    when given) with OpenCV's shape filters on. ``check``: a view whose points do not fit
+    the board's geometry (``geometry_error``) raises ``CalibrationError`` saying which
+    point and by how much, never used.
+    """
+    img = _grey(image)
     size = (target.nx, target.ny)                  # (points per row, rows)
     pts = None
     if target.kind == "chessboard":
@@ -152,35 +175,141 @@ def detect_points(image: np.ndarray, target: Target) -> tuple[np.ndarray, np.nda
                  | cv2.CALIB_CB_FAST_CHECK)          # FAST_CHECK: give up quickly on no board
         found, pts = cv2.findChessboardCorners(img, size, flags=flags)
         if found:
-            criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
-            pts = cv2.cornerSubPix(img, pts, (5, 5), (-1, -1), criteria)
+            w = subpix_window(np.asarray(pts, dtype=float).reshape(target.ny, target.nx, 2))
+            criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+            pts = cv2.cornerSubPix(img, pts, (w, w), (-1, -1), criteria)
+        else:
+            found, pts = cv2.findChessboardCornersSB(img, size,
+                                                     flags=cv2.CALIB_CB_NORMALIZE_IMAGE)
     elif target.kind in ("circles", "dots", "acircles"):
         flag = (cv2.CALIB_CB_ASYMMETRIC_GRID if target.kind == "acircles"
                 else cv2.CALIB_CB_SYMMETRIC_GRID)
-        found, pts = cv2.findCirclesGrid(img, size, flags=flag,
-                                         blobDetector=_blob_detector(img, target))
+        found = False
+        for det in blob_detectors(img, target, px_per_mm):
+            found, pts = cv2.findCirclesGrid(img, size, flags=flag, blobDetector=det)
+            if found:
+                break
     else:
         board = target.charuco_board()
         corners, ids, _, _ = cv2.aruco.CharucoDetector(board).detectBoard(img)
         found = ids is not None and len(ids) >= 6
         if found:
-            return (np.asarray(corners, dtype=float).reshape(-1, 2),
-                    np.asarray(ids, dtype=int).ravel())
+            px = np.asarray(corners, dtype=float).reshape(-1, 2)
+            index = np.asarray(ids, dtype=int).ravel()
+            if check:
+                _check_geometry(px, index, target)
+            return px, index
     if not found or pts is None:
         raise CalibrationError(f"no {target.describe()} found in the image: is the whole "
                                "target in view, flat, lit and of that size?")
+    if check and target.kind == "chessboard":
+        _check_sharpness(img, size, pts)
     pts = np.asarray(pts, dtype=float).reshape(-1, 2)
-    return pts, np.arange(len(pts))
+    index = np.arange(len(pts))
+    if check:
+        _check_geometry(pts, index, target)
+    return pts, index
 
 
-def _blob_detector(img: np.ndarray, target: Target):
-    """A blob detector for dots of any size (OpenCV's default stops at 5000 px²)."""
-    p = cv2.SimpleBlobDetector_Params()
-    p.minArea = 10.0
-    p.maxArea = float(img.size) / 4.0
-    p.filterByConvexity = False
-    p.filterByInertia = False
+def _check_sharpness(img: np.ndarray, size: tuple[int, int], pts: np.ndarray) -> None:
+    """Refuse a blurred chessboard: OpenCV's ``estimateChessboardSharpness`` gives the
+    average width (px) over which the board's edges rise; sharp photos give 2.5-3.3 px
+    (OpenCV's 9x6 samples), a Gaussian blur of sigma 2 px about 6."""
+    try:
+        sharp = float(cv2.estimateChessboardSharpness(img, size, np.asarray(
+            pts, dtype=np.float32).reshape(-1, 1, 2))[0][0])
+    except cv2.error:
+        return
+    grid = np.asarray(pts, dtype=float).reshape(size[1], size[0], 2)
+    side = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=-1)))
+    limit = max(SHARPNESS_PX, SHARPNESS_SHARE * side)
+    if sharp > limit:
+        raise CalibrationError(f"the chessboard is blurred: its edges rise over {sharp:.1f} px "
+                               f"(limit {limit:.1f}): focus the lens, hold the board still or "
+                               "shorten the exposure")
+
+
+def subpix_window(grid: np.ndarray) -> int:
+    """``cornerSubPix``'s half-window for a chessboard found as ``grid`` (``(ny, nx, 2)``
+    px): ``SUBPIX_FRACTION`` of the smallest square side, so it never reaches a
+    neighbouring corner (on OpenCV's own 9x6 photos, squares 31-45 px: OpenCV's sample
+    window of 11 leaves 0.41 px rms, a fifth of the square 0.18 px)."""
+    sides = np.concatenate([np.linalg.norm(np.diff(grid, axis=1), axis=-1).ravel(),
+                            np.linalg.norm(np.diff(grid, axis=0), axis=-1).ravel()])
+    side = float(np.percentile(sides, 10)) if sides.size else 10.0
+    return int(np.clip(round(SUBPIX_FRACTION * side), SUBPIX_MIN, SUBPIX_MAX))
+
+
+def blob_detectors(img: np.ndarray, target: Target, px_per_mm: float | None = None) -> list:
+    """Blob detectors to try, best first: dots of the expected size (``px_per_mm``), then
+    dots of any size a grid of this many dots can have in this image. OpenCV's shape
+    filters (inertia, convexity) stay on: without them a dark corner, a smudge or two dots
+    touching through blur pass as dots."""
+    out = []
+    h, w = img.shape[:2]
+    if px_per_mm:
+        area = np.pi / 4.0 * (target.dot_mm * px_per_mm) ** 2
+        out.append(_blob_detector(0.3 * area, 3.0 * area, target, px_per_mm))
+    # any size: from a few pixels up to what fits if the grid filled the image
+    n_across = max(target.nx, target.ny) + 1
+    biggest = np.pi / 4.0 * (min(h, w) / n_across) ** 2
+    out.append(_blob_detector(12.0, max(biggest, 100.0), target, None))
+    return out
+
+
+def _blob_detector(min_area: float, max_area: float, target: Target, px_per_mm: float | None):
+    p = cv2.SimpleBlobDetector_Params()          # OpenCV's defaults, then the dot's size
+    p.minArea = float(min_area)
+    p.maxArea = float(max_area)
+    p.filterByInertia = True
+    p.minInertiaRatio = 0.2                      # a dot seen at up to ~75 degrees
+    p.filterByConvexity = True
+    p.minConvexity = 0.85
+    if px_per_mm:
+        p.minDistBetweenBlobs = max(2.0, 0.5 * (target.spacing - target.dot_mm) * px_per_mm)
     return cv2.SimpleBlobDetector_create(p)
+
+
+def geometry_error(px: np.ndarray, index: np.ndarray, target: Target
+                   ) -> tuple[float, int, float]:
+    """How far the points depart from the board's geometry: ``(worst px, its index,
+    pitch px)``. Each point is compared with where a homography fitted to its neighbours
+    (within two pitches, not itself) puts it: locally a flat board is a homography whatever
+    the tilt, and a lens bends it little over two pitches (on OpenCV's 9x6 photos, a strong
+    lens and tilt, at most 1.6 px, 0.04 of the pitch)."""
+    board = target.points_board().reshape(-1, 2)[index]
+    px = np.asarray(px, dtype=float).reshape(-1, 2)
+    reach = 2.01 * target.spacing
+    d = np.linalg.norm(board[:, None] - board[None], axis=-1)
+    worst, at = 0.0, -1
+    pitches = []
+    for k in range(len(board)):
+        near = (d[k] <= reach) & (d[k] > 0)
+        if near.sum() < 5:
+            continue
+        h, _ = cv2.findHomography(board[near], px[near], 0)
+        if h is None:
+            continue
+        q = cv2.perspectiveTransform(board[k].reshape(1, 1, 2), h).reshape(2)
+        e = float(np.linalg.norm(q - px[k]))
+        if e > worst:
+            worst, at = e, k
+        nn = (d[k] > 0) & (d[k] <= 1.01 * target.spacing)
+        if nn.any():
+            pitches.append(float(np.median(np.linalg.norm(px[nn] - px[k], axis=1))))
+    pitch_px = float(np.median(pitches)) if pitches else 0.0
+    return worst, int(at), pitch_px
+
+
+def _check_geometry(px: np.ndarray, index: np.ndarray, target: Target) -> None:
+    worst, at, pitch_px = geometry_error(px, index, target)
+    limit = max(GEOMETRY_PX, GEOMETRY_PITCH * pitch_px)
+    if worst > limit:
+        u, v = px[at]
+        raise CalibrationError(f"the points found do not fit a flat {target.describe()}: the "
+                               f"one at ({u:.0f}, {v:.0f}) px is {worst:.1f} px from where its "
+                               f"neighbours put it (limit {limit:.1f}): a wrong point, a "
+                               "bent board, or not that board")
 
 
 # ------------------------------------------------------------------------------ drawing

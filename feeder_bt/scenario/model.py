@@ -181,6 +181,14 @@ class CameraCalibration:
     origin_mm: tuple[float, float] = (80.0, -15.0)
     mm_per_px: float = 1.0
     rotation_deg: float = 0.0
+    # the lens (``feeder calibrate camera`` with several views): focal lengths and principal
+    # point in px, and OpenCV's distortion coefficients (k1, k2, p1, p2[, k3[, k4, k5, k6]]);
+    # pixels are undistorted before they are mapped to the belt
+    intrinsics: tuple[float, float, float, float] | None = None
+    dist: list[float] = field(default_factory=list)
+    # undistorted pixel -> belt mm as a 3x3 homography, row by row (a tilted camera); when
+    # set it replaces the similarity above, which is then its nearest similarity (for scale)
+    homography: list[float] | None = None
 
 
 @dataclass
@@ -209,6 +217,10 @@ class TargetSpec:
     dot_mm: float = 14.0                 # circle grids: dot diameter
     marker_mm: float = 0.0               # charuco: marker side (0: 0.7 of the square)
     dictionary: str = "DICT_4X4_250"     # charuco: OpenCV's ArUco dictionary
+    # `feeder calibrate camera` refuses (writes nothing) a lens model whose reprojection
+    # rms is over max_rms_px, or a belt plane whose rms is over max_belt_mm
+    max_rms_px: float = 1.0
+    max_belt_mm: float = 0.3
 
 
 @dataclass
@@ -346,6 +358,13 @@ class SimImperfections:
     calib_offset_mm: tuple[float, float] = (0.5, -0.4)
     calib_scale_pct: float = 0.1
     calib_rotation_deg: float = 0.1
+    # the lens and the mounting (docs/simulator.md): an 8 mm lens on a 1/2" 640-px sensor
+    # (10 um pixels: 800 px focal length), a little barrel distortion, the camera a degree
+    # or so off square to the belt; added to a camera described as a similarity only
+    lens_focal_px: float = 800.0
+    lens_k1: float = -0.03
+    lens_k2: float = 0.0
+    tilt_deg: tuple[float, float] = (1.5, -1.0)
     # landing on the horizontal belt (off the ramp, or dropped by the robot)
     land_slide_mm: float = 2.0           # sigma of the slide along and across
     land_turn_deg: float = 3.0           # sigma of the turn while settling

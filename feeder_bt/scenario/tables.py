@@ -156,6 +156,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (CameraSpec, "grab_s"): NON_NEGATIVE,
     (CameraSpec, "vision_latency_s"): NON_NEGATIVE,
     (CameraCalibration, "mm_per_px"): POSITIVE,
+    (TargetSpec, "max_rms_px"): POSITIVE,
+    (TargetSpec, "max_belt_mm"): POSITIVE,
     (TargetSpec, "pitch_mm"): POSITIVE,
     (TargetSpec, "dot_mm"): POSITIVE,
     (TargetSpec, "marker_mm"): NON_NEGATIVE,

@@ -13,8 +13,10 @@ from saved images of the target.
 
 The target is the cell's ``camera.target`` unless ``--target``/``--board``/``--square`` (and
 ``--dot``, ``--marker``, ``--dictionary``) say otherwise; ``--no-prior`` trusts the stated
-``--pose`` alone (a first calibration, or one far off); several ``--image`` also estimate
-lens distortion (``calibration.lens``).
+``--pose`` alone (a first calibration, or one far off); several ``--image`` (or, on the
+simulated cell, ``--views``) also give the full lens model (``calibration.camera_model``);
+``--json`` prints one JSON object; a result over the cell's limits is refused (exit 3,
+nothing written) unless ``--force``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime
+import json
 import os
 from pathlib import Path
 
@@ -34,17 +37,22 @@ from ..calibration import (
     CameraFit,
     ToolFit,
     belt_procedure,
-    calibrate_camera_image,
     camera_procedure,
     sim_waiter,
     tool_procedure,
     window_error_mm,
 )
 from ..calibration.camera import Target, TargetPose, centred_pose
+from ..calibration.camera_model import (
+    DEFAULT_MAX_BELT_MM,
+    DEFAULT_MAX_RMS_PX,
+    CameraResult,
+    calibrate_camera_views,
+    calibration_values,
+)
 from ..calibration.common import CalibrationError
 from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from ..calibration.files import calibration_path, write_calibration_file
-from ..calibration.lens import LensFit, fit_lens
 from ..calibration.targets import parse_board
 from ..clock import SimClock
 from ..errors import FeederError
@@ -97,6 +105,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     c.add_argument("--sim-truth", nargs=4, type=float, default=[0, 0, 0, 0],
                    metavar=("DX", "DY", "DEG", "PCT"),
                    help="simulated camera's error: origin shift mm, rotation, scale %%")
+    c.add_argument("--views", type=int, default=0, metavar="N",
+                   help="simulated cell: also N views of the target held turned and tilted, "
+                        "for the lens (default: 12 when the simulated lens bends, else 0)")
+    c.add_argument("--lens-model", choices=("auto", "standard", "rational"), default="auto",
+                   help="distortion model with several views: k1,k2,p1,p2,k3 (standard), "
+                        "and k4..k6 (rational, wide lenses) or whichever fits (auto)")
+    c.add_argument("--max-rms-px", type=float, metavar="PX",
+                   help="refuse a lens model over this reprojection rms (default: the "
+                        "cell's camera.target.max_rms_px, else 1.0)")
+    c.add_argument("--max-belt-mm", type=float, metavar="MM",
+                   help="refuse a belt plane over this rms (default: the cell's "
+                        "camera.target.max_belt_mm, else 0.3)")
+    c.add_argument("--force", action="store_true",
+                   help="write (and exit 0) even when the result is over the limits")
+    c.add_argument("--json", action="store_true",
+                   help="print one JSON object (fx, fy, cx, cy, dist, rms_px, views_used, "
+                        "views_rejected, belt_rms_mm, ...) instead of the report")
 
     def hal_option(sp: argparse.ArgumentParser) -> None:
         sp.add_argument("--hal", choices=("sim", "emulated", "real"),
@@ -190,38 +215,73 @@ def _read(path: str):
     return img
 
 
+class CalibrationRefused(FeederError):
+    """The calibration was computed but is over the cell's limits: nothing was written."""
+
+    exit_code = 3
+
+
+def camera_limits(cell: CellSpec, args: argparse.Namespace) -> tuple[float, float]:
+    """(max reprojection rms px, max belt rms mm): the flags over the cell's target."""
+    spec = cell.camera.target
+    px = args.max_rms_px if args.max_rms_px is not None else (
+        spec.max_rms_px if spec else DEFAULT_MAX_RMS_PX)
+    mm = args.max_belt_mm if args.max_belt_mm is not None else (
+        spec.max_belt_mm if spec else DEFAULT_MAX_BELT_MM)
+    for flag, v in (("--max-rms-px", px), ("--max-belt-mm", mm)):
+        if not v > 0:
+            raise CalibrationError(f"{flag} must be > 0, got {v:g}")
+    return px, mm
+
+
 def _camera(args: argparse.Namespace, cell: CellSpec) -> int:
     target = camera_target(cell, args)
     cam = cell.camera
     pose = TargetPose(*args.pose) if args.pose else centred_pose(cam.calibration, cam.width_px,
                                                                  cam.height_px)
+    limits = camera_limits(cell, args)
     truth = None
     prior = not args.no_prior
-    lens = None
     if args.image:
-        images = [_read(p) for p in args.image]
-        fit = calibrate_camera_image(images[0], target, pose, cam.calibration, prior)
-        if len(images) > 1:
-            lens = fit_lens(images, target)
+        images = [(p, _read(p)) for p in args.image]
     else:
         _need_sim(cell, "camera")
-        base = cam.sim_truth or cam.calibration     # the simulated camera's real pose
+        base = true_camera(cell)                    # the simulated camera's real mapping
         truth = sim_truth(base, *args.sim_truth)
-        fit = sim_camera(cell, target, pose, truth, seed=args.seed, prior=prior,
-                         save=args.save_image)
-    print(f"target: {target.describe()} at x {pose.x_mm:g}, y {pose.y_mm:g} mm, "
-          f"{pose.angle_deg:g} deg")
-    print(format_camera(fit, cell, truth))
-    values = fit.as_dict()
-    if lens is not None:
-        print(format_lens(lens, fit.calibration.mm_per_px))
-        values["lens"] = lens.as_dict()
-    _write(args, cell, "camera", values, default=calibration_path(cell))
+        from ..hal.sim.target import SIM_LENS_VIEWS
+
+        n = args.views if args.views else (SIM_LENS_VIEWS if truth.intrinsics else 0)
+        images = sim_images(cell, target, pose, truth, seed=args.seed, views=n,
+                            save=args.save_image)
+    result = calibrate_camera_views(images, target, pose, cam.calibration, prior,
+                                    args.lens_model)
+    refused = result.refusal(*limits)
+    if args.json:
+        d = result.as_dict()
+        d["target"] = target.describe()
+        d["pose"] = [pose.x_mm, pose.y_mm, pose.angle_deg]
+        if truth is not None:
+            d["sim_window_error_mm"] = round(window_error_mm(
+                result.calibration, truth, cam.width_px, cam.height_px), 5)
+        d["refused"] = refused
+        print(json.dumps(d))
+    else:
+        print(f"target: {target.describe()} at x {pose.x_mm:g}, y {pose.y_mm:g} mm, "
+              f"{pose.angle_deg:g} deg")
+        print(format_result(result, cell, truth))
+    if refused and not args.force:
+        raise CalibrationRefused(f"calibrate camera: refused, nothing written: {refused}")
+    values = calibration_values(result.calibration)
+    values["residual_mm"] = {"rms": round(result.belt.rms_mm, 4),
+                             "max": round(result.belt.max_mm, 4)}
+    values["record"] = {k: v for k, v in result.as_dict().items() if k != "calibration"}
+    _write(args, cell, "camera", values, default=calibration_path(cell),
+           quiet=args.json)
     return 0
 
 
 def _write(args: argparse.Namespace, cell: CellSpec, what: str, values: dict,
-           default: Path | None = None) -> None:
+           default: Path | None = None, quiet: bool = False) -> None:
     if args.write is None:
         return
     dest = Path(args.write) if args.write else default
@@ -233,7 +293,10 @@ def _write(args: argparse.Namespace, cell: CellSpec, what: str, values: dict,
               + {"camera": "Name this file as camera.calibration_file in the cell description.",
                  "belt": "Copy counts_per_mm into encoder.counts_per_mm of the cell.",
                  "tool": "Copy tool_offset_mm into the scenario's parts.*.tool_offset."}[what])
-    print(f"wrote {write_calibration_file(dest, values, header)}")
+    written = write_calibration_file(dest, values, header)
+    if quiet:
+        return
+    print(f"wrote {written}")
     if what == "camera" and dest != default:    # a path in a file is relative to that file
         rel = os.path.relpath(dest.resolve(), Path(cell.path).resolve().parent)
         print(f"to use it, name it in {cell.path}:  camera: {{calibration_file: {rel}}}")
@@ -242,12 +305,30 @@ def _write(args: argparse.Namespace, cell: CellSpec, what: str, values: dict,
 # ------------------------------------------------------------------------------ simulator
 
 
+def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCalibration,
+               seed: int = 1, views: int = 0, save: str | None = None
+               ) -> list[tuple[str, np.ndarray]]:
+    """The simulated camera's images of the target (``hal.sim.target.sim_images``)."""
+    from ..hal.sim.target import sim_images as images
+
+    return images(cell, target, pose, truth, seed, views, save)
+
+
+def true_camera(cell: CellSpec) -> CameraCalibration:
+    """How the simulated camera really maps (``hal.sim.imperfect.true_calibration`` without
+    the residual error a calibration leaves: the camera, lens and tilt a calibration finds)."""
+    from ..hal.sim.imperfect import true_calibration
+
+    return true_calibration(cell, residual=False)
+
+
 def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
               deg: float = 0.0, scale_pct: float = 0.0) -> CameraCalibration:
-    """The cell's calibration with an error added: how the simulated camera really maps."""
-    return CameraCalibration(origin_mm=(nominal.origin_mm[0] + dx, nominal.origin_mm[1] + dy),
-                             mm_per_px=nominal.mm_per_px * (1.0 + scale_pct / 100.0),
-                             rotation_deg=nominal.rotation_deg + deg)
+    """The cell's calibration with an error added: how the simulated camera really maps
+    (a full calibration's homography gets the same error in the belt frame)."""
+    from ..hal.sim.imperfect import shifted
+
+    return shifted(nominal, (dx, dy), scale_pct, deg)
 
 
 def sim_camera(cell: CellSpec, target, pose: TargetPose,
@@ -400,15 +481,40 @@ def format_camera(fit: CameraFit, cell: CellSpec, truth: CameraCalibration | Non
     return "\n".join(lines)
 
 
-def format_lens(fit: LensFit, mm_per_px: float) -> str:
-    verdict = ("negligible for the cell's camera model (no distortion)"
-               if fit.max_shift_px < 0.5 else
-               "the cell's camera model has no distortion: positions there are off by up to "
-               "this much")
-    return (f"lens: k1 {fit.k1:.5f}, k2 {fit.k2:.5f} from {fit.views} views, {fit.points} "
-            f"points: reprojection rms {fit.rms_px:.3f} px\n"
-            f"  distortion shifts the views' area by up to {fit.max_shift_px:.2f} px "
-            f"({fit.max_shift_px * mm_per_px:.2f} mm): {verdict}")
+def format_result(r: CameraResult, cell: CellSpec, truth: CameraCalibration | None) -> str:
+    c = r.calibration
+    lines = []
+    if r.lens is not None:
+        m = r.lens
+        sd = m.std
+        lines.append(f"lens ({'rational' if m.rational else 'standard'} model) from "
+                     f"{len(m.used)} views: fx {m.fx:.2f} ± {sd.get('fx', 0):.2f}, fy "
+                     f"{m.fy:.2f} ± {sd.get('fy', 0):.2f}, cx {m.cx:.2f} ± "
+                     f"{sd.get('cx', 0):.2f}, cy {m.cy:.2f} ± {sd.get('cy', 0):.2f} px")
+        lines.append("  dist " + ", ".join(f"{n} {v:.5f}" for n, v in zip(
+            ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), m.dist, strict=False)))
+        worst = max(m.per_view.items(), key=lambda kv: kv[1])
+        lines.append(f"  reprojection rms {m.rms_px:.3f} px (worst view {worst[0]} "
+                     f"{worst[1]:.3f} px)")
+    for name, why in r.views_rejected:
+        lines.append(f"  view {name} not used: {why}")
+    lines.append(f"belt plane over {r.belt.n_points} points of view {r.first}: rms "
+                 f"{r.belt.rms_mm:.3f} mm, max {r.belt.max_mm:.3f} mm (a similarity would "
+                 f"leave {r.belt.similarity_rms_mm:.3f} mm)")
+    lines.append(f"  near the centre: mm_per_px {c.mm_per_px:.6f}, rotation_deg "
+                 f"{c.rotation_deg:.4f}, origin_mm [{c.origin_mm[0]:.3f}, "
+                 f"{c.origin_mm[1]:.3f}]")
+    cam = cell.camera
+    lines.append(f"  moves the window by up to "
+                 f"{window_error_mm(c, cam.calibration, cam.width_px, cam.height_px):.2f} mm "
+                 "from the cell's present calibration")
+    if truth is not None:
+        err = window_error_mm(c, truth, cam.width_px, cam.height_px)
+        lines.append(f"  simulator check: up to {err:.3f} mm from the simulated camera's truth "
+                     "over the window")
+    if r.note:
+        lines.append(f"  note: {r.note}")
+    return "\n".join(lines)
 
 
 def format_belt(fit: BeltFit) -> str:

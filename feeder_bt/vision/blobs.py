@@ -42,7 +42,7 @@ class Blob:
     """One contour on its way through the cascade: what has been measured so far."""
 
     __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
-                 "face", "oriented", "holes")
+                 "face", "oriented", "holes", "scale")
 
     def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
                  mom: dict[str, float], area_px: float, det: Detection, full: bool,
@@ -54,6 +54,7 @@ class Blob:
         self.mom = mom                    # its moments (cv2.moments)
         self.area_px = area_px            # pixel count (Pick's theorem on the contour)
         self.det = det
+        self.scale: float | None = None   # mm per px where it lies (``find_blobs``)
         self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
         self.hull: np.ndarray | None = None         # convex hull (``hull``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
@@ -106,6 +107,18 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     xy = calibration.px_to_mm(np.array(centres)).tolist()
     for b, (x, y) in zip(blobs, xy, strict=True):
         b.det.x_mm, b.det.y_mm = x, y
+    if not calibration.linear:
+        # a lens or a tilted camera: the scale where each blob lies (a few per mille
+        # from the calibration's mm_per_px over the window), for areas and lengths
+        scales = calibration.local_scale(np.array(centres))
+        for b, sc in zip(blobs, scales, strict=True):
+            b.scale = float(sc)
+            b.det.features["area_mm2"] = area = b.area_px * b.scale ** 2
+            reason = b.det.reason
+            if area < min_area_mm2 and not reason:
+                b.det.reason = "too small"
+            elif reason == "too small" and area >= min_area_mm2:
+                b.det.reason = ""
     return blobs
 
 
@@ -122,7 +135,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
     v = feats.get(name)
     if v is not None:
         return v
-    s = calibration.mm_per_px
+    s = b.scale or calibration.mm_per_px
     c, area_px = b.contour, b.area_px
     group = GROUP_OF[name]
     if group == GROUP_OF["holes"]:
@@ -130,7 +143,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         # theorem the hole's pixel count is the polygon's area - boundary pixels / 2 + 1.
         if b.holes is None:
             raise RuntimeError("hole features asked of a blob whose holes were not found")
-        s2 = calibration.mm2_per_px2
+        s2 = s * s
         steps = _boundary_steps(b.holes, b.full)
         areas = [(abs(cv2.contourArea(k)) - 0.5 * n + 1.0) * s2
                  for k, n in zip(b.holes, steps, strict=True)]

@@ -14,12 +14,21 @@ The image's ``v`` axis runs along the belt, so the mapping swaps axes: it is a
 *reflection* (determinant ``-s²``). A shape's handedness flips between the image and
 the belt frame, so chirality and orientation must be computed after mapping contour
 points to mm, never in pixels.
+
+A full calibration (``feeder calibrate camera`` with several views) adds the lens and a
+tilted camera: pixels are first undistorted (``cv2.undistortPoints`` with the camera
+matrix and OpenCV's distortion coefficients, back to pixel units), then mapped to the belt
+by a homography (``CameraCalibration.homography``) instead of the similarity. Only the
+points the locator reports are undistorted, never the whole image. ``mm_per_px`` stays the
+similarity's scale: areas and lengths in pixels are converted with it, which is right to
+the few per mille a tilt or a lens changes the scale over the window.
 """
 
 from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from ..scenario.model import CameraCalibration
@@ -41,6 +50,27 @@ class Calibration:
         self._fwd = s * self._m              # px -> mm (applied to row vectors via .T)
         self._inv = self._m / s              # mm -> px
         self._origin = np.array(spec.origin_mm, dtype=float)
+        self._k: np.ndarray | None = None
+        self._dist: np.ndarray | None = None
+        intr = getattr(spec, "intrinsics", None)
+        dist = list(getattr(spec, "dist", None) or [])
+        if intr is not None and any(dist):
+            fx, fy, cx, cy = (float(v) for v in intr)
+            if not (fx > 0 and fy > 0):
+                raise ValueError("intrinsics: focal lengths must be positive")
+            if len(dist) not in (4, 5, 8, 12, 14):
+                raise ValueError(f"dist: OpenCV takes 4, 5, 8, 12 or 14 coefficients, got "
+                                 f"{len(dist)}")
+            self._k = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+            self._dist = np.array(dist, dtype=float)
+        hom = getattr(spec, "homography", None)
+        self._h: np.ndarray | None = None
+        if hom is not None:
+            h = np.array(hom, dtype=float)
+            if h.size != 9 or not np.isfinite(h).all() or np.linalg.det(h.reshape(3, 3)) == 0:
+                raise ValueError("homography: expected 9 finite numbers of an invertible 3x3")
+            self._h = h.reshape(3, 3)
+            self._hinv = np.linalg.inv(self._h)
 
     @property
     def mm_per_px(self) -> float:
@@ -50,12 +80,66 @@ class Calibration:
     def mm2_per_px2(self) -> float:
         return self._s * self._s
 
+    @property
+    def linear(self) -> bool:
+        """Whether the mapping is the plain similarity (no lens, no homography)."""
+        return self._k is None and self._h is None
+
+    def local_scale(self, uv: np.ndarray) -> np.ndarray:
+        """mm per px at each of ``(N, 2)`` pixels: the square root of the mapping's area
+        scale there (``mm_per_px`` everywhere for a similarity)."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if self.linear or len(uv) == 0:
+            return np.full(len(uv), self._s)
+        p = self.px_to_mm(np.vstack([uv, uv + [1.0, 0.0], uv + [0.0, 1.0]])).reshape(3, -1, 2)
+        du, dv = p[1] - p[0], p[2] - p[0]
+        return np.sqrt(np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]))
+
+    def undistort(self, uv: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels -> where an ideal (distortion-free) lens would have put them."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if self._k is None or len(uv) == 0:
+            return uv
+        out = np.full_like(uv, np.nan)
+        ok = np.isfinite(uv).all(axis=1)
+        if ok.any():
+            # iterative: a few more iterations than the default 5 for a strong lens
+            crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-9)
+            out[ok] = cv2.undistortPoints(uv[ok].reshape(-1, 1, 2), self._k, self._dist,
+                                          R=None, P=self._k, criteria=crit).reshape(-1, 2)
+        return out
+
+    def distort(self, uv: np.ndarray) -> np.ndarray:
+        """The inverse of ``undistort``: ideal pixels -> where the lens puts them."""
+        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if self._k is None or len(uv) == 0:
+            return uv
+        out = np.full_like(uv, np.nan)
+        ok = np.isfinite(uv).all(axis=1)
+        if ok.any():
+            k = self._k
+            xn = (uv[ok, 0] - k[0, 2]) / k[0, 0]
+            yn = (uv[ok, 1] - k[1, 2]) / k[1, 1]
+            obj = np.column_stack([xn, yn, np.ones_like(xn)]).reshape(-1, 1, 3)
+            z = np.zeros(3)
+            out[ok] = cv2.projectPoints(obj, z, z, k, self._dist)[0].reshape(-1, 2)
+        return out
+
     def px_to_mm(self, uv: np.ndarray) -> np.ndarray:
         """``(N, 2)`` pixel ``(u, v)`` -> ``(N, 2)`` belt ``(x, y)`` mm."""
-        uv = np.asarray(uv, dtype=float).reshape(-1, 2)
+        uv = self.undistort(uv)
+        if self._h is not None:
+            return _apply(self._h, uv)
         return uv @ self._fwd.T + self._origin
 
     def mm_to_px(self, xy: np.ndarray) -> np.ndarray:
         """``(N, 2)`` belt ``(x, y)`` mm -> ``(N, 2)`` pixel ``(u, v)``."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        return (xy - self._origin) @ self._inv.T
+        uv = _apply(self._hinv, xy) if self._h is not None else (xy - self._origin) @ self._inv.T
+        return self.distort(uv)
+
+
+def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """A homography on ``(N, 2)`` points (NaN rows stay NaN)."""
+    q = pts @ h[:, :2].T + h[:, 2]
+    return q[:, :2] / q[:, 2:3]

@@ -40,20 +40,78 @@ def hashed_normal(seed: int, channel: int, k: int) -> float:
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
-def true_calibration(cell: CellSpec) -> CameraCalibration:
-    """How the simulated camera really maps: ``camera.sim_truth`` (a deliberate
-    mis-calibration) or the cell's calibration, plus the residual any real calibration
-    leaves (``sim.calib_*``). Only the renderer may see this."""
+def true_calibration(cell: CellSpec, residual: bool = True) -> CameraCalibration:
+    """How the simulated camera really maps: ``camera.sim_truth`` (the camera as mounted)
+    or the cell's calibration; a camera given as a similarity only gets the lens and tilt
+    of ``sim.lens_*``/``sim.tilt_deg`` (``lensed``); then, with ``residual``, the error any
+    real calibration leaves (``sim.calib_*``). ``sim: {ideal: true}``: exactly the cell's
+    calibration when that is a full one (with a lens), else ``sim_truth`` or it as before.
+    Only the renderer may see this."""
     cam = cell.camera
     base = cam.sim_truth or cam.calibration
     s = cell.sim
-    if s.ideal:
+    if s.ideal:                     # no lens error: the camera is as fully calibrated
+        return cam.calibration if cam.calibration.intrinsics is not None else base
+    if base.intrinsics is None and base.homography is None and s.lens_focal_px > 0:
+        base = lensed(base, cam.width_px, cam.height_px, s.lens_focal_px,
+                      (s.lens_k1, s.lens_k2), s.tilt_deg)
+    if not residual:
         return base
+    return shifted(base, s.calib_offset_mm, s.calib_scale_pct, s.calib_rotation_deg)
+
+
+def shifted(cal: CameraCalibration, offset_mm: tuple[float, float], scale_pct: float,
+            rotation_deg: float) -> CameraCalibration:
+    """``cal`` moved in the belt frame by ``offset_mm``, scaled by ``scale_pct`` and turned by
+    ``rotation_deg`` about its origin (a homography gets the same move)."""
+    o = np.array(cal.origin_mm, dtype=float)
+    f = 1.0 + scale_pct / 100.0
+    hom = cal.homography
+    if hom is not None:
+        r = math.radians(rotation_deg)
+        a = f * np.array([[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]])
+        move = np.eye(3)
+        move[:2, :2] = a
+        move[:2, 2] = o + np.asarray(offset_mm, dtype=float) - a @ o
+        h = move @ np.array(hom, dtype=float).reshape(3, 3)
+        hom = [float(v) for v in (h / h[2, 2]).ravel()]
     return CameraCalibration(
-        origin_mm=(base.origin_mm[0] + s.calib_offset_mm[0],
-                   base.origin_mm[1] + s.calib_offset_mm[1]),
-        mm_per_px=base.mm_per_px * (1.0 + s.calib_scale_pct / 100.0),
-        rotation_deg=base.rotation_deg + s.calib_rotation_deg)
+        origin_mm=(float(o[0] + offset_mm[0]), float(o[1] + offset_mm[1])),
+        mm_per_px=cal.mm_per_px * f, rotation_deg=cal.rotation_deg + rotation_deg,
+        intrinsics=cal.intrinsics, dist=list(cal.dist), homography=hom)
+
+
+def lensed(cal: CameraCalibration, width_px: int, height_px: int, focal_px: float,
+           k: tuple[float, float], tilt_deg: tuple[float, float]) -> CameraCalibration:
+    """A camera described as the similarity ``cal`` (square to the belt, no lens) given a
+    lens (focal length, radial distortion ``k``, principal point at the window's centre) and
+    turned ``tilt_deg`` about the image's u and v axes: its homography is the similarity
+    after the turn's ``K R^T K^-1``, which leaves the window's centre pixel and the scale
+    there where the similarity has them."""
+    cx, cy = (width_px - 1) / 2.0, (height_px - 1) / 2.0
+    kk = np.array([[focal_px, 0.0, cx], [0.0, focal_px, cy], [0.0, 0.0, 1.0]])
+    a, b = (math.radians(t) for t in tilt_deg)
+    rx = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
+    ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]])
+    g = kk @ (rx @ ry).T @ np.linalg.inv(kk)        # tilted pixel -> square pixel
+    c = np.array([cx, cy, 1.0])
+    q = g @ c
+    jac = (g[:2, :2] * q[2] - np.outer(q[:2], g[2, :2])) / q[2] ** 2
+    fix = np.eye(3)
+    fix[:2, :2] = jac
+    fix[:2, 2] = q[:2] / q[2] - jac @ c[:2]
+    g = np.linalg.inv(fix) @ g
+    r = math.radians(cal.rotation_deg)
+    sim = np.eye(3)
+    sim[:2, :2] = cal.mm_per_px * np.array([[-math.sin(r), math.cos(r)],
+                                            [math.cos(r), math.sin(r)]])
+    sim[:2, 2] = cal.origin_mm
+    h = sim @ g
+    return CameraCalibration(origin_mm=cal.origin_mm, mm_per_px=cal.mm_per_px,
+                             rotation_deg=cal.rotation_deg,
+                             intrinsics=(focal_px, focal_px, cx, cy),
+                             dist=[float(k[0]), float(k[1]), 0.0, 0.0, 0.0],
+                             homography=[float(v) for v in (h / h[2, 2]).ravel()])
 
 
 class Imperfections:

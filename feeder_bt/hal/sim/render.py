@@ -6,7 +6,9 @@ the corners (vignetting), dark anti-aliased part silhouettes with a little textu
 (``part_grey``) whose edges fall off into shade (``shading``) with a specular highlight
 (``highlight`` grey levels, saturating) towards the lamp. Both: holes show what is behind
 them, optical blur and sensor noise. Parts are drawn through the *truth* calibration, which the simulator may
-set apart from the cell's calibration to model a mis-calibrated camera.
+set apart from the cell's calibration to model a mis-calibrated camera; with a lens and a
+tilt in it (``sim.lens_*``, ``sim.tilt_deg``) the outline's vertices go through the true
+homography and lens distortion (``vision.calibration.Calibration.mm_to_px``).
 
 Speed (about 1-2 ms a 640x484 frame): the background is precomputed, each part is
 supersampled, composited and blurred only in its own box, and the noise is the
@@ -77,11 +79,15 @@ class Renderer:
         Outlines that overlap merge into one silhouette (touching parts). Only boxes around
         the parts are composited and blurred: elsewhere the background is smooth already.
         """
+        return self.render_px([self.calibration.mm_to_px(o) for o in outlines_mm], rng)
+
+    def render_px(self, outlines_px: list[np.ndarray], rng: np.random.Generator) -> np.ndarray:
+        """``render`` of silhouettes given in pixels (a target held off the belt, projected
+        by the caller through the true camera)."""
         h, w = self.shape
         p = self._pad
         parts: list[tuple[list[int], list[np.ndarray]]] = []
-        for outline in outlines_mm:
-            px = self.calibration.mm_to_px(outline)       # NaN rows part a part's rings
+        for px in outlines_px:                            # NaN rows part a part's rings
             lo, hi = np.nanmin(px, axis=0), np.nanmax(px, axis=0)
             box = [max(int(lo[0]) - p, 0), max(int(lo[1]) - p, 0),
                    min(int(hi[0]) + p + 2, w), min(int(hi[1]) + p + 2, h)]
