@@ -41,6 +41,7 @@ PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expir
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires
 STATIONARY_S = 60.0       # a part on a belt that does not move: its pick time-out
 ROBOT_IDLE_S = 30.0       # parts waiting and no robot asking this long: tell the operator
+CUT_OFF_S = 600.0         # a robot whose parts expire unreported is refused this long
 FORGET = 1000             # expired ids remembered for late reports
 # MISSED id WHY: a first word naming a fault kind counts the miss under that kind
 MISS_KINDS = {"servo_timeout": "servo_timeout", "servo": "servo_timeout",
@@ -99,7 +100,8 @@ class DeskCounts:
 
     def as_dict(self, outstanding: int) -> dict[str, int]:
         keys = ("requests", "handed_out", "picked", "placed", "missed", "released",
-                "expired", "held_expired", "late_reports", "refused")
+                "expired", "held_expired", "late_reports", "refused", "mismatch",
+                "over_limit", "cut_off")
         return {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
 
 
@@ -125,6 +127,14 @@ class Desk:
         self.chooser: ServeRobots | None = None
         # is a robot's connection still open? (the TCP server knows; in process: yes)
         self.alive: Callable[[Hashable], bool] = lambda conn: True
+        # trust (issue 28): at most this many parts with one robot and not yet reported;
+        # a robot whose parts expire unreported that many times running is cut off
+        self.max_outstanding = 4
+        self.cut_off_s = CUT_OFF_S
+        self.unreported: Counter[str] = Counter()    # per robot, since its last report
+        self.cut_until: dict[str, float] = {}
+        # the simulated cell: did the world see a part of this type placed? (None: trust)
+        self.verify_placed: Callable[[Part], bool] | None = None
 
     @property
     def counts(self) -> Counter:
@@ -197,6 +207,16 @@ class Desk:
             self.counts["refused"] += 1
             return (f"ERR PART: unknown part type {req.part_type!r} (one of: "
                     f"{', '.join(ctx.scenario.parts)})")
+        robot = robot_of(item.conn)
+        if self.is_cut_off(robot):
+            self.counts["refused"] += 1
+            return f"ERR PART: robot {robot} is cut off: parts handed to it were never reported"
+        held = sum(1 for r in self.handed.values() if robot_of(r.owner) == robot)
+        if held >= self.max_outstanding:
+            self.counts["over_limit"] += 1
+            self.counts["refused"] += 1
+            return (f"ERR PART: robot {robot} holds {held} parts not yet reported (at most "
+                    f"{self.max_outstanding}): report them first")
         chosen = None
         if self.chooser is not None:
             chosen = self.chooser.choose(req.part_type, req.within_s)
@@ -264,6 +284,7 @@ class Desk:
             return refusal or f"ERR {USAGE[cmd]}"
         pid = rec.part.id
         now = self.clock.now()
+        self.unreported.pop(robot_of(item.conn), None)     # it reports: it is honest
         late = pid not in self.handed
         if late and cmd in ("PICKED", "PLACED"):       # expired, then reported after all
             self.counts["held_expired" if rec.picked else "expired"] -= 1
@@ -282,6 +303,8 @@ class Desk:
             return f"OK PICKED {pid}"
         del self.handed[pid]
         if cmd == "PLACED":
+            if self.verify_placed is not None and not self.verify_placed(rec.part):
+                return self._mismatch(rec, item.conn)
             if not rec.picked:
                 self.counts["picked"] += 1
             self.counts["placed"] += 1
@@ -304,6 +327,43 @@ class Desk:
             self.ctx.queue.put_front(rec.part)        # too far by now: dropped there
             return f"OK RELEASE {pid} queued"
         return f"OK RELEASE {pid} gone"
+
+    def _mismatch(self, rec: Handed, conn: Hashable) -> str:
+        """A PLACED the simulated world did not see: not counted as retrieved."""
+        pid = rec.part.id
+        self.counts["mismatch"] += 1
+        if self.ctx is not None:
+            self.ctx.stats.count("placed_mismatch")
+            self.ctx.stats.faults["placed_mismatch"] += 1
+            self.ctx.stats.emit(self.clock.now(), "fault", kind="placed_mismatch", id=pid,
+                                message=f"{conn}: reported part {pid} placed, but no "
+                                        f"{rec.part.type} was placed")
+        return (f"ERR PLACED {pid}: no {rec.part.type} was placed: counted as a mismatch, "
+                "not as retrieved")
+
+    def is_cut_off(self, robot: str) -> bool:
+        """Any thread: is ``robot`` cut off now?"""
+        until = self.cut_until.get(robot)
+        return until is not None and self.clock.now() < until
+
+    def _unreported(self, rec: Handed, now: float) -> None:
+        """One more of a robot's parts expired unreported; enough in a row cut it off and
+        raise a fault for the operator."""
+        robot = robot_of(rec.owner)
+        self.unreported[robot] += 1
+        if self.unreported[robot] < self.max_outstanding or self.is_cut_off(robot):
+            return
+        self.cut_until[robot] = now + self.cut_off_s
+        self.unreported.pop(robot, None)
+        self.counts["cut_off"] += 1
+        for r in list(self.handed.values()):        # what it still holds goes back
+            if robot_of(r.owner) == robot and not r.picked:
+                r.until = now
+        if self.ctx is not None:
+            self.ctx.stats.faults["robot_cut_off"] += 1
+            self.ctx.stats.emit(now, "fault", kind="robot_cut_off", robot=robot,
+                                message=f"robot {robot} took parts and never reported "
+                                        f"them: refused for {self.cut_off_s:g} s")
 
     def _count_miss(self, rec: Handed, why: str, conn: Hashable) -> None:
         ctx = self.ctx
@@ -358,12 +418,21 @@ class Desk:
                 self.expired.pop(next(iter(self.expired)))
             held = rec.picked
             self.counts["held_expired" if held else "expired"] += 1
+            self._unreported(rec, now)
             if self.ctx is not None:
                 self.ctx.stats.count("unreported")
                 self.ctx.stats.emit(now, "part_expired", id=pid, type=rec.part.type,
                                     robot=str(rec.owner), picked=held,
                                     message=("reported picked, never placed" if held else
                                              "handed out, never reported: recirculated"))
+
+
+def robot_of(conn: Hashable) -> str:
+    """The robot a connection name belongs to: ``NAME`` of ``NAME#N@HOST:PORT`` (a robot
+    that said who it is); otherwise the connection itself (each on its own)."""
+    text = str(conn)
+    head = text.split("@", 1)[0]
+    return head.split("#", 1)[0] if "#" in head else text
 
 
 def _host(conn: Hashable) -> str | None:

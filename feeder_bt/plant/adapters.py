@@ -24,6 +24,7 @@ class PlantOptions:
     sim_robot: bool = True              # on the simulated cell: drive its robot through
                                         # the reference client
     pick_grace_s: float = 5.0
+    robots: str | None = None           # the robots file: who may take parts (robots.py)
     opcua: str | None = None            # "[HOST:]PORT"
     opcua_users: str | None = None
     opcua_insecure: bool = False        # an unsecured endpoint too (loopback only)
@@ -46,6 +47,23 @@ def parse_hostport(text: str, default_port: int, what: str) -> tuple[str, int]:
     return host, port
 
 
+def _world_check(world: Any) -> Any:
+    """On the simulated cell: a PLACED is believed only if the world placed one more part
+    of that type than the PLACED reports already believed (the world's ids are not the
+    cell's: it counts by type). Not a leak of truth to vision: it judges robots' reports,
+    as the report's accounting does."""
+    from collections import Counter
+    believed: Counter[str] = Counter()
+
+    def check(part: Any) -> bool:
+        if believed[part.type] >= world.placed_by_type[part.type]:
+            return False
+        believed[part.type] += 1
+        return True
+
+    return check
+
+
 class PlantAdapters:
     """Whatever of the part server, the simulated robot and OPC UA this run serves."""
 
@@ -63,10 +81,16 @@ class PlantAdapters:
         if opts.part_server:
             from .part_server import DEFAULT_PORT, PartServer, install
             host, port = parse_hostport(opts.part_server, DEFAULT_PORT, "--part-server")
+            from .robots import RobotTrust
+            trust = RobotTrust.load(opts.robots)
             self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
             install(cell, self.desk)
+            world = getattr(cell.hal, "world", None)
+            if world is not None:
+                self.desk.verify_placed = _world_check(world)
+            self.trust = trust
             try:
-                self.server = PartServer(self.desk, host, port)
+                self.server = PartServer(self.desk, host, port, trust)
                 where = self.server.start()
             except OSError as e:
                 raise FeederError(f"--part-server {opts.part_server}: {e.strerror or e}") \
@@ -92,7 +116,14 @@ class PlantAdapters:
         else:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
+            if self.trust.robots:            # it says who it is, like any robot
+                link.send(f"HELLO sim-robot {self.trust.add_runtime('sim-robot')}")
+                reply = link.receive(timeout=10.0)
+                if reply is None or not reply.startswith("OK HELLO"):
+                    raise FeederError(f"the simulated robot was refused: {reply}")
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
+
+    trust = None
 
     def pump(self) -> None:
         """After each tick, on the tick thread."""

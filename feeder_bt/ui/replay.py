@@ -26,8 +26,9 @@ from ..eventlog import open_readonly
 from ..treelog import TraceView, read_trace
 from . import parse_bind
 from .access import Gate, allowed_hosts
+from .conns import ConnGate, ConnLimits, quiet_logger
 from .responses import SecurityHeaders
-from .serve import _bind, make_notice
+from .serve import _bind, make_notice, uvicorn_config
 from .treedata import tree_routes
 
 STATIC = Path(__file__).parent / "static"
@@ -66,14 +67,22 @@ def serve_replay(db: str | Path, run_id: int, bind: str) -> int:
         print(notice, file=sys.stderr)
     conn = open_readonly(db)
     view = read_trace(conn, run_id)
-    config = uvicorn.Config(replay_app(view, host), log_level="warning", access_log=False,
-                            lifespan="off", proxy_headers=False, server_header=False)
-    server = uvicorn.Server(config)
+    gate = ConnGate("replay UI", ConnLimits(total=256, per_address=32))
+    server = uvicorn.Server(uvicorn_config(replay_app(view, host), gate))
+
+    async def serve() -> None:
+        gate.loop_errors(asyncio.get_running_loop())
+        unquiet = quiet_logger("uvicorn.error", gate)
+        try:
+            await server.serve(sockets=[sock])
+        finally:
+            unquiet()
+
     shown = f"[{host}]" if ":" in host else host
     print(f"replay UI: http://{shown}:{port}/ (run {run_id}; Ctrl-C to stop)",
           file=sys.stderr, flush=True)
     try:
-        asyncio.run(server.serve(sockets=[sock]))
+        asyncio.run(serve())
     except KeyboardInterrupt:
         pass
     finally:
