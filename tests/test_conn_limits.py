@@ -137,3 +137,35 @@ def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
     finally:
         flood.close()
         live.close()
+
+
+def test_opc_ua_wrong_arguments_are_invalid_and_anonymous_attempts_recorded(tmp_path):
+    pytest.importorskip("asyncua")
+    from asyncua import ua
+    from asyncua.ua.uaerrors import BadInvalidArgument, UaError
+    from test_opcua import ALICE, LiveCell, cell_node, client
+
+    live = LiveCell(tmp_path)
+    try:
+        async def go() -> None:
+            with pytest.raises(UaError):
+                async with client(live.url, None):
+                    pass
+            async with client(live.url, ALICE) as c:
+                idx, node = await cell_node(c)
+                await node.call_method(f"{idx}:TakeControl")
+                nan = ua.Variant(float("nan"), ua.VariantType.Double)
+                for bad in (ua.Variant("fast", ua.VariantType.String),
+                            ua.Variant(True, ua.VariantType.Boolean),
+                            ua.Variant([1.0, 2.0], ua.VariantType.Double)):
+                    with pytest.raises(BadInvalidArgument):
+                        await node.call_method(f"{idx}:SetSpeeds", bad, nan, nan)
+                await node.call_method(f"{idx}:ReleaseControl")
+
+        asyncio.run(go())
+        end = time.monotonic() + WAIT_S           # the access event reaches the tick thread
+        while live.ua.ops.report()["access"].get("login_refused", 0) < 1:
+            assert time.monotonic() < end, live.ua.ops.report()["access"]
+            time.sleep(0.05)
+    finally:
+        live.close()

@@ -402,8 +402,23 @@ class CellUaServer:
         if len(values) != len(SPEED_KEYS):
             return self._refuse(ua.StatusCodes.BadArgumentsMissing,
                                 f"SetSpeeds takes {len(SPEED_KEYS)} numbers")
-        speeds = {k: float(v) for k, v in zip(SPEED_KEYS, values, strict=True)
-                  if v is not None and float(v) == float(v)}           # NaN: unchanged
+        speeds: dict[str, float] = {}
+        for key, v in zip(SPEED_KEYS, values, strict=True):
+            # a Double (or any number but a Boolean); anything else is the caller's mistake,
+            # never our BadUnexpectedError (issue 28)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                return self._refuse(ua.StatusCodes.BadInvalidArgument,
+                                    f"SetSpeeds: {SPEEDS[key]} must be a Double, got "
+                                    f"{type(v).__name__}")
+            try:
+                f = float(v)
+            except OverflowError:
+                return self._refuse(ua.StatusCodes.BadInvalidArgument,
+                                    f"SetSpeeds: {SPEEDS[key]} is out of range")
+            if f == f:                               # NaN: leave as it is
+                speeds[key] = f
         return await self._run("speeds", speeds)
 
     async def _run(self, name: str, args: dict[str, Any]):

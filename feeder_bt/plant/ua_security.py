@@ -18,6 +18,8 @@ import ipaddress
 from pathlib import Path
 from typing import Any
 
+from asyncua import ua
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
@@ -43,6 +45,13 @@ def install_session_hooks() -> None:
         token = PEER.set(str(peer[0]))
         try:
             return activate(self, params, peer_certificate)
+        except ServiceError as e:       # refused before our user manager is asked
+            users = getattr(self.iserver, "user_manager", None)
+            if e.code == ua.StatusCodes.BadIdentityTokenRejected and \
+                    isinstance(users, UaUsers):
+                users.record("login_refused", "-", ip=str(peer[0])[:64], surface="opcua",
+                             locked_by="anonymous")
+            raise
         finally:
             PEER.reset(token)
 
