@@ -201,16 +201,16 @@ class UiServer:
             self._sock.close()
 
 
-def make_notice(host: str) -> str | None:
+def make_notice(host: str, what: str = "the operator UI") -> str | None:
     """A warning when the UI is reachable from other machines over plain HTTP."""
     if is_loopback(host):
         return None
     if host.strip("[]") in ("", "0.0.0.0", "::"):
-        return (f"feeder: warning: the operator UI listens on every address ({host}) over "
+        return (f"feeder: warning: {what} listens on every address ({host}) over "
                 "plain HTTP, and answers only to localhost until you name this machine: "
                 "`feeder users set hosts NAME...` (serve it on 127.0.0.1 behind a TLS proxy "
                 "instead)")
-    return (f"feeder: warning: the operator UI on {host} is reachable from the network over "
+    return (f"feeder: warning: {what} on {host} is reachable from the network over "
             "plain HTTP: passwords and session cookies travel unencrypted (serve it on "
             "127.0.0.1 behind a TLS proxy instead)")
 
