@@ -91,6 +91,10 @@ def add_plant_options(parser: argparse.ArgumentParser) -> None:
                         help="with --part-server: the robots file naming the robots that "
                              "may take parts (a secret each, or their addresses); without "
                              "it only this machine is served (docs/part-server.md)")
+    parser.add_argument("--sim-robot-port", metavar="[HOST:]PORT", nargs="?", const="7601",
+                        help="with --part-server --no-sim-robot on the simulated cell: an "
+                             "outside program moves the simulated robot over this port "
+                             "(loopback; default 127.0.0.1:7601; docs/part-server.md)")
     parser.add_argument("--opcua", metavar="[HOST:]PORT", nargs="?", const="4840",
                         help="serve the cell over OPC UA at opc.tcp://HOST:PORT/feeder "
                              "(default 127.0.0.1:4840)")
@@ -109,6 +113,7 @@ def plant_options(args: argparse.Namespace) -> Any:
     from .plant.adapters import PlantOptions
     return PlantOptions(part_server=args.part_server, sim_robot=args.sim_robot,
                         robots=getattr(args, "robots", None),
+                        sim_robot_port=getattr(args, "sim_robot_port", None),
                         opcua=args.opcua, opcua_users=args.users,
                         opcua_insecure=args.opcua_insecure, opcua_pki=args.opcua_pki)
 

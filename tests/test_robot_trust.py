@@ -160,3 +160,51 @@ def test_fast_without_the_sim_robot_is_refused_with_the_reason():
                                           "race ahead of an outside robot"):
         run_job(RunOptions(scenario=LENSES, duration=10.0, fast=True, view="none", db=None,
                            plant=PlantOptions(part_server="127.0.0.1:0", sim_robot=False)))
+
+
+def test_an_outside_program_drives_the_simulated_robot():
+    from feeder_bt.plant.outside_robot import MotionLink, run
+    from feeder_bt.plant.robot_port import RobotPort
+
+    s = _serving_with_parts(2)
+    s.desk.verify_placed = _world_check(s.world)
+    server = PartServer(s.desk, "127.0.0.1", 0)
+    port = RobotPort(s.hal.robot, s.scenario, "127.0.0.1", 0)
+    parts_at, robot_at = server.start(), port.start()
+    done = threading.Event()
+
+    def every() -> None:
+        port.pump()
+        s.desk.serve_idle()
+
+    thread = threading.Thread(target=lambda: Ticker(s.cell, fast=False).run(
+        until=s.clock.now() + 300.0, stop=done.is_set, every=every))
+    thread.start()
+    try:
+        host, p = parts_at.split(":")
+        with PartClient.connect(host, int(p)) as parts:
+            robot = MotionLink(*robot_at.split(":")[:1], int(robot_at.split(":")[1]))
+            assert robot.do("SPEED 1e-300").startswith("ERR SPEED")
+            assert robot.do("HELD") == "OK HELD -"
+            did = run(parts, robot, count=3)
+            robot.close()
+    finally:
+        done.set()
+        thread.join()
+        port.close()
+        server.close()
+    assert did["placed"] == 3
+    # every PLACED was seen by the world: believed, none a mismatch
+    assert s.desk.counts["placed"] == 3 and s.desk.counts["mismatch"] == 0
+    assert s.world.placed_by_type["lens"] == 3 == s.cell.stats.total_retrieved
+    s.close()
+
+
+def test_the_robot_port_is_for_this_machine_and_needs_no_sim_robot():
+    from feeder_bt.plant.robot_port import RobotPort
+    with pytest.raises(FeederError, match="for this machine only"):
+        RobotPort(None, None, "0.0.0.0", 7601)
+    with pytest.raises(FeederError, match="--sim-robot-port: with --no-sim-robot"):
+        run_job(RunOptions(scenario=LENSES, duration=5.0, view="none", db=None,
+                           plant=PlantOptions(part_server="127.0.0.1:0",
+                                              sim_robot_port="127.0.0.1:0")))

@@ -25,6 +25,8 @@ class PlantOptions:
                                         # the reference client
     pick_grace_s: float = 5.0
     robots: str | None = None           # the robots file: who may take parts (robots.py)
+    sim_robot_port: str | None = None   # "[HOST:]PORT": an outside program moves the
+                                        # simulated robot (robot_port.py)
     opcua: str | None = None            # "[HOST:]PORT"
     opcua_users: str | None = None
     opcua_insecure: bool = False        # an unsecured endpoint too (loopback only)
@@ -98,6 +100,8 @@ class PlantAdapters:
             print(f"part server: {where}", file=sys.stderr, flush=True)
             if opts.sim_robot and getattr(cell.hal, "world", None) is not None:
                 self.program = self._sim_robot(where)
+            if opts.sim_robot_port:
+                self._robot_port(opts.sim_robot_port)
         if opts.opcua:
             from .opcua import CellUaServer
             self.opcua = CellUaServer(cell, opts, self.scenario_path, self.cell_path)
@@ -124,11 +128,29 @@ class PlantAdapters:
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
 
     trust = None
+    robot_port = None
+
+    def _robot_port(self, text: str) -> None:
+        """The simulated robot's port for an outside program (--sim-robot-port)."""
+        from .robot_port import RobotPort
+        cell, opts = self.cell, self.opts
+        if opts.sim_robot or getattr(cell.hal, "world", None) is None:
+            raise FeederError("--sim-robot-port: with --no-sim-robot on the simulated cell "
+                              "(the built-in program would move the same robot)")
+        host, port = parse_hostport(text, 7601, "--sim-robot-port")
+        self.robot_port = RobotPort(cell.hal.robot, cell.scenario, host, port)
+        try:
+            where = self.robot_port.start()
+        except OSError as e:
+            raise FeederError(f"--sim-robot-port {text}: {e.strerror or e}") from None
+        print(f"simulated robot port: {where}", file=sys.stderr, flush=True)
 
     def pump(self) -> None:
         """After each tick, on the tick thread."""
         if self.program is not None:
             self.program.step()
+        if self.robot_port is not None:
+            self.robot_port.pump()
         if self.desk is not None:
             self.desk.serve_idle()
         if self.opcua is not None:
@@ -141,6 +163,8 @@ class PlantAdapters:
     def close(self) -> None:
         if self.program is not None:
             self.program.kill()
+        if self.robot_port is not None:
+            self.robot_port.close()
         if self.server is not None:
             self.server.close()
         if self.opcua is not None:
@@ -152,6 +176,8 @@ class PlantAdapters:
             out["part_server"] = self.server.report()
             if self.program is not None:
                 out["part_server"]["sim_robot"] = dict(self.program.counts)
+            if self.robot_port is not None:
+                out["part_server"]["sim_robot_port"] = dict(self.robot_port.counts)
         if self.opcua is not None:
             out["opcua"] = self.opcua.report()
         return out

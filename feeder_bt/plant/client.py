@@ -188,6 +188,10 @@ class PartClient:
             raise PartServerError(fields[0])
         return kind, fields
 
+    def hello(self, name: str, secret: str) -> None:
+        """Say which robot this is (a part server with a robots file asks it first)."""
+        self.request(f"HELLO {name} {secret}")
+
     def part(self, type: str | None = None, within: float | None = None,
              wait: float = 0.0) -> Offer | None:
         """Ask for a part; None if there is none (within ``wait`` seconds)."""
