@@ -36,12 +36,12 @@ from ..part_protocol import (
 from ..parts import Part
 from .common import Ctx
 from .retrieve import NextPart, count_retrieved
+from .serve_trust import CUT_OFF_S, TrustRules, robot_of
 
 PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expires
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires
 STATIONARY_S = 60.0       # a part on a belt that does not move: its pick time-out
 ROBOT_IDLE_S = 30.0       # parts waiting and no robot asking this long: tell the operator
-CUT_OFF_S = 600.0         # a robot whose parts expire unreported is refused this long
 FORGET = 1000             # expired ids remembered for late reports
 # MISSED id WHY: a first word naming a fault kind counts the miss under that kind
 MISS_KINDS = {"servo_timeout": "servo_timeout", "servo": "servo_timeout",
@@ -105,7 +105,7 @@ class DeskCounts:
         return {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
 
 
-class Desk:
+class Desk(TrustRules):
     """The part server's records and answers; every method but ``inbox.put`` runs on the
     tick thread. ``status()`` gives the cell's side of a STATUS reply (state, scenario)."""
 
@@ -328,43 +328,6 @@ class Desk:
             return f"OK RELEASE {pid} queued"
         return f"OK RELEASE {pid} gone"
 
-    def _mismatch(self, rec: Handed, conn: Hashable) -> str:
-        """A PLACED the simulated world did not see: not counted as retrieved."""
-        pid = rec.part.id
-        self.counts["mismatch"] += 1
-        if self.ctx is not None:
-            self.ctx.stats.count("placed_mismatch")
-            self.ctx.stats.faults["placed_mismatch"] += 1
-            self.ctx.stats.emit(self.clock.now(), "fault", kind="placed_mismatch", id=pid,
-                                message=f"{conn}: reported part {pid} placed, but no "
-                                        f"{rec.part.type} was placed")
-        return (f"ERR PLACED {pid}: no {rec.part.type} was placed: counted as a mismatch, "
-                "not as retrieved")
-
-    def is_cut_off(self, robot: str) -> bool:
-        """Any thread: is ``robot`` cut off now?"""
-        until = self.cut_until.get(robot)
-        return until is not None and self.clock.now() < until
-
-    def _unreported(self, rec: Handed, now: float) -> None:
-        """One more of a robot's parts expired unreported; enough in a row cut it off and
-        raise a fault for the operator."""
-        robot = robot_of(rec.owner)
-        self.unreported[robot] += 1
-        if self.unreported[robot] < self.max_outstanding or self.is_cut_off(robot):
-            return
-        self.cut_until[robot] = now + self.cut_off_s
-        self.unreported.pop(robot, None)
-        self.counts["cut_off"] += 1
-        for r in list(self.handed.values()):        # what it still holds goes back
-            if robot_of(r.owner) == robot and not r.picked:
-                r.until = now
-        if self.ctx is not None:
-            self.ctx.stats.faults["robot_cut_off"] += 1
-            self.ctx.stats.emit(now, "fault", kind="robot_cut_off", robot=robot,
-                                message=f"robot {robot} took parts and never reported "
-                                        f"them: refused for {self.cut_off_s:g} s")
-
     def _count_miss(self, rec: Handed, why: str, conn: Hashable) -> None:
         ctx = self.ctx
         if ctx is None:
@@ -425,14 +388,6 @@ class Desk:
                                     robot=str(rec.owner), picked=held,
                                     message=("reported picked, never placed" if held else
                                              "handed out, never reported: recirculated"))
-
-
-def robot_of(conn: Hashable) -> str:
-    """The robot a connection name belongs to: ``NAME`` of ``NAME#N@HOST:PORT`` (a robot
-    that said who it is); otherwise the connection itself (each on its own)."""
-    text = str(conn)
-    head = text.split("@", 1)[0]
-    return head.split("#", 1)[0] if "#" in head else text
 
 
 def _host(conn: Hashable) -> str | None:

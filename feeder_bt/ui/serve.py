@@ -11,7 +11,10 @@ HTTP and websocket protocol classes are replaced (``Config(http=..., ws=...)``) 
 subclasses that pass each connection through a ``conns.ConnGate`` (per-address and total
 caps, the oldest idle connection closed for a newcomer) and close one whose request has
 not arrived within ``header_s``; header size stays bounded by h11's
-``h11_max_incomplete_event_size`` (16 KiB); the backlog is the system's ceiling.
+``h11_max_incomplete_event_size`` (16 KiB); the backlog is the system's ceiling. (uvicorn
+docs, "Settings" — ``limit_concurrency``, ``backlog``, ``timeout_keep_alive``,
+``h11_max_incomplete_event_size`` — and "Server Behavior"; checked against uvicorn 0.54's
+``protocols/http/h11_impl.py``, whose keep-alive timer starts only after a response.)
 """
 
 from __future__ import annotations
