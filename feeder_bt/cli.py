@@ -214,7 +214,17 @@ def summary(report: dict) -> str:
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
-            + _ceiling_line(report))
+            + _ceiling_line(report) + _robots_line(report))
+
+
+def _robots_line(report: dict) -> str:
+    """The part server's distrust (issue 28): PLACED reports the simulated world did not
+    see (not counted as retrieved) and robots cut off; nothing when there was none."""
+    ps = report.get("part_server") or {}
+    bad = [(ps.get("mismatch", 0), "PLACED the world did not see (not counted)"),
+           (ps.get("cut_off", 0), "robot(s) cut off for parts never reported")]
+    said = ", ".join(f"{n} {what}" for n, what in bad if n)
+    return f"\n  part server: {said}" if said else ""
 
 
 def _ceiling_line(report: dict) -> str:

@@ -87,6 +87,14 @@ def add_plant_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-sim-robot", dest="sim_robot", action="store_false",
                         help="with --part-server on the simulated cell: no simulated robot "
                              "program (an outside client only talks to the server)")
+    parser.add_argument("--robots", metavar="FILE",
+                        help="with --part-server: the robots file naming the robots that "
+                             "may take parts (a secret each, or their addresses); without "
+                             "it only this machine is served (docs/part-server.md)")
+    parser.add_argument("--sim-robot-port", metavar="[HOST:]PORT", nargs="?", const="7601",
+                        help="with --part-server --no-sim-robot on the simulated cell: an "
+                             "outside program moves the simulated robot over this port "
+                             "(loopback; default 127.0.0.1:7601; docs/part-server.md)")
     parser.add_argument("--opcua", metavar="[HOST:]PORT", nargs="?", const="4840",
                         help="serve the cell over OPC UA at opc.tcp://HOST:PORT/feeder "
                              "(default 127.0.0.1:4840)")
@@ -104,6 +112,8 @@ def plant_options(args: argparse.Namespace) -> Any:
         return None
     from .plant.adapters import PlantOptions
     return PlantOptions(part_server=args.part_server, sim_robot=args.sim_robot,
+                        robots=getattr(args, "robots", None),
+                        sim_robot_port=getattr(args, "sim_robot_port", None),
                         opcua=args.opcua, opcua_users=args.users,
                         opcua_insecure=args.opcua_insecure, opcua_pki=args.opcua_pki)
 
@@ -244,6 +254,11 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     opcua = bool(opts.plant is not None and opts.plant.opcua)
     if opcua and opts.fast:
         raise FeederError("--opcua serves a plant in real time: drop --fast")
+    if opts.fast and opts.plant is not None and opts.plant.part_server \
+            and not opts.plant.sim_robot:
+        raise FeederError("--fast with --no-sim-robot: virtual time would race ahead of an "
+                          "outside robot in real time, and every part would expire before "
+                          "it could ask; drop --fast")
     # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
     duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start

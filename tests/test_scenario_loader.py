@@ -240,7 +240,7 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         [("tick_hz: 50", "tick_hz: 4")], 3, "tick_hz", ["[5, 1000]", "got 4"]),
     "robot_speed_pct_zero": (
         [("policy: fifo", "policy: fifo\n  robot_speed_pct: 0")], 26,
-        "retrieve.robot_speed_pct", ["(0, 200]"]),
+        "retrieve.robot_speed_pct", ["[1, 200]"]),
     "probabilities_do_not_sum_to_one": (
         [("0.15, pickable", "0.10, pickable")], 7, "parts.lens.poses",
         ["sum to 1", "0.95"]),

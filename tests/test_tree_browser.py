@@ -13,7 +13,7 @@ import time
 
 import pytest
 from browser_helpers import new_page, require_browser
-from uiutil import ROOT, Client, FeederUi, ReplayUi, feeder_cli, make_users
+from uiutil import PASSWORD, ROOT, Client, FeederUi, ReplayUi, feeder_cli, make_users
 
 from feeder_bt.run import RunOptions, run_job
 
@@ -48,8 +48,13 @@ def replay(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def page(browser):
+def page(browser, replay):
     pg = new_page(browser)
+    pg.goto(replay[1])                      # the replay asks for a login first (issue 28)
+    pg.fill("#login-user", "alice")
+    pg.fill("#login-password", PASSWORD)
+    pg.click("#login-submit")
+    expect(pg.locator("#tv-time")).to_be_visible()
     yield pg
     pg.context.close()
 

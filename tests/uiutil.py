@@ -112,10 +112,16 @@ class FeederUi(UiProcess):
 
 
 class ReplayUi(UiProcess):
-    """`feeder replay DB --ui 127.0.0.1:0`: a past run's trees, served."""
+    """`feeder replay DB --ui 127.0.0.1:0 --users FILE`: a past run's trees, served to
+    signed-in users (alice, ``PASSWORD``, unless ``users`` is given)."""
 
-    def __init__(self, tmp: Path, db: Path) -> None:
-        super().__init__(tmp, ["replay", str(db), "--ui", "127.0.0.1:0"], "replay UI", 30.0)
+    def __init__(self, tmp: Path, db: Path, users: Path | None = None) -> None:
+        if users is None:
+            users = tmp / "replay-users.json"
+            UsersFile(users).add("alice", PASSWORD)
+        self.users = users
+        super().__init__(tmp, ["replay", str(db), "--ui", "127.0.0.1:0", "--users",
+                               str(users)], "replay UI", 30.0)
 
     def stop(self) -> None:
         self.proc.terminate()

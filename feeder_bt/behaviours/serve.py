@@ -36,6 +36,7 @@ from ..part_protocol import (
 from ..parts import Part
 from .common import Ctx
 from .retrieve import NextPart, count_retrieved
+from .serve_trust import CUT_OFF_S, TrustRules, robot_of
 
 PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expires
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires
@@ -99,11 +100,12 @@ class DeskCounts:
 
     def as_dict(self, outstanding: int) -> dict[str, int]:
         keys = ("requests", "handed_out", "picked", "placed", "missed", "released",
-                "expired", "held_expired", "late_reports", "refused")
+                "expired", "held_expired", "late_reports", "refused", "mismatch",
+                "over_limit", "cut_off")
         return {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
 
 
-class Desk:
+class Desk(TrustRules):
     """The part server's records and answers; every method but ``inbox.put`` runs on the
     tick thread. ``status()`` gives the cell's side of a STATUS reply (state, scenario)."""
 
@@ -125,6 +127,14 @@ class Desk:
         self.chooser: ServeRobots | None = None
         # is a robot's connection still open? (the TCP server knows; in process: yes)
         self.alive: Callable[[Hashable], bool] = lambda conn: True
+        # trust (issue 28): at most this many parts with one robot and not yet reported;
+        # a robot whose parts expire unreported that many times running is cut off
+        self.max_outstanding = 4
+        self.cut_off_s = CUT_OFF_S
+        self.unreported: Counter[str] = Counter()    # per robot, since its last report
+        self.cut_until: dict[str, float] = {}
+        # the simulated cell: did the world see a part of this type placed? (None: trust)
+        self.verify_placed: Callable[[Part], bool] | None = None
 
     @property
     def counts(self) -> Counter:
@@ -197,6 +207,16 @@ class Desk:
             self.counts["refused"] += 1
             return (f"ERR PART: unknown part type {req.part_type!r} (one of: "
                     f"{', '.join(ctx.scenario.parts)})")
+        robot = robot_of(item.conn)
+        if self.is_cut_off(robot):
+            self.counts["refused"] += 1
+            return f"ERR PART: robot {robot} is cut off: parts handed to it were never reported"
+        held = sum(1 for r in self.handed.values() if robot_of(r.owner) == robot)
+        if held >= self.max_outstanding:
+            self.counts["over_limit"] += 1
+            self.counts["refused"] += 1
+            return (f"ERR PART: robot {robot} holds {held} parts not yet reported (at most "
+                    f"{self.max_outstanding}): report them first")
         chosen = None
         if self.chooser is not None:
             chosen = self.chooser.choose(req.part_type, req.within_s)
@@ -264,6 +284,7 @@ class Desk:
             return refusal or f"ERR {USAGE[cmd]}"
         pid = rec.part.id
         now = self.clock.now()
+        self.unreported.pop(robot_of(item.conn), None)     # it reports: it is honest
         late = pid not in self.handed
         if late and cmd in ("PICKED", "PLACED"):       # expired, then reported after all
             self.counts["held_expired" if rec.picked else "expired"] -= 1
@@ -282,6 +303,8 @@ class Desk:
             return f"OK PICKED {pid}"
         del self.handed[pid]
         if cmd == "PLACED":
+            if self.verify_placed is not None and not self.verify_placed(rec.part):
+                return self._mismatch(rec, item.conn)
             if not rec.picked:
                 self.counts["picked"] += 1
             self.counts["placed"] += 1
@@ -358,6 +381,7 @@ class Desk:
                 self.expired.pop(next(iter(self.expired)))
             held = rec.picked
             self.counts["held_expired" if held else "expired"] += 1
+            self._unreported(rec, now)
             if self.ctx is not None:
                 self.ctx.stats.count("unreported")
                 self.ctx.stats.emit(now, "part_expired", id=pid, type=rec.part.type,

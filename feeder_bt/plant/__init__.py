@@ -7,7 +7,12 @@
   robot, written against it;
 - ``opcua``: the cell as an OPC UA server (``feeder run --opcua``), commanded under the
   dashboard's rules (``ua_security``: its users and the session hooks);
+- ``robots``: which robots the part server trusts (the robots file, ``HELLO``);
+  ``robot_port``: the simulated robot's motions for an outside program
+  (``--sim-robot-port``), ``outside_robot`` such a program;
 - ``adapters``: what one run opens, pumps after each tick and closes.
+
+Every listener admits connections through ``ui.conns.ConnGate`` (issue 28).
 
 Each is a thin translation onto the cell's own operations. This module imports nothing
 heavy, so the command line can parse its options without loading asyncua.

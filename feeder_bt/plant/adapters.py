@@ -24,6 +24,9 @@ class PlantOptions:
     sim_robot: bool = True              # on the simulated cell: drive its robot through
                                         # the reference client
     pick_grace_s: float = 5.0
+    robots: str | None = None           # the robots file: who may take parts (robots.py)
+    sim_robot_port: str | None = None   # "[HOST:]PORT": an outside program moves the
+                                        # simulated robot (robot_port.py)
     opcua: str | None = None            # "[HOST:]PORT"
     opcua_users: str | None = None
     opcua_insecure: bool = False        # an unsecured endpoint too (loopback only)
@@ -46,6 +49,23 @@ def parse_hostport(text: str, default_port: int, what: str) -> tuple[str, int]:
     return host, port
 
 
+def _world_check(world: Any) -> Any:
+    """On the simulated cell: a PLACED is believed only if the world placed one more part
+    of that type than the PLACED reports already believed (the world's ids are not the
+    cell's: it counts by type). Not a leak of truth to vision: it judges robots' reports,
+    as the report's accounting does."""
+    from collections import Counter
+    believed: Counter[str] = Counter()
+
+    def check(part: Any) -> bool:
+        if believed[part.type] >= world.placed_by_type[part.type]:
+            return False
+        believed[part.type] += 1
+        return True
+
+    return check
+
+
 class PlantAdapters:
     """Whatever of the part server, the simulated robot and OPC UA this run serves."""
 
@@ -63,10 +83,16 @@ class PlantAdapters:
         if opts.part_server:
             from .part_server import DEFAULT_PORT, PartServer, install
             host, port = parse_hostport(opts.part_server, DEFAULT_PORT, "--part-server")
+            from .robots import RobotTrust
+            trust = RobotTrust.load(opts.robots)
             self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
             install(cell, self.desk)
+            world = getattr(cell.hal, "world", None)
+            if world is not None:
+                self.desk.verify_placed = _world_check(world)
+            self.trust = trust
             try:
-                self.server = PartServer(self.desk, host, port)
+                self.server = PartServer(self.desk, host, port, trust)
                 where = self.server.start()
             except OSError as e:
                 raise FeederError(f"--part-server {opts.part_server}: {e.strerror or e}") \
@@ -74,6 +100,8 @@ class PlantAdapters:
             print(f"part server: {where}", file=sys.stderr, flush=True)
             if opts.sim_robot and getattr(cell.hal, "world", None) is not None:
                 self.program = self._sim_robot(where)
+            if opts.sim_robot_port:
+                self._robot_port(opts.sim_robot_port)
         if opts.opcua:
             from .opcua import CellUaServer
             self.opcua = CellUaServer(cell, opts, self.scenario_path, self.cell_path)
@@ -92,12 +120,37 @@ class PlantAdapters:
         else:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
+            if self.trust.robots:            # it says who it is, like any robot
+                link.send(f"HELLO sim-robot {self.trust.add_runtime('sim-robot')}")
+                reply = link.receive(timeout=10.0)
+                if reply is None or not reply.startswith("OK HELLO"):
+                    raise FeederError(f"the simulated robot was refused: {reply}")
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
+
+    trust = None
+    robot_port = None
+
+    def _robot_port(self, text: str) -> None:
+        """The simulated robot's port for an outside program (--sim-robot-port)."""
+        from .robot_port import RobotPort
+        cell, opts = self.cell, self.opts
+        if opts.sim_robot or getattr(cell.hal, "world", None) is None:
+            raise FeederError("--sim-robot-port: with --no-sim-robot on the simulated cell "
+                              "(the built-in program would move the same robot)")
+        host, port = parse_hostport(text, 7601, "--sim-robot-port")
+        self.robot_port = RobotPort(cell.hal.robot, cell.scenario, host, port)
+        try:
+            where = self.robot_port.start()
+        except OSError as e:
+            raise FeederError(f"--sim-robot-port {text}: {e.strerror or e}") from None
+        print(f"simulated robot port: {where}", file=sys.stderr, flush=True)
 
     def pump(self) -> None:
         """After each tick, on the tick thread."""
         if self.program is not None:
             self.program.step()
+        if self.robot_port is not None:
+            self.robot_port.pump()
         if self.desk is not None:
             self.desk.serve_idle()
         if self.opcua is not None:
@@ -110,6 +163,8 @@ class PlantAdapters:
     def close(self) -> None:
         if self.program is not None:
             self.program.kill()
+        if self.robot_port is not None:
+            self.robot_port.close()
         if self.server is not None:
             self.server.close()
         if self.opcua is not None:
@@ -121,6 +176,8 @@ class PlantAdapters:
             out["part_server"] = self.server.report()
             if self.program is not None:
                 out["part_server"]["sim_robot"] = dict(self.program.counts)
+            if self.robot_port is not None:
+                out["part_server"]["sim_robot_port"] = dict(self.robot_port.counts)
         if self.opcua is not None:
             out["opcua"] = self.opcua.report()
         return out

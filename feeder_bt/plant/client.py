@@ -72,7 +72,9 @@ class TcpLink:
 
     def receive(self, timeout: float | None = 0.0) -> str | None:
         while b"\n" not in self.buf:
-            ready, _, _ = select.select([self.sock], [], [], timeout)
+            poller = select.poll()           # not select(): a descriptor may be > 1023
+            poller.register(self.sock, select.POLLIN)
+            ready = poller.poll(None if timeout is None else max(0, int(timeout * 1000)))
             if not ready:
                 return None
             try:
@@ -185,6 +187,10 @@ class PartClient:
         if kind == "ERR":
             raise PartServerError(fields[0])
         return kind, fields
+
+    def hello(self, name: str, secret: str) -> None:
+        """Say which robot this is (a part server with a robots file asks it first)."""
+        self.request(f"HELLO {name} {secret}")
 
     def part(self, type: str | None = None, within: float | None = None,
              wait: float = 0.0) -> Offer | None:

@@ -37,12 +37,23 @@ from ..cell import Cell
 from ..errors import FeederError
 from ..ui.access import AccessRecorder
 from ..ui.bridge import Bridge, Outcome
+from ..ui.conns import ConnGate, ConnLimits
 from ..ui.control import Control, Session
 from ..ui.operate import SPEED_KEYS, CellOps
 from ..ui.status import CellPanel
 from ..ui.users import UsersFile
 from .adapters import PlantOptions, parse_hostport
-from .ua_security import CLOSED, SESSION, UaUsers, default_pki, install_session_hooks, is_loopback
+from .ua_security import (
+    ACTIVATION_S,
+    CLOSED,
+    GATES,
+    SESSION,
+    UaUsers,
+    default_pki,
+    install_gate_hook,
+    install_session_hooks,
+    is_loopback,
+)
 
 NAMESPACE = "urn:feeder_bt"
 DEFAULT_PORT = 4840
@@ -100,6 +111,8 @@ class CellUaServer:
         self.last_msg = 0
         self.events_sent = 0
         self.refused = 0
+        self.gate = ConnGate("OPC UA", ConnLimits(total=128, per_address=16,
+                                                  header_s=ACTIVATION_S))
 
     # ------------------------------------------------------------------ tick thread
     def _snapshot(self):
@@ -122,6 +135,7 @@ class CellUaServer:
         """Serve on a thread of its own; returns once the endpoint listens."""
         logging.getLogger("asyncua").setLevel(logging.CRITICAL)   # one-line errors
         install_session_hooks()
+        install_gate_hook()
         self.bridge.publish()
         self.thread = threading.Thread(target=self._main, name="opcua", daemon=True)
         self.thread.start()
@@ -147,6 +161,16 @@ class CellUaServer:
         server = self.server = Server(user_manager=UaUsers(self.users, record))
         await server.init()
         CLOSED[id(server.iserver)] = self._session_closed
+        # connections (issue 28): our gate caps them per address and in all, and makes room
+        # for a newcomer by closing the oldest without an activated session. asyncua's own
+        # max_connections is only a backstop far above ours: it counts a closed connection
+        # until its connection_lost runs, so under a burst it would refuse (reset) the very
+        # client our gate let in. Its watchdog closes a connection that has not activated a
+        # session within ACTIVATION_S.
+        GATES[id(server.iserver)] = self.gate
+        server.iserver.max_connections = self.gate.total * 8 + 1000
+        server.iserver.max_pending_activation_seconds = ACTIVATION_S
+        self.gate.loop_errors(self.loop)      # asyncua's own log is silenced (start())
         server.set_endpoint(self.url)
         server.set_server_name(f"feeder_bt cell {self.cell.cell.name}")
         await server.set_application_uri(f"{NAMESPACE}:cell:{self.cell.cell.name}")
@@ -172,6 +196,8 @@ class CellUaServer:
         self.bridge.unsubscribe(self._published)
         await server.stop()
         CLOSED.pop(id(server.iserver), None)
+        GATES.pop(id(server.iserver), None)
+        self.gate.tell()
 
     async def _certificate(self, server: Server) -> None:
         """The server's key and self-signed certificate, made on first start."""
@@ -233,6 +259,7 @@ class CellUaServer:
 
     def report(self) -> dict[str, Any]:
         return {"url": self.url, "events": self.events_sent, "refused": self.refused,
+                "connection_limits": self.gate.stats(),
                 **self.ops.report()}
 
     # ------------------------------------------------------------------ publishing
@@ -375,8 +402,23 @@ class CellUaServer:
         if len(values) != len(SPEED_KEYS):
             return self._refuse(ua.StatusCodes.BadArgumentsMissing,
                                 f"SetSpeeds takes {len(SPEED_KEYS)} numbers")
-        speeds = {k: float(v) for k, v in zip(SPEED_KEYS, values, strict=True)
-                  if v is not None and float(v) == float(v)}           # NaN: unchanged
+        speeds: dict[str, float] = {}
+        for key, v in zip(SPEED_KEYS, values, strict=True):
+            # a Double (or any number but a Boolean); anything else is the caller's mistake,
+            # never our BadUnexpectedError (issue 28)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                return self._refuse(ua.StatusCodes.BadInvalidArgument,
+                                    f"SetSpeeds: {SPEEDS[key]} must be a Double, got "
+                                    f"{type(v).__name__}")
+            try:
+                f = float(v)
+            except OverflowError:
+                return self._refuse(ua.StatusCodes.BadInvalidArgument,
+                                    f"SetSpeeds: {SPEEDS[key]} is out of range")
+            if f == f:                               # NaN: leave as it is
+                speeds[key] = f
         return await self._run("speeds", speeds)
 
     async def _run(self, name: str, args: dict[str, Any]):

@@ -1,10 +1,19 @@
 """``feeder run --part-server [HOST:]PORT``: robots of any brand pull parts from the cell.
 
-The TCP side only: a thread accepts connections (one thread per robot) and turns each
-request line into a ``Pending`` in the desk's inbox; the tick thread answers it
-(``ServeRobots`` while feeding, ``Desk.serve_idle`` otherwise) and the connection's thread
-writes the answer back. The cell never waits on a robot, and a robot that goes away
-leaves only records that time out (behaviours/serve.py).
+The TCP side only: one thread runs an asyncio loop that holds every connection (no
+thread per robot) and turns each request line into a ``Pending`` in the desk's inbox; the
+tick thread answers it (``ServeRobots`` while feeding, ``Desk.serve_idle`` otherwise) and
+the answer is handed back to the loop, which writes it. The cell never waits on a robot,
+and a robot that goes away leaves only records that time out (behaviours/serve.py).
+
+Nobody on the network can starve it (issue 28): connections pass a ``ui.conns.ConnGate``
+(a cap per address and in all; when full, the oldest connection that has not said who it
+is makes room), a connection must send its first line within ``header_s`` and is closed
+after ``idle_s`` of silence with nothing asked; the backlog is the system's ceiling.
+Robots must be trusted (``robots.RobotTrust``): a robot named in the robots file proves
+who it is (``HELLO NAME SECRET``, or its address); without a robots file only loopback
+peers are served. A robot cut off by the desk (parts taken and never reported) has its
+connections closed and its ``HELLO`` refused until the cut-off ends.
 
 ``install(cell, desk)`` makes the cell build the part server's trees (trees/serve.py)
 instead of the retrieve tree each time it starts.
@@ -12,20 +21,25 @@ instead of the retrieve tree each time it starts.
 
 from __future__ import annotations
 
+import asyncio
 import itertools
-import select
 import socket
-import socketserver
 import threading
+from concurrent.futures import Future
 from typing import Any
 
 from ..behaviours.serve import Desk, Pending
 from ..cell import Cell, CellState
 from ..part_protocol import MAX_LINE
 from ..trees.serve import build_serving, build_serving_cleanup, build_serving_setup
+from ..ui.conns import ConnGate, ConnLimits, backlog, peer_ip
+from .robots import RobotTrust
 
 DEFAULT_PORT = 7600
-POLL_S = 0.2               # how often a waiting connection thread checks for shutdown
+SWEEP_S = 1.0              # how often idle connections are looked for
+IN_FLIGHT = 8              # requests a connection may have waiting; then it is not read
+LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0)
+FREE = ("HELP", "QUIT")    # what a robot may ask before it has said who it is
 
 
 def install(cell: Cell, desk: Desk) -> None:
@@ -57,84 +71,197 @@ def _cell_status(cell: Cell) -> dict[str, Any]:
     return out
 
 
-class _Handler(socketserver.StreamRequestHandler):
-    server: _Server
+class _Conn(asyncio.Protocol):
+    """One robot connection on the server's loop."""
 
-    def setup(self) -> None:
-        super().setup()
-        self.conn = f"robot-{next(self.server.ids)}@{self.client_address[0]}:" \
-                    f"{self.client_address[1]}"
-        self.server.connected(self.conn, +1)
+    def __init__(self, srv: _Server) -> None:
+        self.srv = srv
+        self.transport: asyncio.Transport | None = None
+        self.name = ""                     # the desk's name for this connection
+        self.robot: str | None = None      # who it proved to be (None: not yet)
+        self.buf = b""
+        self.waiting: list[list[Any]] = []  # [Pending, reply] in order, not yet written
+        self.seen = 0.0
+        self.lines = 0
+        self.closing = False
+        self.paused = False
 
-    def handle(self) -> None:
-        while not self.server.closing.is_set():
+    # ------------------------------------------------------------------ life
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        srv = self.srv
+        if not srv.gate.admit(transport, self._busy):
+            return
+        self.transport = transport  # type: ignore[assignment]
+        ip = peer_ip(transport)
+        peer = transport.get_extra_info("peername") or ("?", 0)
+        self.ip, self.port = ip, peer[1]
+        self.seen = srv.loop.time()
+        self.name = f"robot-{next(srv.ids)}@{ip}:{self.port}"
+        if srv.trust.robots:
+            r = srv.trust.by_address(ip)
+            if r is not None:
+                self._become(r.name)
+        elif _loopback(ip):
+            self.robot = ""                # anonymous: this machine, this connection
+        srv.conns.add(self)
+        srv.connected(self.name, +1)
+
+    def _become(self, robot: str) -> None:
+        old = self.name
+        self.robot = robot
+        self.name = f"{robot}#{next(self.srv.ids)}@{self.ip}:{self.port}"
+        if old in self.srv.robots:
+            self.srv.robots.discard(old)
+            self.srv.robots.add(self.name)
+
+    def _busy(self) -> bool:
+        return bool(self.robot) or bool(self.waiting)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self.transport is None:
+            return                         # refused at the door
+        self.srv.gate.release(self.transport)
+        self.srv.conns.discard(self)
+        for slot in self.waiting:          # gone while its PART waited: hand it nothing
+            if slot[0] is not None:
+                slot[0].cancelled = True
+        self.waiting.clear()
+        self.srv.connected(self.name, -1)
+
+    def close(self, last: str | None = None) -> None:
+        if self.transport is None or self.closing:
+            return
+        self.closing = True
+        if last is not None:
+            self.transport.write(last.encode("ascii", "replace") + b"\n")
+        self.transport.close()
+
+    # ------------------------------------------------------------------ lines
+    def data_received(self, data: bytes) -> None:
+        if self.closing:
+            return
+        self.seen = self.srv.loop.time()
+        self.buf += data
+        while b"\n" in self.buf and not self.closing:
+            raw, _, self.buf = self.buf.partition(b"\n")
+            if len(raw) > MAX_LINE + 1:
+                self.close(f"ERR line longer than {MAX_LINE} characters: closing")
+                return
+            self._line(raw.decode("ascii", errors="replace").rstrip("\r"))
+        if len(self.buf) > MAX_LINE + 1:
+            self.close(f"ERR line longer than {MAX_LINE} characters: closing")
+
+    def _line(self, line: str) -> None:
+        self.lines += 1
+        words = line.split()
+        cmd = words[0].upper() if words else ""
+        if cmd == "HELLO":
+            self._reply_now(self._hello(words))
+            return
+        if self.robot is None and cmd not in FREE:
+            self.srv.gate.note("refused: a request before HELLO")
+            self._reply_now("ERR who are you? Send HELLO NAME SECRET first (a robot named in "
+                            "the part server's robots file)")
+            return
+        if self.robot and self.srv.cut_off(self.robot):
+            self.close(f"ERR robot {self.robot} is cut off: parts handed to it were never "
+                       "reported")
+            return
+        slot: list[Any] = [None, None]           # [Pending, its reply when it comes]
+
+        def answer(text: str, slot: list[Any] = slot) -> None:   # tick thread
             try:
-                raw = self.rfile.readline(MAX_LINE + 2)
-            except (OSError, ValueError):
+                self.srv.loop.call_soon_threadsafe(self._answered, slot, text)
+            except RuntimeError:                 # the loop has ended
+                pass
+
+        slot[0] = Pending(self.name, line, answer)
+        self.waiting.append(slot)
+        self.srv.desk.inbox.put(slot[0])
+        if len(self.waiting) >= IN_FLIGHT and not self.paused and self.transport:
+            self.paused = True
+            self.transport.pause_reading()
+
+    def _hello(self, words: list[str]) -> str:
+        srv = self.srv
+        if len(words) != 3:
+            return "ERR usage: HELLO NAME SECRET"
+        if self.robot:
+            return f"ERR this connection is robot {self.robot} already"
+        r = srv.trust.hello(words[1], words[2], self.ip)
+        if r is None:
+            srv.gate.note("refused: a wrong HELLO")
+            srv.refused_hellos += 1
+            return "ERR HELLO: unknown robot, wrong secret or address"
+        if srv.cut_off(r.name):
+            return f"ERR robot {r.name} is cut off: parts handed to it were never reported"
+        self._become(r.name)
+        return f"OK HELLO {r.name}"
+
+    def _reply_now(self, text: str) -> None:
+        if self.waiting:                   # in order, behind what the desk still answers
+            slot: list[Any] = [None, None]
+            self.waiting.append(slot)
+            self._answered(slot, text)
+            return
+        self._write(text)
+
+    def _answered(self, slot: list[Any], text: str) -> None:
+        """On the loop: an answer came; write every answer that is next in order."""
+        slot[1] = text
+        while self.waiting and self.waiting[0][1] is not None:
+            reply = self.waiting.pop(0)[1]
+            self._write(reply)
+            if reply == "OK BYE":
+                self.close()
                 return
-            if not raw:
-                return                                  # the robot closed the connection
-            if not raw.endswith(b"\n") and len(raw) > MAX_LINE:
-                self._write(f"ERR line longer than {MAX_LINE} characters: closing")
-                return
-            line = raw.decode("ascii", errors="replace").rstrip("\r\n")
-            done = threading.Event()
-            box: list[str] = []
+        if self.paused and len(self.waiting) < IN_FLIGHT and self.transport:
+            self.paused = False
+            self.transport.resume_reading()
 
-            def answer(text: str, box: list[str] = box, done: threading.Event = done) -> None:
-                box.append(text)
-                done.set()
-
-            item = Pending(self.conn, line, answer)
-            self.server.desk.inbox.put(item)
-            while not done.wait(POLL_S):
-                if self.server.closing.is_set():
-                    item.cancelled = True
-                    self._write("ERR the cell controller is shutting down")
-                    return
-                if self._hung_up():      # gone while its PART waited: hand it nothing
-                    item.cancelled = True
-                    return
-            if not self._write(box[0]) or box[0] == "OK BYE":
-                return
-
-    def _hung_up(self) -> bool:
-        try:
-            ready, _, _ = select.select([self.connection], [], [], 0)
-            return bool(ready) and self.connection.recv(1, socket.MSG_PEEK) == b""
-        except OSError:
-            return True
-
-    def _write(self, text: str) -> bool:
-        try:
-            self.wfile.write(text.encode("ascii", errors="replace") + b"\n")
-            self.wfile.flush()
-            return True
-        except OSError:
-            return False
-
-    def finish(self) -> None:
-        try:
-            super().finish()
-        except OSError:
-            pass
-        self.server.connected(self.conn, -1)
+    def _write(self, text: str) -> None:
+        if self.transport is not None and not self.closing:
+            self.transport.write(text.encode("ascii", errors="replace") + b"\n")
+            self.seen = self.srv.loop.time()
 
 
-class _Server(socketserver.ThreadingTCPServer):
-    daemon_threads = True
-    allow_reuse_address = True
+def _loopback(ip: str) -> bool:
+    import ipaddress
+    try:
+        return ipaddress.ip_address(ip).is_loopback
+    except ValueError:
+        return False
 
-    def __init__(self, address: tuple[str, int], desk: Desk) -> None:
-        self.desk = desk
+
+class _Server:
+    """The loop, its listening socket and its connections (what ``PartServer`` runs)."""
+
+    def __init__(self, address: tuple[str, int], desk: Desk, trust: RobotTrust,
+                 limits: ConnLimits) -> None:
+        self.desk, self.trust, self.limits = desk, trust, limits
         self.ids = itertools.count(1)
         self.closing = threading.Event()
         self.lock = threading.Lock()
         self.robots: set[str] = set()
         self.total_connections = 0
+        self.refused_hellos = 0
+        self.conns: set[_Conn] = set()
+        self.gate = ConnGate("part server", limits)
         family = socket.AF_INET6 if ":" in address[0] else socket.AF_INET
-        self.address_family = family
-        super().__init__(address, _Handler)
+        self.sock = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self.sock.bind(address)
+            self.sock.listen(backlog())
+        except (OSError, OverflowError) as e:
+            self.sock.close()
+            if isinstance(e, OverflowError):
+                raise OSError(str(e)) from None
+            raise
+        self.sock.setblocking(False)
+        self.server_address = self.sock.getsockname()
+        self.loop = asyncio.new_event_loop()
+        self.ready: Future = Future()
 
     def connected(self, conn: str, delta: int) -> None:
         with self.lock:
@@ -144,17 +271,72 @@ class _Server(socketserver.ThreadingTCPServer):
             else:
                 self.robots.discard(conn)
 
+    def cut_off(self, robot: str) -> bool:
+        return self.desk.is_cut_off(robot)
+
+    def run(self) -> None:
+        asyncio.set_event_loop(self.loop)
+        self.gate.loop_errors(self.loop)
+        try:
+            server = self.loop.run_until_complete(
+                self.loop.create_server(lambda: _Conn(self), sock=self.sock))
+        except BaseException as e:
+            self.ready.set_exception(e)
+            return
+        self.ready.set_result(True)
+        self.loop.call_later(SWEEP_S, self._sweep)
+        try:
+            self.loop.run_forever()
+        finally:
+            server.close()
+            for c in list(self.conns):
+                c.close("ERR the cell controller is shutting down")
+            self.loop.run_until_complete(asyncio.sleep(0.05))
+            self.gate.tell()
+            self.loop.close()
+
+    def _sweep(self) -> None:
+        """Close connections that never said anything, or went silent with nothing asked;
+        and those of robots the desk has cut off."""
+        now, lim = self.loop.time(), self.limits
+        for c in list(self.conns):
+            if c.closing or c.waiting:
+                continue
+            if c.robot and self.cut_off(c.robot):
+                c.close(f"ERR robot {c.robot} is cut off: parts handed to it were never "
+                        "reported")
+            elif c.lines == 0 and now - c.seen > lim.header_s:
+                self.gate.note(f"closed: nothing said within {lim.header_s:g} s")
+                c.close()
+            elif now - c.seen > lim.idle_s:
+                self.gate.note(f"closed: silent for {lim.idle_s:g} s")
+                c.close()
+        if not self.closing.is_set():
+            self.loop.call_later(SWEEP_S, self._sweep)
+
+    def stop(self) -> None:
+        self.closing.set()
+        try:
+            self.loop.call_soon_threadsafe(self.loop.stop)
+        except RuntimeError:
+            pass
+
 
 class PartServer:
-    """The listening socket and its thread; ``start()`` returns ``host:port``."""
+    """The listening socket and its thread; ``start()`` returns ``host:port``.
 
-    def __init__(self, desk: Desk, host: str = "127.0.0.1", port: int = DEFAULT_PORT) -> None:
+    ``trust``: the robots file (None: loopback peers only); ``limits``: the connection
+    caps and time-outs."""
+
+    def __init__(self, desk: Desk, host: str = "127.0.0.1", port: int = DEFAULT_PORT,
+                 trust: RobotTrust | None = None, limits: ConnLimits = LIMITS) -> None:
         self.desk = desk
-        self.server = _Server((host, port), desk)
+        self.trust = trust or RobotTrust()
+        desk.max_outstanding = self.trust.max_outstanding
+        self.server = _Server((host, port), desk, self.trust, limits)
         desk.alive = lambda conn: conn in self.server.robots
-        self.thread = threading.Thread(target=self.server.serve_forever,
-                                       kwargs={"poll_interval": POLL_S},
-                                       name="part-server", daemon=True)
+        self.thread = threading.Thread(target=self.server.run, name="part-server",
+                                       daemon=True)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -163,16 +345,18 @@ class PartServer:
 
     def start(self) -> str:
         self.thread.start()
+        self.server.ready.result(timeout=30.0)
         host, port = self.address
         return f"{host}:{port}"
 
     def close(self) -> None:
         """Stop accepting; waiting robots are told the controller is shutting down."""
-        self.server.closing.set()
-        self.server.shutdown()
-        self.server.server_close()
+        self.server.stop()
         self.thread.join(timeout=5.0)
+        self.server.sock.close()
 
     def report(self) -> dict[str, Any]:
         return {"address": "{}:{}".format(*self.address),
-                "connections": self.server.total_connections, **self.desk.report()}
+                "connections": self.server.total_connections,
+                "connection_limits": self.server.gate.stats(),
+                "refused_hellos": self.server.refused_hellos, **self.desk.report()}

@@ -18,6 +18,8 @@ import ipaddress
 from pathlib import Path
 from typing import Any
 
+from asyncua import ua
+from asyncua.common.utils import ServiceError
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
@@ -43,6 +45,13 @@ def install_session_hooks() -> None:
         token = PEER.set(str(peer[0]))
         try:
             return activate(self, params, peer_certificate)
+        except ServiceError as e:       # refused before our user manager is asked
+            users = getattr(self.iserver, "user_manager", None)
+            if e.code == ua.StatusCodes.BadIdentityTokenRejected and \
+                    isinstance(users, UaUsers):
+                users.record("login_refused", "-", ip=str(peer[0])[:64], surface="opcua",
+                             locked_by="anonymous")
+            raise
         finally:
             PEER.reset(token)
 
@@ -118,3 +127,65 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return host == "localhost"
+
+
+# ---------------------------------------------------------------------------- connections
+#: id(InternalServer) -> its ConnGate (issue 28); consulted by the patched protocol factory
+GATES: dict[int, Any] = {}
+ACTIVATION_S = 10.0        # a connection with no activated session this long is closed
+
+
+class _GatedUa:
+    """asyncua's per-connection protocol behind a ``ConnGate``: over the cap it is never
+    made (no UaProcessor, no task, no log line); when full, the oldest connection without
+    an activated session makes room. Everything else is passed through."""
+
+    def __init__(self, inner: Any, gate: Any) -> None:
+        self.inner, self.gate, self.transport = inner, gate, None
+
+    def _busy(self) -> bool:
+        proc = self.inner.processor
+        session = getattr(proc, "session", None)
+        return session is not None and session.is_activated()
+
+    def connection_made(self, transport: Any) -> None:
+        if not self.gate.admit(transport, self._busy):
+            return
+        self.transport = transport
+        self.inner.connection_made(transport)
+
+    def connection_lost(self, exc: BaseException | None) -> None:
+        if self.transport is None:
+            return
+        self.gate.release(self.transport)
+        self.inner.connection_lost(exc)
+
+    def data_received(self, data: bytes) -> None:
+        if self.transport is not None:
+            self.inner.data_received(data)
+
+    def eof_received(self) -> bool | None:
+        return None
+
+    def pause_writing(self) -> None:
+        pass
+
+    def resume_writing(self) -> None:
+        pass
+
+
+def install_gate_hook() -> None:
+    """Make asyncua's ``BinaryServer`` build each connection's protocol behind the gate of
+    its server (if one is registered in ``GATES``). Once per process, idempotent."""
+    from asyncua.server.binary_server_asyncio import BinaryServer
+    if getattr(BinaryServer, "_feeder_gate", False):
+        return
+    make = BinaryServer._make_protocol
+
+    def gated(self):
+        proto = make(self)
+        gate = GATES.get(id(self.iserver))
+        return proto if gate is None else _GatedUa(proto, gate)
+
+    BinaryServer._make_protocol = gated
+    BinaryServer._feeder_gate = True

@@ -131,7 +131,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (PresentParams, "big_advance_incline_mm"): POSITIVE,
     (LocateParams, "frame_spacing_mm"): POSITIVE,
     (LocateParams, "dedupe_mm"): NON_NEGATIVE,
-    (RetrieveParams, "robot_speed_pct"): Range(0, 200, lo_open=True),
+    (RetrieveParams, "robot_speed_pct"): Range(1, 200),    # 1 %: ui/operate.py MIN_ROBOT_PCT
     (RetrieveParams, "too_far_mm"): POSITIVE,
     (RetrieveParams, "reach_time_s"): NON_NEGATIVE,
     (AdjustParams, "period_s"): POSITIVE,

@@ -41,6 +41,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--ui", nargs="?", const="127.0.0.1:8080", type=bind, metavar="HOST:PORT",
                    help="serve the tree view with a timeline over the whole run "
                         "(default 127.0.0.1:8080; until Ctrl-C)")
+    p.add_argument("--users", metavar="FILE",
+                   help="with --ui: the users file viewers sign in with (default: the "
+                        "dashboard's, ~/.config/feeder_bt/users.json)")
     p.set_defaults(handler=cmd_replay)
     return p
 
@@ -137,7 +140,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                                 "the trees' history was recorded)")
         if args.ui:
             from ..ui.replay import serve_replay
-            return serve_replay(args.db, run_id, args.ui)
+            return serve_replay(args.db, run_id, args.ui, args.users)
         t, what = pick_time(conn, run_id, view, args.at, args.before_fault)
         state = view.at(t)
         tree = args.tree or state.tree or _last_tree(view, t)

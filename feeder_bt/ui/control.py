@@ -229,17 +229,17 @@ class LoginLimiter:
         now = self.clock()
         lock = 0.0
         for key in keys:
-            r = self._record(key, now) or self._records.setdefault(key, _Record())
+            r = self._record(key, now) or _Record()
+            self._records.pop(key, None)          # re-inserted last: oldest stay first
+            self._records[key] = r
             r.failures += 1
             r.last = now
             if r.failures >= self.free:
                 delay = min(self.max_s, self.base_s * 2.0 ** (r.failures - self.free))
                 r.locked_until = max(r.locked_until, now + delay)
                 lock = max(lock, r.locked_until - now)
-        if len(self._records) > self.max_keys:          # bound memory under a flood
-            oldest = sorted(self._records, key=lambda k: self._records[k].last)
-            for key in oldest[:len(self._records) - self.max_keys]:
-                del self._records[key]
+        while len(self._records) > self.max_keys:       # bound memory under a flood:
+            del self._records[next(iter(self._records))]     # the least recent, O(1)
         return lock
 
     def success(self, keys: Iterable[str]) -> None:

@@ -138,14 +138,12 @@ class LoginGuard:
         ip_key, pair_key = a.keys(False)
         locks = [("name and address", self.pairs.failure([pair_key])),
                  ("address", self.addrs.failure([ip_key]))]
-        failures, last = self._names.get(a.name, (0, now))
+        failures, last = self._names.pop(a.name, (0, now))
         failures = 1 if now - last > self.forget_s else failures + 1
-        self._names[a.name] = (failures, now)
+        self._names[a.name] = (failures, now)   # re-inserted last: the oldest stay first
         if failures == self.name_free:
             locks.append(("name", self.name_gap_s))
-        if len(self._names) > 10000:            # bound memory under a flood of names
-            for key in sorted(self._names, key=lambda k: self._names[k][1])[:1000]:
-                del self._names[key]
+        _bound(self._names)
         return [(why, s) for why, s in locks if s > 0]
 
     def success(self, a: Attempt, trusted: bool) -> None:
@@ -158,7 +156,24 @@ class LoginGuard:
             self.pairs.success(a.keys(False)[1:])
             self.addrs.success(a.keys(False)[:1])
         self._names.pop(a.name, None)
+        self._good.pop((a.name, a.ip), None)
         self._good[(a.name, a.ip)] = self.clock()
-        if len(self._good) > 10000:
-            for key in sorted(self._good, key=self._good.__getitem__)[:1000]:
-                del self._good[key]
+        _bound(self._good)
+
+    def known(self, a: Attempt) -> bool:
+        """A known browser, or the address this user logged in from before: served before
+        strangers when password checks are scarce (issue 28)."""
+        if self.trusted(a):
+            return True
+        return self.clock() - self._good.get((a.name, a.ip), -1e18) <= self.known_s
+
+
+MAX_KEYS = 10000
+
+
+def _bound(d: dict) -> None:
+    """Keep at most ``MAX_KEYS`` entries, dropping the least recently written: entries are
+    re-inserted when written, so the oldest is first (O(1) a drop; never a sort on the
+    event loop under a flood of names)."""
+    while len(d) > MAX_KEYS:
+        del d[next(iter(d))]

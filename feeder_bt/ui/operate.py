@@ -29,6 +29,13 @@ SIMPLE = {"start": "start", "stop": "stop", "pause": "pause", "resume": "resume"
 COMMANDS = (*SIMPLE, "load", "speeds", "adjust")
 MAX_AUDIT = 1000
 MAX_NUMBER_CHARS = 32          # a speed given as text: longer is refused before conversion
+# Physical floors (issue 28): below them a speed is not a working speed but a stopped
+# machine (pause the cell instead), and 1e-300 would only hide a mistake. The V+ speed
+# factor is a percentage of full speed, 100 normal (V+ Operating System Reference Guide,
+# SPEED monitor command); its lower bound here is ours: check at commissioning.
+MIN_ROBOT_PCT = 1.0
+MIN_BELT_MM_S = 1.0
+MIN_INCLINE_PCT = 1.0          # or exactly 0: the incline stopped
 
 
 @dataclass(frozen=True)
@@ -72,6 +79,8 @@ def parse_speeds(args: Mapping[str, Any], limits: Limits, current: Mapping[str, 
         if isinstance(raw, str) and len(raw) > MAX_NUMBER_CHARS:
             raise FeederError(f"{key}: must be a number of at most {MAX_NUMBER_CHARS} "
                               "characters")
+        if isinstance(raw, str) and not raw.isascii():     # float() reads "١٠٠" as 100
+            raise FeederError(f"{key}: must be a number in ASCII digits, got {raw[:40]!r}")
         try:
             v = float(raw)
         except ValueError:
@@ -84,19 +93,21 @@ def parse_speeds(args: Mapping[str, Any], limits: Limits, current: Mapping[str, 
     h = out.get("horizontal_mm_s", float(current.get("horizontal_mm_s", 0.0)))
     pct = out.get("incline_pct", float(current.get("incline_pct", 0.0)))
     if "horizontal_mm_s" in out:
-        if h <= 0:
-            raise FeederError(f"horizontal speed must be above 0 mm/s, got {_num(h)} (pause "
-                              "the cell to stop the belts)")
+        if h < MIN_BELT_MM_S:
+            raise FeederError(f"horizontal speed must be at least {_num(MIN_BELT_MM_S)} mm/s, "
+                              f"got {_num(h)} (pause the cell to stop the belts)")
         if h > limits.horizontal_max_mm_s:
             raise FeederError(f"horizontal speed {_num(h)} mm/s is above the horizontal "
                               f"conveyor's max_mm_s {_num(limits.horizontal_max_mm_s)}")
-    if "incline_pct" in out and not 0 <= pct <= limits.incline_pct_max:
-        raise FeederError(f"incline speed must be 0-{_num(limits.incline_pct_max)} % of the "
-                          f"horizontal speed, got {_num(pct)}")
+    if "incline_pct" in out and not (pct == 0 or MIN_INCLINE_PCT <= pct
+                                     <= limits.incline_pct_max):
+        raise FeederError(f"incline speed must be 0, or {_num(MIN_INCLINE_PCT)}-"
+                          f"{_num(limits.incline_pct_max)} % of the horizontal speed, got "
+                          f"{_num(pct)}")
     if "robot_speed_pct" in out:
         r = out["robot_speed_pct"]
-        if not 0 < r <= limits.robot_pct_max:
-            raise FeederError(f"robot speed must be above 0 and at most "
+        if not MIN_ROBOT_PCT <= r <= limits.robot_pct_max:
+            raise FeederError(f"robot speed must be {_num(MIN_ROBOT_PCT)}-"
                               f"{_num(limits.robot_pct_max)} %, got {_num(r)}")
     belts = "horizontal_mm_s" in out or "incline_pct" in out
     for top, why in ((h, ""), (adjuster_max_mm_s, " (the engaged auto-adjuster may drive "

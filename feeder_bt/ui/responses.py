@@ -44,11 +44,19 @@ class SecurityHeaders:
         try:
             await self.app(scope, receive, send_with_headers)
         except Exception as e:                 # a bug: one line, never a traceback
-            print(f"feeder: operator UI: {scope.get('method')} {scope.get('path')}: "
-                  f"internal error: {type(e).__name__}", file=sys.stderr)
+            print(f"feeder: operator UI: {str(scope.get('method'))[:16]} "
+                  f"{short_path(scope.get('path'))}: internal error: {type(e).__name__}",
+                  file=sys.stderr)
             if not started:
                 await refuse("internal error; nothing was changed", 500)(
                     scope, receive, send_with_headers)
+
+
+def short_path(path: object, limit: int = 80) -> str:
+    """A request path as it may be logged: at most ``limit`` characters and its length
+    (a path of megabytes must not become megabytes of log)."""
+    text = str(path)
+    return repr(text) if len(text) <= limit else f"{text[:limit]!r}... ({len(text)} chars)"
 
 
 def same_origin(conn: HTTPConnection) -> bool:

@@ -3,6 +3,18 @@
 The socket is bound in the caller's thread, so a bad address or a busy port is a one-line
 error before the cell starts. uvicorn's own forwarded-header handling is off: only
 ``access.Gate`` decides whose ``X-Forwarded-*`` headers count (a named proxy's).
+
+Connections (issue 28): uvicorn caps only concurrency in all (``limit_concurrency``, which
+idle connections fill too) and closes a connection only after a response
+(``timeout_keep_alive``); a connection that never sends a request is never closed. So its
+HTTP and websocket protocol classes are replaced (``Config(http=..., ws=...)``) by
+subclasses that pass each connection through a ``conns.ConnGate`` (per-address and total
+caps, the oldest idle connection closed for a newcomer) and close one whose request has
+not arrived within ``header_s``; header size stays bounded by h11's
+``h11_max_incomplete_event_size`` (16 KiB); the backlog is the system's ceiling. (uvicorn
+docs, "Settings" — ``limit_concurrency``, ``backlog``, ``timeout_keep_alive``,
+``h11_max_incomplete_event_size`` — and "Server Behavior"; checked against uvicorn 0.54's
+``protocols/http/h11_impl.py``, whose keep-alive timer starts only after a response.)
 """
 
 from __future__ import annotations
@@ -15,6 +27,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from ..errors import FeederError
+from .conns import ConnGate, ConnLimits, backlog, quiet_logger
 
 if TYPE_CHECKING:
     from .server import UiApp
@@ -32,12 +45,82 @@ def _bind(host: str, port: int) -> socket.socket:
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind(addr)
-        sock.listen(64)
+        sock.listen(backlog())           # a burst waits in the kernel
     except OSError as e:
         sock.close()
         raise FeederError(f"--ui {host}:{port}: cannot listen: {e.strerror}") from None
     sock.setblocking(False)
     return sock
+
+
+def gated_protocols(gate: ConnGate) -> tuple[type, type | None]:
+    """uvicorn's HTTP (h11) and websocket protocol classes, admitting each connection
+    through ``gate`` and closing one whose next request has not come within
+    ``gate.limits.header_s`` (after the connection is made, and after each response)."""
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+    from uvicorn.protocols.websockets.auto import AutoWebSocketsProtocol
+
+    header_s = gate.limits.header_s
+
+    class GatedHttp(H11Protocol):
+        _feeder_in = False
+
+        def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+            if not gate.admit(transport, self._busy):
+                return                            # aborted: connection_lost does nothing
+            self._feeder_in = True
+            super().connection_made(transport)
+            self._arm()
+
+        def _busy(self) -> bool:
+            return self.cycle is not None and not self.cycle.response_complete
+
+        def _arm(self) -> None:
+            armed = self.cycle
+            self.loop.call_later(header_s, self._deadline, armed)
+
+        def _deadline(self, armed: Any) -> None:
+            if self.cycle is armed and not self._busy() and not self.transport.is_closing() \
+                    and self.transport.get_protocol() is self:
+                gate.note(f"closed: no request within {header_s:g} s")
+                self.transport.close()
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            if not self.transport.is_closing():
+                self._arm()
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            if not self._feeder_in:
+                return
+            if self.transport.get_protocol() is self:
+                gate.release(self.transport)
+            super().connection_lost(exc)
+
+    ws_class = None
+    if AutoWebSocketsProtocol is not None:
+        class GatedWs(AutoWebSocketsProtocol):  # type: ignore[misc, valid-type]
+            def connection_made(self, transport: Any) -> None:  # type: ignore[override]
+                gate.replace(transport, lambda: True)   # an open websocket is busy
+                super().connection_made(transport)
+
+            def connection_lost(self, exc: Exception | None) -> None:
+                gate.release(self.transport)
+                super().connection_lost(exc)
+
+        ws_class = GatedWs
+    return GatedHttp, ws_class
+
+
+def uvicorn_config(app: Any, gate: ConnGate, **extra: Any) -> Any:
+    """The uvicorn settings every feeder web listener uses (dashboard, replay)."""
+    import uvicorn
+    http, ws = gated_protocols(gate)
+    return uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
+                          proxy_headers=False, server_header=False, http=http,
+                          **({"ws": ws} if ws is not None else {}),
+                          timeout_keep_alive=5, h11_max_incomplete_event_size=16 * 1024,
+                          backlog=backlog(), **extra)
 
 
 def is_loopback(host: str) -> bool:
@@ -52,8 +135,10 @@ def is_loopback(host: str) -> bool:
 class UiServer:
     """uvicorn serving a ``UiApp`` in a daemon thread with its own event loop."""
 
-    def __init__(self, ui: UiApp, host: str, port: int) -> None:
+    def __init__(self, ui: UiApp, host: str, port: int,
+                 limits: ConnLimits | None = None) -> None:
         self.ui, self.host, self.port = ui, host, port
+        self.gate = ConnGate("operator UI", limits or ConnLimits(total=512, per_address=32))
         self._sock: socket.socket | None = None
         self._server: Any = None
         self._thread: threading.Thread | None = None
@@ -70,9 +155,7 @@ class UiServer:
 
         self._sock = _bind(self.host, self.port)
         self.port = self._sock.getsockname()[1]
-        config = uvicorn.Config(self.ui.app, log_level="warning", access_log=False,
-                                lifespan="off", timeout_graceful_shutdown=2,
-                                proxy_headers=False, server_header=False,
+        config = uvicorn_config(self.ui.app, self.gate, timeout_graceful_shutdown=2,
                                 ws_ping_interval=10.0, ws_ping_timeout=10.0,
                                 ws_max_size=64 * 1024)
         self._server = uvicorn.Server(config)
@@ -95,6 +178,8 @@ class UiServer:
 
     async def _main(self) -> None:
         loop = asyncio.get_running_loop()
+        self.gate.loop_errors(loop)
+        unquiet = quiet_logger("uvicorn.error", self.gate)
 
         def notify() -> None:            # tick thread: hop onto our loop, never block
             loop.call_soon_threadsafe(self.ui.wake_all)
@@ -104,6 +189,7 @@ class UiServer:
             await self._server.serve(sockets=[self._sock])
         finally:
             self.ui.bridge.unsubscribe(notify)
+            unquiet()
 
     def close(self, timeout: float = 5.0) -> None:
         """Ask uvicorn to stop (websockets are closed) and wait for the thread."""
@@ -118,16 +204,16 @@ class UiServer:
             self._sock.close()
 
 
-def make_notice(host: str) -> str | None:
+def make_notice(host: str, what: str = "the operator UI") -> str | None:
     """A warning when the UI is reachable from other machines over plain HTTP."""
     if is_loopback(host):
         return None
     if host.strip("[]") in ("", "0.0.0.0", "::"):
-        return (f"feeder: warning: the operator UI listens on every address ({host}) over "
+        return (f"feeder: warning: {what} listens on every address ({host}) over "
                 "plain HTTP, and answers only to localhost until you name this machine: "
                 "`feeder users set hosts NAME...` (serve it on 127.0.0.1 behind a TLS proxy "
                 "instead)")
-    return (f"feeder: warning: the operator UI on {host} is reachable from the network over "
+    return (f"feeder: warning: {what} on {host} is reachable from the network over "
             "plain HTTP: passwords and session cookies travel unencrypted (serve it on "
             "127.0.0.1 behind a TLS proxy instead)")
 

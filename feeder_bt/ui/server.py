@@ -60,6 +60,8 @@ COMMAND_TIMEOUT_S = 5.0       # the tick thread answers within a tick or two; el
 SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
 MAX_CHECKS = 4                # password checks at once (16 MiB and ~50 ms of a core each)
+STRANGER_CHECKS = 2           # ... of which strangers may hold at most this many: a known
+                              # browser or address always finds a free one (issue 28)
 STATIC = Path(__file__).parent / "static"
 
 class _Client:
@@ -102,6 +104,7 @@ class UiApp:
         self.fixed_settings = settings is not None
         self.clients: set[_Client] = set()
         self._checking = 0               # password checks in flight
+        self._strangers = 0              # ... of them by strangers
         self._stamp = users.stamp
         self._release_seq = users.section("release_control").get("seq")
         self._allowed = allowed_hosts(host, st.hosts)
@@ -273,13 +276,17 @@ class UiApp:
                         wait_s=secs)
             return refuse(f"too many failed logins: try again in {secs} s", 429,
                           {"retry-after": str(secs)})
-        if self._checking >= MAX_CHECKS:
+        favoured = verdict.trusted or self.guard.known(attempt)
+        if self._checking >= MAX_CHECKS or (not favoured
+                                            and self._strangers >= STRANGER_CHECKS):
             return refuse("the controller is busy checking other logins: try again", 429,
                           {"retry-after": "1"})
+        # one check in flight per address (a stranger) or per browser (a known one)
         if not self.guard.begin(attempt, verdict.trusted):
             return refuse("another login for this user is being checked: try again", 429,
                           {"retry-after": "1"})
         self._checking += 1
+        self._strangers += 0 if favoured else 1
         try:
             entry = self.users.load_or_empty().get(name) if real else None
             stored = str(entry["hash"]) if entry else _dummy_hash()
@@ -288,6 +295,7 @@ class UiApp:
             good = good and entry is not None
         finally:
             self._checking -= 1
+            self._strangers -= 0 if favoured else 1
             self.guard.end(attempt, verdict.trusted)
         if not good:
             locks = self.guard.failure(attempt, verdict.trusted)

@@ -69,8 +69,16 @@ def check_name(name: str) -> str:
     return name
 
 
+MIN_SCORE = 3          # zxcvbn's "safely unguessable" band: about 10^8 guesses and more
+# words an attacker tries with any user's name here: the project's and the cell's
+CONTEXT_WORDS = ["feeder", "feeder_bt", "feederbt", "cell", "operator", "admin", "robot",
+                 "cobra", "adept", "galil", "conveyor"]
+
+
 def check_password(password: str, name: str = "") -> str:
-    """A new password: long enough, not too long, and not one anybody would guess first."""
+    """A new password: long enough, not too long, and not one anybody would guess first:
+    judged by zxcvbn (Dropbox's estimator: dictionaries, keyboard walks, dates, l33t, the
+    user's name; issue 28) when it is installed, else by the bundled word list."""
     if len(password) < MIN_PASSWORD:
         raise UsersError(f"password too short: at least {MIN_PASSWORD} characters")
     if len(password) > MAX_PASSWORD:
@@ -80,7 +88,47 @@ def check_password(password: str, name: str = "") -> str:
         raise UsersError("password refused: it is all blanks")
     if folded in WEAK_PASSWORDS or len(set(folded)) == 1 or folded == name.casefold():
         raise UsersError("password refused: it is among the first an attacker would try")
+    why = _too_guessable(password, name)
+    if why:
+        raise UsersError(f"password refused: {why}")
     return password
+
+
+def _too_guessable(password: str, name: str) -> str | None:
+    """Why ``password`` is too easy to guess, or None."""
+    try:
+        from zxcvbn import zxcvbn
+    except ImportError:
+        return _guessable_by_list(password, name)
+    r = zxcvbn(password[:100], user_inputs=[name, *CONTEXT_WORDS] if name else CONTEXT_WORDS)
+    if r["score"] >= MIN_SCORE:
+        return None
+    hint = (r.get("feedback") or {}).get("warning") or "it is too easy to guess"
+    return f"{hint.rstrip('.')} (choose a longer one: a few unrelated words)"
+
+
+_LEET = str.maketrans("@4310$5!7+", "aaeiossitt")
+_COMMON_WORDS = frozenset({
+    "password", "passw0rd", "letmein", "welcome", "qwerty", "qwertz", "azerty", "admin",
+    "administrator", "login", "master", "dragon", "monkey", "shadow", "sunshine", "princess",
+    "football", "baseball", "soccer", "hockey", "superman", "batman", "trustno", "iloveyou",
+    "summer", "winter", "spring", "autumn", "fall", "january", "february", "march", "april",
+    "june", "july", "august", "september", "october", "november", "december", "monday",
+    "friday", "secret", "changeme", "default", "test", "guest", "hello", "freedom",
+    "whatever", "starwars", "computer", "internet", "abc", "abcd", "asdf", "zxcv",
+    "qwertyuiop", "qwertyui", "asdfgh", "asdfghjkl", "zxcvbnm", "qazwsx", "qwer",
+    *CONTEXT_WORDS,
+})
+
+
+def _guessable_by_list(password: str, name: str) -> str | None:
+    """Without zxcvbn: a common word or the user's name, in any case, in l33t, with digits
+    and symbols around it, is refused."""
+    core = password.casefold().strip("0123456789!@#$%^&*()_+-=.,;:?'\"/\\ ")
+    core = "".join(ch for ch in core.translate(_LEET) if ch.isalpha())
+    if not core or core in _COMMON_WORDS or (name and core == name.casefold()):
+        return "a common word or your name with digits and symbols added"
+    return None
 
 
 def group_or_world_readable(path: Path) -> bool:
@@ -247,7 +295,6 @@ class UsersFile:
     # ------------------------------------------------------------------ writing
     def add(self, name: str, password: str, replace: bool = False) -> None:
         check_name(name)
-        check_password(password, name)
         users = dict(self.load())
         if name in users and not replace:
             raise UsersError(f"user {name!r} already exists in {self.path} (use --replace to "
@@ -256,6 +303,7 @@ class UsersFile:
         if twin:
             raise UsersError(f"user {twin[0]!r} already exists in {self.path}: names that "
                              "differ only in case would be confused")
+        check_password(password, name)
         role = users.get(name, {}).get("role")
         users[name] = {"hash": hash_password(password),
                        "added": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),

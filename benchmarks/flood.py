@@ -1,0 +1,137 @@
+"""Issue 28's figures: idle-connection floods against each listener, and what the rightful
+user or robot still gets; JSON out.
+
+    python benchmarks/flood.py [--ui 5000] [--parts 1200] [--opcua 1100] [--out PATH]
+
+- ``ui``: `feeder run --ui` (a child process); alice holds control and the cell runs;
+  N idle connections from 50 loopback addresses; then the time of her ``/api/me`` and of
+  her Stop, and whether the cell stopped.
+- ``parts``: the part server with N idle connections from 40 addresses; the time from a
+  new robot's connect to its first answer, and whether it got a part.
+- ``opcua``: the OPC UA server with N idle connections; the time for a client to connect,
+  log in and read the state.
+
+Measured here, never asserted in tests beyond the issue's own 2 s / 5 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from floodutil import IdleFlood  # noqa: E402
+from uiutil import Client, FeederUi, make_users  # noqa: E402
+
+
+def ui_flood(n: int) -> dict:
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        ui = FeederUi(tmp, make_users(tmp / "users.json", {"alice": "alice-secret-1"}))
+        try:
+            alice = Client(ui.url)
+            alice.login("alice", "alice-secret-1")
+            alice.call("api/control", {"action": "take"})
+            alice.command("start")
+            while alice.status()["state"] != "RUNNING":
+                time.sleep(0.1)
+            port = int(ui.url.rsplit(":", 1)[1].strip("/"))
+            t0 = time.monotonic()
+            flood = IdleFlood(port, n, addresses=50)
+            settled = flood.settle()
+            t_open = time.monotonic() - t0
+            t0 = time.monotonic()
+            code_me = alice.call("api/me")[0]
+            t_me = time.monotonic() - t0
+            t0 = time.monotonic()
+            code_stop = alice.command("stop")[0]
+            t_stop = time.monotonic() - t0
+            end = time.monotonic() + 60
+            while alice.status()["state"] != "STOPPED" and time.monotonic() < end:
+                time.sleep(0.05)
+            stopped = alice.status()["state"] == "STOPPED"
+            held = flood.still_open()
+            flood.close()
+        finally:
+            ui.kill()
+        err = (tmp / "stderr.txt").read_text()
+    return {"idle": n, "connects_finished": settled, "open_s": round(t_open, 2),
+            "me_status": code_me, "me_s": round(t_me, 3), "stop_status": code_stop,
+            "stop_s": round(t_stop, 3), "stopped": stopped, "held_open_by_server": held,
+            "stderr_lines": len(err.splitlines()), "tracebacks": err.count("Traceback")}
+
+
+def parts_flood(n: int) -> dict:
+    from test_conn_limits import _ServedCell
+
+    from feeder_bt.plant.client import PartClient
+    served = _ServedCell()
+    try:
+        flood = IdleFlood(served.port, n, addresses=40, net=2)
+        settled = flood.settle()
+        t0 = time.monotonic()
+        with PartClient.connect(served.host, served.port) as robot:
+            robot.status()
+            t_first = time.monotonic() - t0
+            offer = robot.part(wait=10.0)
+            t_part = time.monotonic() - t0
+        flood.close()
+        stats = served.server.server.gate.stats()
+    finally:
+        served.close()
+    return {"idle": n, "connects_finished": settled, "first_answer_s": round(t_first, 3),
+            "got_part": offer is not None, "part_s": round(t_part, 3), "gate": stats}
+
+
+def opcua_flood(n: int) -> dict:
+    from test_opcua import ALICE, LiveCell, cell_node, client, read
+    with tempfile.TemporaryDirectory() as d:
+        live = LiveCell(Path(d))
+        try:
+            port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+            flood = IdleFlood(port, n, addresses=40, net=3)
+            settled = flood.settle()
+
+            async def go():
+                t0 = time.monotonic()
+                async with client(live.url, ALICE) as c:
+                    idx, node = await cell_node(c)
+                    state = await read(node, idx, "State")
+                return state, time.monotonic() - t0
+
+            state, took = asyncio.run(go())
+            flood.close()
+            stats = live.ua.gate.stats()
+        finally:
+            live.close()
+    return {"idle": n, "connects_finished": settled, "state": state,
+            "connect_login_read_s": round(took, 3), "gate": stats}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ui", type=int, default=5000)
+    ap.add_argument("--parts", type=int, default=1200)
+    ap.add_argument("--opcua", type=int, default=1100)
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "flood.json"))
+    args = ap.parse_args()
+    out = {"machine": platform.platform(), "python": platform.python_version(),
+           "ui": ui_flood(args.ui), "part_server": parts_flood(args.parts),
+           "opcua": opcua_flood(args.opcua)}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+    print(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,230 @@
+"""Connection limits for every listener (issue 28): the dashboard, ``feeder replay --ui``,
+the part server and the OPC UA server all admit TCP connections through a ``ConnGate``.
+
+A peer on the network must not be able to starve the cell by opening connections and
+sending nothing. So each listener has:
+
+- a cap on connections **per address** (a new one over it is closed at once), and a cap
+  **in all**: when it is full, a new connection takes the place of the oldest one that is
+  doing nothing (no request in flight, not a signed-in websocket, not an activated OPC UA
+  session, not a robot that said who it is); only if every connection is busy is the new
+  one refused. A held idle connection therefore never keeps out a newcomer;
+- a deadline for a connection's first request (``header_s``; the listeners apply it) and
+  an idle time-out;
+- a listen backlog as large as the system allows (``backlog()``), so a burst waits in the
+  kernel instead of being reset;
+- cheap refusals: the socket is aborted in the accept callback (no thread, no task, no
+  traceback); refusals are counted and told in one summarised line per ``period_s``.
+
+Everything here runs on the listener's own event loop (no locks); ``stats()`` may be read
+from any thread (a dict copy).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import resource
+import sys
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+SOMAXCONN = "/proc/sys/net/core/somaxconn"
+
+
+@dataclass(frozen=True)
+class ConnLimits:
+    """One listener's limits (the defaults suit a cell: a few operators or robots)."""
+
+    total: int = 256            # connections at once, in all
+    per_address: int = 32       # ... from one address (a browser opens ~6, plus a websocket)
+    header_s: float = 10.0      # a connection's first request must arrive within this
+    idle_s: float = 60.0        # a connection silent this long is closed (where it applies)
+    period_s: float = 60.0      # at most one summary line of refusals per period
+
+
+def backlog(want: int = 4096) -> int:
+    """The listen backlog: ``want``, or the system's ceiling if that is lower (Linux
+    silently truncates to ``net.core.somaxconn``)."""
+    try:
+        with open(SOMAXCONN) as f:
+            return max(16, min(want, int(f.read().strip())))
+    except (OSError, ValueError):
+        return min(want, 1024)
+
+
+def raise_fd_limit(want: int = 65536) -> int:
+    """Raise this process's soft limit on open files towards ``want`` (never above the
+    hard limit) so that a flood of connections meets our caps, not EMFILE; returns the
+    soft limit now."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = want if hard == resource.RLIM_INFINITY else min(want, hard)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+            soft = target
+        except (ValueError, OSError):
+            pass
+    return int(soft)
+
+
+def peer_ip(transport: Any) -> str:
+    peer = transport.get_extra_info("peername")
+    return str(peer[0]) if isinstance(peer, tuple) and peer else "?"
+
+
+class ConnGate:
+    """Admits connections to one listener; see the module docstring.
+
+    ``name`` is how the summary line names the listener (``operator UI``, ``part server``)."""
+
+    def __init__(self, name: str, limits: ConnLimits | None = None,
+                 clock: Callable[[], float] = time.monotonic,
+                 say: Callable[[str], None] | None = None) -> None:
+        self.name, self.limits, self.clock = name, limits or ConnLimits(), clock
+        fds = raise_fd_limit()
+        # never more connections than file descriptors to spare (each costs one)
+        self.total = max(8, min(self.limits.total, (fds - 64) // 2))
+        self.say = say or (lambda line: print(line, file=sys.stderr, flush=True))
+        self._conns: dict[Any, tuple[str, Callable[[], bool]]] = {}   # oldest first
+        self._per_ip: Counter[str] = Counter()
+        self.counts: Counter[str] = Counter()     # admitted, refused_*, evicted, errors
+        self._pending: Counter[str] = Counter()   # not yet told
+        self._told_at = -1e18
+        self._flush: asyncio.TimerHandle | None = None
+
+    # ------------------------------------------------------------------ admitting
+    def admit(self, transport: Any, busy: Callable[[], bool]) -> bool:
+        """Take ``transport`` in, or abort it (False). ``busy()`` says whether the
+        connection is doing something worth keeping when the listener is full."""
+        ip = peer_ip(transport)
+        if self._per_ip[ip] >= self.limits.per_address:
+            self._refuse(transport, f"over {self.limits.per_address} from one address")
+            return False
+        if len(self._conns) >= self.total and not self._evict_idle():
+            self._refuse(transport, f"{self.total} connections, all busy")
+            return False
+        self._conns[transport] = (ip, busy)
+        self._per_ip[ip] += 1
+        self.counts["admitted"] += 1
+        return True
+
+    def release(self, transport: Any) -> None:
+        """The connection ended (idempotent)."""
+        entry = self._conns.pop(transport, None)
+        if entry is not None:
+            ip = entry[0]
+            self._per_ip[ip] -= 1
+            if self._per_ip[ip] <= 0:
+                del self._per_ip[ip]
+
+    def replace(self, transport: Any, busy: Callable[[], bool]) -> None:
+        """The same connection now judged by another ``busy`` (an upgrade to a websocket,
+        a robot that said who it is)."""
+        entry = self._conns.get(transport)
+        if entry is not None:
+            self._conns[transport] = (entry[0], busy)
+
+    def _evict_idle(self) -> bool:
+        for transport, (_, busy) in self._conns.items():     # oldest first
+            try:
+                idle = not busy()
+            except Exception:          # a half-made protocol: treat it as idle
+                idle = True
+            if idle:
+                self.release(transport)
+                transport.abort()
+                self.counts["evicted"] += 1
+                self.note("an idle connection closed for a newcomer")
+                return True
+        return False
+
+    def _refuse(self, transport: Any, why: str) -> None:
+        transport.abort()
+        self.counts["refused"] += 1
+        self.note(f"refused: {why}")
+
+    # ------------------------------------------------------------------ telling
+    def note(self, what: str) -> None:
+        """Count ``what``; one summary line per period says how many of each."""
+        self._pending[what] += 1
+        now = self.clock()
+        if now - self._told_at >= self.limits.period_s:
+            self.tell()
+        elif self._flush is None:
+            try:
+                loop = asyncio.get_running_loop()
+            except RuntimeError:
+                return
+            self._flush = loop.call_later(self._told_at + self.limits.period_s - now,
+                                          self.tell)
+
+    def tell(self) -> None:
+        """Print the summary line now (if anything happened since the last one)."""
+        self._flush = None
+        if not self._pending:
+            return
+        self._told_at = self.clock()
+        parts = ", ".join(f"{n} {what}" for what, n in sorted(self._pending.items()))
+        self._pending.clear()
+        self.say(f"feeder: {self.name}: {parts} (in {len(self._conns)} open; at most "
+                 f"{self.total}, {self.limits.per_address} per address)")
+
+    def open_count(self) -> int:
+        return len(self._conns)
+
+    def stats(self) -> dict[str, int]:
+        return {"open": len(self._conns), "addresses": len(self._per_ip),
+                **dict(self.counts)}
+
+    def loop_errors(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Make ``loop``'s unhandled errors (``socket.accept() out of system resource``
+        when the process runs out of descriptors, a connection reset mid-callback) one
+        counted word in the summary, never a traceback per connection."""
+        def handler(loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+            exc = context.get("exception")
+            what = context.get("message", "error")
+            if exc is not None:
+                what = f"{what} ({type(exc).__name__})"
+            self.counts["errors"] += 1
+            self.note(what[:80])
+
+        loop.set_exception_handler(handler)
+
+
+class _ToGate:
+    """A logging filter: a library's per-connection warnings (uvicorn's "Invalid HTTP
+    request received.", asyncua's "Refusing connection ...") become counted words in the
+    summary line of the gate serving the loop that logged them, instead of one line each."""
+
+    def __init__(self) -> None:
+        self.gates: dict[int, ConnGate] = {}
+
+    def filter(self, record: Any) -> bool:
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return True
+        gate = self.gates.get(id(loop))
+        if gate is None:
+            return True
+        gate.note(str(record.getMessage()).splitlines()[0][:60])
+        return False
+
+
+_FILTERS: dict[str, _ToGate] = {}
+
+
+def quiet_logger(name: str, gate: ConnGate) -> Callable[[], None]:
+    """Route logger ``name``'s records made on the running loop into ``gate``'s summary;
+    returns the function that undoes it (call it on the same loop)."""
+    import logging
+    f = _FILTERS.get(name)
+    if f is None:
+        f = _FILTERS[name] = _ToGate()
+        logging.getLogger(name).addFilter(f)
+    key = id(asyncio.get_running_loop())
+    f.gates[key] = gate
+    return lambda: f.gates.pop(key, None) and None
