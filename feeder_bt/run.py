@@ -249,6 +249,34 @@ class _StopRequest:
 
 
 def run_job(opts: RunOptions) -> dict[str, Any]:
+    """Load a scenario on a cell, feed for a while, stop in order, report."""
+    run = _Run(opts, _prepare(opts))    # every bad option or file fails before the HAL opens
+    run.open_cell()
+    run.attach_views()
+    try:
+        run.take_signals()
+        run.serve_operators()
+        run.feed()
+        run.stop_in_order()
+    finally:
+        run.close()
+    return run.finish_report()
+
+
+@dataclass
+class _Prepared:
+    """What a run needs, read and checked before anything opens."""
+    scenario: Scenario
+    cell_spec: Any
+    duration: float | None
+    start: bool
+    plan: Any = None            # the fault plan
+    supply_plan: Any = None
+
+
+def _prepare(opts: RunOptions) -> _Prepared:
+    """Check the options against each other and read every file the run names; like a bad
+    --db, anything wrong fails here, before the HAL opens."""
     if opts.ui and opts.fast:
         raise FeederError("--ui serves operators in real time: drop --fast")
     opcua = bool(opts.plant is not None and opts.plant.opcua)
@@ -263,153 +291,201 @@ def run_job(opts: RunOptions) -> dict[str, Any]:
     duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell, overlay=opts.overlay)
-    if opts.ui:                 # like a bad --db: a bad users file fails before the HAL opens
+    if opts.ui:
         from .ui.app import check_users
         check_users(opts.users)
     if opcua:
         _check_opcua(opts)
-    plan = None
-    if opts.faults:             # like a bad --db: a bad plan fails before the HAL opens
+    prep = _Prepared(scenario, cell_spec, duration, start)
+    if opts.faults:
         from .scenario.faults import load_fault_plan
-        plan = load_fault_plan(opts.faults)
+        prep.plan = load_fault_plan(opts.faults)
         if opts.hal != "sim":
             raise ConfigError("fault plans drive the simulated cell; the emulators take "
                               "their faults from tests (feeder_bt.emulators.faults)",
                               key="faults")
-    supply_plan = None
-    if opts.supply:             # like a bad plan: before the HAL opens
+    if opts.supply:
         from .hal.sim.supply import with_start
         from .scenario.supply import check_against_scenario, load_supply_plan
-        supply_plan = load_supply_plan(opts.supply)
+        prep.supply_plan = load_supply_plan(opts.supply)
         if opts.hal != "sim":
             raise ConfigError("supply plans drive the simulated cell; on an emulated or "
                               "real cell the plant brings the parts", key="supply")
-        check_against_scenario(supply_plan, list(scenario.parts))
-        scenario = with_start(scenario, supply_plan)
-    log = EventLog(opts.db) if opts.db else None      # a bad --db fails before the HAL opens
-    hal, clock = make_hal(opts.hal, scenario, cell_spec, opts.seed)
-    injector = None
-    if plan is not None:
-        from .hal.sim.faults import inject_faults
-        injector = inject_faults(hal, plan)  # type: ignore[arg-type]
-    supply = None
-    if supply_plan is not None:
-        from .hal.sim.supply import apply_supply
-        supply = apply_supply(hal, supply_plan)
-    if not isinstance(clock, SimClock):
-        clock = RealClock()
-    cell = Cell(cell_spec, hal, clock)
-    broken = _watch_accounting(cell)
-    trace = None
-    if log or opts.ui:          # the trees' history, for `feeder replay` and the timeline
-        from .treelog import TreeTrace
-        trace = TreeTrace(cell, live=bool(opts.ui), logged=bool(log))
-    if log:
-        _start_log(log, opts, scenario, cell)
-        if trace is not None:
-            log.add_writer(trace)
-    ticker = Ticker(cell, fast=opts.fast, skip_idle=opts.skip_idle)
-    t_start = clock.now()
-    t_stop: float | None = None     # set when feeding ends: the report's feed time stops
-    feed = _FeedSpan(cell) if opts.ui or (opts.plant and opts.plant.opcua) else None
+        check_against_scenario(prep.supply_plan, list(scenario.parts))
+        prep.scenario = with_start(scenario, prep.supply_plan)
+    return prep
 
-    def feed_seconds() -> float:
-        """The feeding time the report counts, so far: the view's parts/min is the report's."""
-        t = clock.now() if t_stop is None else t_stop
-        return feed.seconds(t) if feed else t - t_start
 
-    show: LiveView | Progress | None = None
-    if opts.fast:
-        show = Progress(cell, duration or 0.0, feed_seconds=feed_seconds)
-    elif opts.view != "none":
-        show = LiveView(cell, fmt=opts.view, feed_seconds=feed_seconds)
-    every = _chain(trace.after_tick if trace else None, show.update if show else None)
-    if log:     # after each tick: the view, then the log's batch (cheap when not due)
-        every = _chain(every, log.periodic_flush)
+class _Run:
+    """One run of the main job, step by step (``run_job`` names the steps)."""
 
-    request = _StopRequest()
-    # only the main thread may take signals (a Dask worker runs `feeder tune`'s jobs in one
-    # of its threads: there the worker, not the run, answers Ctrl-C)
-    old = ({sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
-           if threading.current_thread() is threading.main_thread() else {})
-    wall0 = time.monotonic()
-    interrupted = False
-    ui = None
-    plant = None
-    try:
-        cell.load(scenario)
+    def __init__(self, opts: RunOptions, prep: _Prepared) -> None:
+        self.opts, self.prep = opts, prep
+        self.log = EventLog(opts.db) if opts.db else None   # a bad --db fails here too
+        self.injector = self.supply = self.trace = self.show = None
+        self.ui = self.plant = None
+        self.every: Callable[[], None] | None = None
+        self.t_stop: float | None = None    # set when feeding ends: the feed time stops
+        self.interrupted = False
+        self._old_signals: dict = {}
+        self.request = _StopRequest()
+
+    # ---------------------------------------------------------------- steps
+    def open_cell(self) -> None:
+        """The HAL (with the simulated cell's fault and supply plans), the cell, and what
+        watches it: the world's accounting, the trees' history, the event log."""
+        opts, prep = self.opts, self.prep
+        self.hal, clock = make_hal(opts.hal, prep.scenario, prep.cell_spec, opts.seed)
+        if prep.plan is not None:
+            from .hal.sim.faults import inject_faults
+            self.injector = inject_faults(self.hal, prep.plan)  # type: ignore[arg-type]
+        if prep.supply_plan is not None:
+            from .hal.sim.supply import apply_supply
+            self.supply = apply_supply(self.hal, prep.supply_plan)
+        self.clock = clock if isinstance(clock, SimClock) else RealClock()
+        self.cell = Cell(prep.cell_spec, self.hal, self.clock)
+        self.broken = _watch_accounting(self.cell)
+        if self.log or opts.ui:     # the trees' history, for `feeder replay` and the timeline
+            from .treelog import TreeTrace
+            self.trace = TreeTrace(self.cell, live=bool(opts.ui), logged=bool(self.log))
+        if self.log:
+            _start_log(self.log, opts, prep.scenario, self.cell)
+            if self.trace is not None:
+                self.log.add_writer(self.trace)
+
+    def attach_views(self) -> None:
+        """The ticker, the feed-time span, the progress bar or live view, and what runs
+        after each tick."""
+        opts = self.opts
+        self.ticker = Ticker(self.cell, fast=opts.fast, skip_idle=opts.skip_idle)
+        self.t_start = self.clock.now()
+        self.feed_span = (_FeedSpan(self.cell)
+                          if opts.ui or (opts.plant and opts.plant.opcua) else None)
+        if opts.fast:
+            self.show = Progress(self.cell, self.prep.duration or 0.0,
+                                 feed_seconds=self.feed_seconds)
+        elif opts.view != "none":
+            self.show = LiveView(self.cell, fmt=opts.view, feed_seconds=self.feed_seconds)
+        self.every = _chain(self.trace.after_tick if self.trace else None,
+                            self.show.update if self.show else None)
+        if self.log:    # after each tick: the view, then the log's batch (cheap when not due)
+            self.every = _chain(self.every, self.log.periodic_flush)
+        self.wall0 = time.monotonic()
+
+    def take_signals(self) -> None:
+        """Ctrl-C and SIGTERM ask for an orderly stop. Only the main thread may take signals
+        (a Dask worker runs `feeder tune`'s jobs in one of its threads: there the worker,
+        not the run, answers Ctrl-C)."""
+        if threading.current_thread() is threading.main_thread():
+            self._old_signals = {sig: signal.signal(sig, self.request)
+                                 for sig in (signal.SIGINT, signal.SIGTERM)}
+
+    def serve_operators(self) -> None:
+        """Load the scenario; open the operator UI and the plant adapters asked for."""
+        opts, cell = self.opts, self.cell
+        cell.load(self.prep.scenario)
         if opts.ui:             # commands run and snapshots are taken in the tick thread
             from .ui.app import OperatorUi
-            ui = OperatorUi(cell, opts.scenario, opts.cell or scenario.cell_path,
-                            *_bind(opts.ui), users_path=opts.users, t0=t_start, trace=trace)
-            url = ui.start()
+            self.ui = OperatorUi(cell, opts.scenario, opts.cell or self.prep.scenario.cell_path,
+                                 *_bind(opts.ui), users_path=opts.users, t0=self.t_start,
+                                 trace=self.trace)
+            url = self.ui.start()
             print(f"operator UI: {url}", file=sys.stderr, flush=True)
-            if isinstance(show, LiveView):
-                show.note = f"operator UI: {url}"
-            every = _chain(every, ui.pump)
-        plant = _open_plant(opts, cell, scenario)
-        if plant is not None:
-            every = _chain(every, plant.pump)
-        if start:
+            if isinstance(self.show, LiveView):
+                self.show.note = f"operator UI: {url}"
+            self.every = _chain(self.every, self.ui.pump)
+        self.plant = _open_plant(opts, cell, self.prep.scenario)
+        if self.plant is not None:
+            self.every = _chain(self.every, self.plant.pump)
+
+    def feed(self) -> None:
+        """Start (unless an operator will) and tick until the duration, a stop request, the
+        end of the world's accounting or a FAULT nobody resets."""
+        cell, plan, request = self.cell, self.prep.plan, self.request
+        if self.prep.start:
             cell.start()
+        operated = bool(self.ui) or (self.plant is not None and self.plant.opcua is not None)
+        if operated:
+            def stop() -> bool:
+                return request.requested or self.broken()
+        else:
+            def stop() -> bool:
+                return (request.requested or self.broken() or cell.state is CellState.STOPPED
+                        or (cell.state is CellState.FAULT and not _operator_resets(cell, plan)))
+        duration = self.prep.duration
         try:
-            operated = bool(ui) or (plant is not None and plant.opcua is not None)
-            ticker.run(until=None if duration is None else t_start + duration,
-                       stop=(lambda: request.requested or broken()) if operated else
-                       (lambda: request.requested or broken()
-                        or cell.state is CellState.STOPPED
-                        or (cell.state is CellState.FAULT and not _operator_resets(cell, plan))),
-                       every=_chain(every, (lambda: _operator(cell)) if plan else None))
+            self.ticker.run(until=None if duration is None else self.t_start + duration,
+                            stop=stop,
+                            every=_chain(self.every, (lambda: _operator(cell)) if plan else None))
         except KeyboardInterrupt:
             pass
-        interrupted = request.requested
-        t_stop = clock.now()
+        self.interrupted = request.requested
+        self.t_stop = self.clock.now()
+
+    def stop_in_order(self) -> None:
+        """Stop the cell and tick its clean-up (operators see it but can no longer
+        command); on the simulated clock no need to watch it in real time."""
+        ui, plant, cell = self.ui, self.plant, self.cell
         if ui:
-            ui.closing()        # operators see the clean-up but can no longer command
+            ui.closing()
         if plant is not None:
             plant.closing()
         cell.stop()
-        if isinstance(clock, SimClock):   # no need to watch the clean-up in real time
-            ticker.fast, ticker.skip_idle = True, opts.skip_idle
-        ticker.run(until=clock.now() + STOP_GRACE_S,
-                   stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT),
-                   every=_chain(trace.after_tick if trace else None, ui.pump if ui else None,
-                                plant.pump if plant else None))
-        if show:
-            show.update(force=True)
-    finally:
-        if show:
-            show.close()        # the terminal back as it was, even after an error
-        for sig, handler in old.items():
+        if isinstance(self.clock, SimClock):
+            self.ticker.fast, self.ticker.skip_idle = True, self.opts.skip_idle
+        self.ticker.run(until=self.clock.now() + STOP_GRACE_S,
+                        stop=lambda: cell.state in (CellState.STOPPED, CellState.FAULT),
+                        every=_chain(self.trace.after_tick if self.trace else None,
+                                     ui.pump if ui else None, plant.pump if plant else None))
+        if self.show:
+            self.show.update(force=True)
+
+    def close(self) -> None:
+        """Everything back as it was, even after an error: the terminal, the signals, the
+        servers, the HAL; the event log flushed (nothing buffered is lost)."""
+        if self.show:
+            self.show.close()
+        for sig, handler in self._old_signals.items():
             signal.signal(sig, handler)
-        if ui:
-            ui.close()
-        if plant is not None:
-            plant.close()
-        hal.close()
-        if log:
-            log.flush()               # even when interrupted: nothing buffered is lost
-    report = build_report(cell, ticker, seed=opts.seed, hal=opts.hal,
-                          sim_seconds=clock.now() - t_start,
-                          feed_seconds=feed_seconds(),
-                          wall_seconds=time.monotonic() - wall0, interrupted=interrupted,
-                          inflow=supply.inflow() if supply is not None else None)
-    report["speeds"] = final_speeds()
-    if injector is not None:
-        report["injected"] = dict(injector.injected)
-        report["unseen"] = dict(injector.unseen)     # injected, but met by nobody
-        report["watchdog_stops"] = injector.watchdog_stops   # Galil outages #WDOG ended
-        report["fault_plan"] = str(opts.faults)
-    if supply is not None:
-        report["supply"] = supply.report()
-    if ui:
-        report["operator"] = ui.report()
-    if plant is not None:
-        report.update(plant.report())
-    if opts.report:
-        Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
-        write_report(report, opts.report)
-    if log:
-        log.finish(report)
-        log.close()
-    return report
+        if self.ui:
+            self.ui.close()
+        if self.plant is not None:
+            self.plant.close()
+        self.hal.close()
+        if self.log:
+            self.log.flush()
+
+    def finish_report(self) -> dict[str, Any]:
+        """The run report, written where asked and closed into the event log."""
+        opts = self.opts
+        report = build_report(self.cell, self.ticker, seed=opts.seed, hal=opts.hal,
+                              sim_seconds=self.clock.now() - self.t_start,
+                              feed_seconds=self.feed_seconds(),
+                              wall_seconds=time.monotonic() - self.wall0,
+                              interrupted=self.interrupted,
+                              inflow=self.supply.inflow() if self.supply is not None else None)
+        report["speeds"] = final_speeds()
+        if self.injector is not None:
+            report["injected"] = dict(self.injector.injected)
+            report["unseen"] = dict(self.injector.unseen)     # injected, met by nobody
+            report["watchdog_stops"] = self.injector.watchdog_stops   # #WDOG outages
+            report["fault_plan"] = str(opts.faults)
+        if self.supply is not None:
+            report["supply"] = self.supply.report()
+        if self.ui:
+            report["operator"] = self.ui.report()
+        if self.plant is not None:
+            report.update(self.plant.report())
+        if opts.report:
+            Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
+            write_report(report, opts.report)
+        if self.log:
+            self.log.finish(report)
+            self.log.close()
+        return report
+
+    # ---------------------------------------------------------------- helpers
+    def feed_seconds(self) -> float:
+        """The feeding time the report counts, so far: the view's parts/min is the report's."""
+        t = self.clock.now() if self.t_stop is None else self.t_stop
+        return self.feed_span.seconds(t) if self.feed_span else t - self.t_start
