@@ -12,6 +12,7 @@ from pathlib import Path
 
 from .argtypes import positive
 from .errors import ConfigError, FeederError
+from .vocabulary import story_text
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
@@ -204,7 +205,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def summary(report: dict) -> str:
-    """The run's summary, lines that fit 80 columns; its parts/min is the report's and the
+    """The run's summary (with its faults, misses and alarms: feeder_bt/vocabulary.py), lines that fit 80 columns; its parts/min is the report's and the
     live view's last."""
     p = report["parts"]
     how = " (interrupted)" if report.get("interrupted") else ""
@@ -214,7 +215,7 @@ def summary(report: dict) -> str:
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
-            + _ceiling_line(report))
+            + _ceiling_line(report) + "\n" + story_text(report))
 
 
 def _ceiling_line(report: dict) -> str:

@@ -169,6 +169,7 @@ function renderStatus(st) {
     `${fmt(sp.incline_pct)} %, robot ${fmt(sp.robot_speed_pct)} %`;
   $("st-hal-horizontal").textContent = `${fmt(st.hal.horizontal_mm_s)} mm/s`;
   $("st-hal-incline").textContent = `${fmt(st.hal.incline_mm_s)} mm/s`;
+  $("st-faults").textContent = `${st.faults} (${st.recovered}) / ${st.misses}`;
   $("st-fault").textContent = st.fault || "-";
   $("adjust-state").textContent = st.adjuster
     ? `${st.adjuster}, ${st.auto_adjust ? "engaged" : "disengaged"}` : "-";

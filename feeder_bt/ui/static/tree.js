@@ -296,7 +296,8 @@
       for (const [t, what] of st.marks) {
         const x = ((t - t0) / span * 1000).toFixed(1);
         const m = svg("line", {x1: x, x2: x, y1: 0, y2: 12,
-                               class: what.startsWith("fault") ? "fault" : "state"});
+                               class: what.startsWith("fault") ? "fault"
+                                 : what.startsWith("miss") ? "miss" : "state"});
         m.append(svg("title", {}, `${t.toFixed(2)} s: ${what}`));
         m.addEventListener("click", () => this.seek(t));
         marks.push(m);
