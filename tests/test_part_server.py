@@ -302,6 +302,8 @@ def test_requests_while_stopped_are_answered():
     assert client.poll() == ("NONE", ["STOPPED"])
     kind, fields = client.poll()
     assert kind == "STATUS" and "state=STOPPED" in fields
+    # every term of the ledger (docs/part-server.md) is in STATUS
+    assert {f.split("=")[0] for f in fields} >= {"placed", "missed", "released", "expired", "held_expired"}
     s.close()
 
 
