@@ -141,6 +141,9 @@ function renderSession(s) {
   const leaving = (c.free_in !== undefined && c.free_in !== null)
     ? ` \u2014 control free in ${c.free_in} s` : "";   // the holder has no page open
   el.textContent = c.state === "you" ? "Control: you have control"
+    : c.state === "other" && c.same_user
+      ? `Control: your other session has control (${c.holder}, another tab or browser)` +
+        leaving
     : c.state === "other" ? `Control: someone else has control (${c.holder})${leaving}`
     : "Control: available";
   $("force").hidden = !(s.admin && c.state === "other");
