@@ -23,7 +23,7 @@ def nearest(path: str | Path) -> str | None:
         names = sorted(c.name for c in parent.iterdir())
     except OSError:
         return None
-    close = difflib.get_close_matches(p.name, names, n=1, cutoff=0.6)
+    close = difflib.get_close_matches(p.name, names, n=1, cutoff=0.8)   # a typo, not a guess
     if not close:
         return None
     return str(parent / close[0]) if str(parent) != "." or str(p.parent) != "." else close[0]
