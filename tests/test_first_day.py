@@ -99,3 +99,19 @@ def test_the_tour_writes_only_into_out_and_out_is_ignored():
     assert all(w.startswith(("out/", "runs/")) for w in written), written
     ignored = (ROOT / ".gitignore").read_text().split()
     assert "/out/" in ignored and "/runs/" in ignored
+
+
+def test_the_live_view_shows_the_legend_when_there_is_room():
+    import io
+
+    from test_view import _cell
+
+    from feeder_bt.view import STATUS_LEGEND, LiveView
+    cell, ticker = _cell()
+    cell.start()
+    ticker.run(until=30.0)
+    view = LiveView(cell, out=io.StringIO())
+    tall = view.lines(200, 400)
+    assert any(s.startswith(LEGEND[0]) and STATUS_LEGEND in s for s in tall)
+    short = view.lines(80, 12)                  # no room: the trees keep every row
+    assert not any(LEGEND[0] in s for s in short)
