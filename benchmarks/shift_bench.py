@@ -76,6 +76,7 @@ def _one(job: tuple[str, str | None, int, float]) -> dict:
             "duplicated": p["duplicated"], "misplaced": p["misplaced"],
             "accounting": p.get("accounting", []), "injected": r.get("injected", {}),
             "unseen": r.get("unseen", {}), "cell_faults": r["faults"],
+            "misses": r.get("misses", {}),            # missed grabs: not faults (vocabulary)
             "recoveries": r["recoveries"], "retried": r.get("retried", {}),
             "unrecovered": unrecovered(r), "watchdog_stops": r.get("watchdog_stops", 0),
             "wall_seconds": r["wall_seconds"]}

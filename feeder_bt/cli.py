@@ -12,6 +12,7 @@ from pathlib import Path
 
 from .argtypes import positive
 from .errors import ConfigError, FeederError
+from .vocabulary import story_text
 
 # feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
@@ -112,12 +113,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_plant_options(r)
 
     t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
-    t.add_argument("scenario")
+    t.add_argument("scenario", nargs="?")
     t.add_argument("--format", default="unicode",
                    choices=["ascii", "unicode", "dot", "svg", "png"])
     t.add_argument("-o", "--output", help="write to this file instead of standard output")
     t.add_argument("--part", default="feeding", choices=["feeding", "setup", "cleanup"],
                    help="which tree (default: the four feeding trees)")
+    t.add_argument("--legend", action="store_true",
+                   help="print only what the node-kind glyphs (/_/ {o} {-} -^- -->) mean")
 
     c = sub.add_parser("check", help="validate scenarios, cell descriptions, fault and supply "
                        "plans "
@@ -204,7 +207,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def summary(report: dict) -> str:
-    """The run's summary, lines that fit 80 columns; its parts/min is the report's and the
+    """The run's summary (with its faults, misses and alarms: feeder_bt/vocabulary.py), lines that fit 80 columns; its parts/min is the report's and the
     live view's last."""
     p = report["parts"]
     how = " (interrupted)" if report.get("interrupted") else ""
@@ -214,7 +217,7 @@ def summary(report: dict) -> str:
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
-            + _ceiling_line(report) + _robots_line(report))
+            + _ceiling_line(report) + _robots_line(report) + "\n" + story_text(report))
 
 
 def _robots_line(report: dict) -> str:
@@ -244,8 +247,17 @@ def _ceiling_line(report: dict) -> str:
 
 def cmd_tree(args: argparse.Namespace) -> int:
     from .treeview import render_tree
+    from .view import LEGEND
+    if args.legend:
+        print("\n".join(LEGEND))
+        return 0
+    if args.scenario is None:
+        raise FeederError("tree: give a scenario (or --legend)")
     out = render_tree(args.scenario, args.format, args.part)
+    if args.format in ("ascii", "unicode") and not args.output:
+        out = f"{out.rstrip()}\n\n" + "\n".join(LEGEND)
     if args.output:
+        Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)
         Path(args.output).write_bytes(out if isinstance(out, bytes) else out.encode())
         print(f"wrote {args.output}")
     elif isinstance(out, bytes):
@@ -296,6 +308,7 @@ def cmd_schema(args: argparse.Namespace) -> int:
     from .scenario.schema import schema
     text = json.dumps(schema(args.kind), indent=2) + "\n"
     if args.output:
+        Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)
         Path(args.output).write_text(text)
         print(f"wrote {args.output}")
     else:
@@ -303,9 +316,21 @@ def cmd_schema(args: argparse.Namespace) -> int:
     return 0
 
 
+def _interrupted(e: BaseException | None) -> bool:
+    """Whether a Ctrl-C is somewhere in an exception's chain."""
+    seen = 0
+    while e is not None and seen < 20:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        e, seen = e.__cause__ or e.__context__, seen + 1
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """The `feeder` command. Ctrl-C at any time, even while the first imports run (the
+    parsers import every tool), ends with one line and 130, never a traceback."""
     try:
+        args = build_parser().parse_args(argv)
         return args.handler(args)
     except FeederError as e:
         if os.environ.get("FEEDER_DEBUG"):
@@ -315,6 +340,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"feeder: {line}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
+        print("feeder: interrupted", file=sys.stderr)
+        return 130
+    except ImportError as e:               # numpy turns a Ctrl-C in its import into this
+        if not _interrupted(e):
+            raise
         print("feeder: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .behaviours.common import Event, Stats
+from .didyoumean import hint
 from .errors import FeederError
 
 SCHEMA_VERSION = 1
@@ -258,7 +259,7 @@ def open_readonly(path: str | Path) -> sqlite3.Connection:
     """Open an existing event log for reading; EventLogError (one line) if it is not one."""
     p = Path(path)
     if not p.is_file():
-        raise EventLogError(f"{path}: no such event log")
+        raise EventLogError(f"{path}: no such event log{hint(path)}")
     try:
         conn = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True)
     except sqlite3.Error as e:

@@ -13,6 +13,7 @@ from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
 from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm
 from .ticker import Ticker
+from .vocabulary import split
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -118,7 +119,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         **bounds(s.counts["located_in_reach"], bound_ppm, total, feed_seconds, inflow,
                  sim_seconds),
         "parts": parts,
-        "faults": dict(s.faults),
+        # one vocabulary (vocabulary.py): device faults apart from the misses the trees retry
+        "faults": split(s.faults)[0],
+        "misses": split(s.faults)[1],
         "recoveries": dict(s.recoveries),
         "retried": dict(s.retried),
         "encoder_drift": dict(s.drift),

@@ -33,6 +33,8 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
+from .vocabulary import MISS_KINDS
+
 CHUNK_S = 10.0              # virtual seconds per chunk (one key frame each)
 BOARD_EVERY_S = 1.0         # virtual seconds between blackboard samples
 PUBLISH_WALL_S = 0.2        # the live view (dashboard) is refreshed at most this often
@@ -431,6 +433,7 @@ def read_trace(conn: sqlite3.Connection, run_id: int) -> TraceView:
             "SELECT t, kind, data FROM events WHERE run_id=? AND kind IN ('state', 'fault') "
             "ORDER BY rowid", (run_id,)):
         d = json.loads(data or "{}")
+        word = "miss" if d.get("kind") in MISS_KINDS else "fault"     # vocabulary.py
         marks.append((t, d.get("new", "?") if kind == "state"
-                       else f"fault: {d.get('message', '?')}"))
+                       else f"{word}: {d.get('message', '?')}"))
     return TraceView(nodes, [(r[1], r[2]) for r in index], marks, load)

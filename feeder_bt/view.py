@@ -134,6 +134,12 @@ _UNICODE = {Status.SUCCESS: "✓", Status.FAILURE: "✕", Status.RUNNING: "*",
             Status.INVALID: "-"}
 
 
+#: what the node-kind glyphs mean (py_trees' own, also in `feeder tree`): one line each
+LEGEND = ("/_/ parallel  {o} [o] selector  {-} [-] sequence  -^- decorator  --> leaf",
+          "{ } keeps its running child across ticks, [ ] starts again from the first")
+STATUS_LEGEND = "[*] running  [✓] success  [✕] failure  [-] not ticked"
+
+
 def _kind(node: py_trees.behaviour.Behaviour) -> str:
     if isinstance(node, py_trees.composites.Parallel):
         return "/_/"
@@ -247,6 +253,8 @@ class LiveView:
             events = [f"{e.t:8.1f} s  {e.kind:<10} {_data(e.data)}"
                       for e in list(cell.stats.events)[-4:]]
             trees = tree_lines(cell.root, rest, self.fmt)
+            if rest - len(trees) >= 3:             # room: what the glyphs and marks mean
+                trees += ["", LEGEND[0] + "  ·  " + STATUS_LEGEND]
             spare = rest - len(trees) - 1
             body = trees + ([""] + events[-spare:] if spare > 0 and events else [])
         return head + [""] + [_fit(s, width) for s in body]

@@ -345,3 +345,23 @@ def test_guesses_from_elsewhere_do_not_keep_the_rightful_user_out(tmp_path):
     assert "login_refused" in kinds
     assert all(d["surface"] == "opcua" for _, _, d in heard)
     assert {d["ip"] for _, _, d in heard} == {"10.9.8.7"}
+
+
+def test_a_refusal_keeps_its_reason(live):
+    """asyncua's ``call_method`` raises on the bad status and drops the output arguments;
+    ``plant.opcua_call.call`` keeps the refusal's one line."""
+    from feeder_bt.plant.opcua_call import Refused, call
+
+    async def go():
+        async with client(live.url, BOB) as bob:
+            idx, b = await cell_node(bob)
+            with pytest.raises(BadUserAccessDenied) as plain:      # asyncua: no reason
+                await b.call_method(f"{idx}:Start")
+            assert "take control first" not in str(plain.value)
+            with pytest.raises(Refused) as e:
+                await call(b, f"{idx}:Start")
+            assert "take control first" in str(e.value) and "BadUserAccessDenied" in str(e.value)
+            assert isinstance(e.value, BadUserAccessDenied)       # old handlers still catch it
+            assert await call(b, f"{idx}:TakeControl") == "you have control"
+            assert await call(b, f"{idx}:ReleaseControl") == "control released"
+    asyncio.run(go())

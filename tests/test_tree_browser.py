@@ -82,9 +82,58 @@ def drag_to(page, fraction: float) -> None:
     page.mouse.up()
 
 
+def test_replay_opens_a_second_before_the_first_fault_unfolded(replay, page):
+    db, url = replay
+    page.goto(url)
+    expect(page.locator("#tv-time")).to_contain_text("1 s before the first fault")
+    want = json.loads(cli("replay", str(db), "--before-fault", "--json"))
+    assert float(page.locator("#tv-time").get_attribute("data-t")) == round(want["t"], 3)
+    expect(node(page, "feeder")).to_have_attribute("data-status", "running")
+    running = [n["id"] for n in want["nodes"] if n["status"] == "running"]
+    assert len(running) > 3
+    for i in running:                        # the running branch is unfolded, every node
+        expect(page.locator(f'#tv-graph g.tv-node[data-id="{i}"]')).to_have_attribute(
+            "data-status", "running")
+
+
+@pytest.mark.parametrize("width", [1280, 1920])
+def test_the_tree_fits_its_box_and_pans_at_1_to_1(replay, browser, width):
+    db, url = replay
+    pg = browser.new_context(viewport={"width": width, "height": 1000}).new_page()
+    try:
+        pg.goto(url)
+        expect(pg.locator("#tv-time")).to_contain_text("before the first fault")
+        expect(pg.locator("#tv-graph g.tv-node").first).to_be_visible()
+
+        def sizes() -> tuple[float, float, float]:
+            return pg.evaluate("() => { const s = document.getElementById('tv-scroll'); "
+                               "return [s.clientWidth, s.scrollWidth, "
+                               "document.getElementById('tv-graph').getBoundingClientRect()"
+                               ".right - s.getBoundingClientRect().right]; }")
+        box, inner, over = sizes()
+        assert inner <= box + 1 and over <= 1, (box, inner, over)   # nothing clipped
+        pg.click("#tv-zoom")                                        # 1:1: wider; drag pans
+        expect(pg.locator("#tv-zoom")).to_have_text("Zoom to fit")
+        box, inner, _ = sizes()
+        assert inner > box + 1 or width > 1280        # at 1280 the trees are wider than that
+        if inner > box + 1:
+            r = pg.locator("#tv-scroll").bounding_box()
+            pg.mouse.move(r["x"] + r["width"] - 5, r["y"] + 5)
+            pg.mouse.down()
+            pg.mouse.move(r["x"] + 5, r["y"] + 5, steps=5)
+            pg.mouse.up()
+            assert pg.evaluate("document.getElementById('tv-scroll').scrollLeft") > 0
+        pg.click("#tv-zoom")
+        box, inner, _ = sizes()
+        assert inner <= box + 1
+    finally:
+        pg.context.close()
+
+
 def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page, shots):
     db, url = replay
     page.goto(url)
+    page.click("#tv-live")                                 # "End": the end of the run
     expect(page.locator("#tv-time")).to_contain_text("end of the run")
     expect(node(page, "feeder")).to_have_attribute("data-status", "invalid")
     assert fill(page, "feeder") == FILL["invalid"]

@@ -102,6 +102,15 @@ def test_a_known_browser_is_locked_only_by_its_own_mistakes(tmp_path):
 # ---------------------------------------------------------------------------- sessions, control
 
 
+WAIT_S = 60.0       # a net against a hung loop only: nothing here is judged by the clock
+
+
+async def settle(turns: int = 50) -> None:
+    """Let every ready task run to its next wait: loop turns, not seconds."""
+    for _ in range(turns):
+        await asyncio.sleep(0)
+
+
 def connect(ui: UiApp, browser: Browser) -> tuple[asyncio.Task, asyncio.Queue]:
     """Open the page's websocket (on the running loop); put a disconnect on the queue to
     close it."""
@@ -128,7 +137,7 @@ def test_control_held_by_a_closed_browser_is_free_after_the_grace_time(tmp_path)
     async def scenario() -> list[dict[str, Any]]:
         seen = []
         task, incoming = connect(ui, alice)
-        await asyncio.sleep(0.01)
+        await settle()
         assert ui.sessions.all()[0].conns == 1
         ok, _ = ui.control.take(ui.sessions.all()[0])
         assert ok
@@ -136,7 +145,7 @@ def test_control_held_by_a_closed_browser_is_free_after_the_grace_time(tmp_path)
         ui.wake_all()
         seen.append(ui.control.state_for(ui.sessions.all()[1]))
         await incoming.put({"type": "websocket.disconnect", "code": 1001})  # tab closed
-        await asyncio.wait_for(task, 1.0)
+        await asyncio.wait_for(task, WAIT_S)
         seen.append(ui.control.state_for(ui.sessions.all()[1]))
         clock.t += 59.5
         ui.wake_all()
@@ -176,8 +185,8 @@ def test_pushes_do_not_keep_a_session_alive_and_sessions_have_a_lifetime(tmp_pat
         for _ in range(15):                                 # 150 s of updates, no request
             clock.t += 10.0
             ui.wake_all()
-            await asyncio.sleep(0.005)
-        await asyncio.wait_for(task, 1.0)                   # told to log out, and closed
+            await settle()
+        await asyncio.wait_for(task, WAIT_S)                   # told to log out, and closed
 
     bob_seen = []
     asyncio.run(pushes())

@@ -138,22 +138,44 @@ def test_a_failing_snapshot_never_stops_the_cell_or_hangs_a_command(capsys):
 # ------------------------------------------------------------------- websocket
 
 
-class FakeSocket:
-    """Stands in for a Starlette WebSocket: records what was sent, as slowly as told."""
+WAIT_S = 60.0       # a net against a hung loop only: nothing here is judged by the clock
 
-    def __init__(self, delay: float = 0.0, stuck: bool = False) -> None:
+
+async def settle(turns: int = 50) -> None:
+    """Let every ready task run to its next wait: loop turns, not seconds, so a loaded
+    machine changes nothing."""
+    for _ in range(turns):
+        await asyncio.sleep(0)
+
+
+class FakeSocket:
+    """Stands in for a Starlette WebSocket: records what was sent; a closed ``gate`` holds
+    each send until the test opens it (a slow client, without the clock)."""
+
+    def __init__(self, stuck: bool = False, gated: bool = False) -> None:
         self.sent: list[dict] = []
         self.closed: int | None = None
-        self.delay, self.stuck = delay, stuck
+        self.stuck = stuck
+        self.gate = asyncio.Event()
+        if not gated:
+            self.gate.set()
+        self.sending = 0
 
     async def send_text(self, text: str) -> None:
         if self.stuck:
             await asyncio.Event().wait()
-        await asyncio.sleep(self.delay)
+        self.sending += 1
+        await self.gate.wait()
         self.sent.append(json.loads(text))
 
     async def close(self, code: int = 1000) -> None:
         self.closed = code
+
+
+async def _until(cond) -> None:
+    """Return once ``cond()`` holds (checked every loop turn)."""
+    while not cond():
+        await asyncio.sleep(0)
 
 
 def _connect(ui, ws, session):
@@ -172,23 +194,28 @@ def _ui_with_session(tmp_path: Path):
     return ui, bridge, ui.sessions.create("alice", "127.0.0.1", users.secret_of("alice"))
 
 
-def test_a_slow_client_gets_only_the_latest_snapshot(tmp_path):
+def test_a_slow_client_gets_only_the_latest_snapshot(tmp_path, monkeypatch):
+    monkeypatch.setattr(ui_server, "SEND_TIMEOUT_S", WAIT_S)
     ui, bridge, session = _ui_with_session(tmp_path)
 
     async def scenario() -> FakeSocket:
-        ws = FakeSocket(delay=0.05)
+        ws = FakeSocket(gated=True)
         client, task = _connect(ui, ws, session)
-        for _ in range(20):                         # 20 snapshots in 0.1 s
+        for _ in range(20):                         # 20 snapshots while the first send hangs
             bridge.publish()
             ui.wake_all()
-            await asyncio.sleep(0.005)
-        await asyncio.sleep(0.2)
+            await settle()
+        assert ws.sending == 1 and ws.sent == []
+        ws.gate.set()                               # the client catches up
+        await asyncio.wait_for(_until(lambda: ws.sent and ws.sent[-1]["status"]["seq"] == 20),
+                               WAIT_S)
+        await settle()
         task.cancel()
         return ws
 
     ws = asyncio.run(scenario())
     seqs = [m["status"]["seq"] for m in ws.sent]
-    assert 1 <= len(seqs) < 10 and seqs[-1] == 20   # coalesced, and ends on the latest
+    assert seqs == [1, 20]                          # coalesced, and ends on the latest
     assert seqs == sorted(set(seqs))                # never the same snapshot twice
     assert ws.sent[0]["session"]["control"]["state"] == "available"
     assert ws.sent[0]["history"] == [[0.0, 1.0, 2]] and ws.sent[0]["messages"][0]["seq"] == 1
@@ -204,7 +231,7 @@ def test_a_stuck_client_is_dropped(tmp_path, monkeypatch):
         client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
-        await asyncio.sleep(0.3)
+        await asyncio.wait_for(task, WAIT_S)        # the send loop gives up on it and ends
         return ws, client in ui.clients, task.done()
 
     ws, still_there, ended = asyncio.run(scenario())
@@ -219,10 +246,10 @@ def test_a_client_whose_session_ends_is_told_and_closed(tmp_path):
         client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
-        await asyncio.sleep(0.01)
+        await settle()
         ui.users.remove("alice")                    # `feeder users remove alice`
         ui.wake_all()
-        await asyncio.wait_for(task, 1.0)
+        await asyncio.wait_for(task, WAIT_S)
         return ws
 
     ws = asyncio.run(scenario())
@@ -238,12 +265,12 @@ def test_a_client_hears_of_control_changes_but_never_the_same_thing_twice(tmp_pa
         client, task = _connect(ui, ws, session)
         bridge.publish()
         ui.wake_all()
-        await asyncio.sleep(0.01)
+        await settle()
         ui.wake_all()                               # nothing new: nothing sent
-        await asyncio.sleep(0.01)
+        await settle()
         ui.control.take(session)                    # no new snapshot, but news all the same
         ui.wake_all()
-        await asyncio.sleep(0.01)
+        await settle()
         task.cancel()
         return ws
 

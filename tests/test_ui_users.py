@@ -142,6 +142,8 @@ def test_one_holder_of_control_at_a_time():
     assert c.state_for(bob) == {"state": "other", "holder": "alice"}
     assert c.refusal(bob) == "refused: alice has control"
     assert not c.is_holder(alice2) and "another session" in c.refusal(alice2)
+    # her other session is told it is hers, not "someone else" (the banner says so)
+    assert c.state_for(alice2) == {"state": "other", "holder": "alice", "same_user": True}
     assert c.release(alice)[0] and c.holder is None
     assert c.take(bob)[0]
     assert not c.drop(alice.token) and c.drop(bob.token) and c.holder is None

@@ -366,7 +366,7 @@ class Desk(TrustRules):
             values["encoder_bits"] = int(enc.robot_bits)
             values["tracking"] = int(ctx.scenario.retrieve.tracking)
             values["types"] = ",".join(ctx.scenario.parts)
-        for k in ("placed", "missed", "expired"):
+        for k in ("placed", "missed", "released", "expired", "held_expired"):   # the ledger
             values[k] = int(self.counts[k])
         values["wanted"] = int(sum(self.wanted.values()))
         return status_line(values)

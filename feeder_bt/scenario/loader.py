@@ -28,6 +28,7 @@ from pathlib import Path
 import yaml
 from yaml.nodes import MappingNode, ScalarNode
 
+from feeder_bt.didyoumean import hint
 from feeder_bt.errors import ConfigError
 from feeder_bt.scenario.checks import (  # noqa: F401 - re-exported
     GALIL_MAX_INPUT,
@@ -106,7 +107,7 @@ def _compose(path: Path, ctx: _Ctx) -> MappingNode:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ConfigError("file not found", file=ctx.file) from None
+        raise ConfigError(f"file not found{hint(path)}", file=ctx.file) from None
     except IsADirectoryError:
         raise ConfigError("is a directory, not a YAML file", file=ctx.file) from None
     except UnicodeDecodeError as e:

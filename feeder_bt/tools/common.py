@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..didyoumean import hint
 from ..errors import FeederError
 from ..scenario import load_scenario
 from ..scenario.model import CellSpec, Scenario
@@ -26,7 +27,7 @@ def read_image(path: str | Path) -> np.ndarray:
     """A grey uint8 image from a PNG/JPG/BMP file, or a one-line error naming the file."""
     p = Path(path)
     if not p.is_file():
-        raise BadInput(f"{p}: image not found")
+        raise BadInput(f"{p}: image not found{hint(p)}")
     img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
     if img is None:
         raise BadInput(f"{p}: cannot read as an image (PNG, JPG or BMP)")

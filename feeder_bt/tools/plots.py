@@ -50,10 +50,12 @@ def plot_run(conn: sqlite3.Connection, run_id: int, window_s: float = WINDOW_S) 
         for kind, times in sorted(s.retrieved_t.items()):
             ax_ppm.plot(s.t, rolling_ppm(s.t, np.searchsorted(times, s.t, side="right"),
                                          window_s, s.t0), linewidth=1, label=kind)
-    if s.faults_t.size:
-        for i, tf in enumerate(s.faults_t):
-            ax_ppm.axvline(tf, color="tab:red", linewidth=0.8, alpha=0.6,
-                           label="fault" if i == 0 else None)
+    for i, tf in enumerate(s.faults_t):           # faults and misses: vocabulary.py
+        ax_ppm.axvline(tf, color="tab:red", linewidth=0.8, alpha=0.6,
+                       label="fault" if i == 0 else None)
+    if s.misses_t.size:                           # a retried grab: a tick, not a line
+        ax_ppm.plot(s.misses_t, np.zeros_like(s.misses_t), linestyle="none", marker="|",
+                    markersize=8, color="tab:grey", label="miss (retried)")
     ax_ppm.set_title("Throughput")
     ax_ppm.set_ylabel("parts/min")
     ax_ppm.set_xlabel("time (s)")

@@ -12,6 +12,7 @@ from typing import Any
 
 from ..eventlog import EventLogError, open_readonly
 from ..treelog import STATUS_NAMES, TraceView, TreeState, read_trace
+from ..vocabulary import MISS_KINDS
 from .runs_db import run_ids
 
 MARK = {"invalid": "[-]", "running": "[*]", "success": "[✓]", "failure": "[✕]"}
@@ -48,20 +49,19 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-def faults(conn: sqlite3.Connection, run_id: int) -> list[tuple[float, str]]:
-    """(time, message) of each fault that stopped the cell (the cell's own and e-stops, not
-    the faults a branch recovered from by itself), in order."""
-    out = []
+def faults(conn: sqlite3.Connection, run_id: int) -> tuple[list[tuple[float, str]], int]:
+    """(time, message) of each fault (one that stopped or degraded the cell: a servo
+    timeout, a lost link, an e-stop...), in order, and how many misses (retried grabs and
+    picks, not faults: vocabulary.py) the run had besides."""
+    out, misses = [], 0
     for t, d in conn.execute("SELECT t, data FROM events WHERE run_id=? AND kind='fault' "
                              "ORDER BY rowid", (run_id,)):
         data = json.loads(d or "{}")
-        if data.get("kind") in STOPPING:
+        if data.get("kind") in MISS_KINDS:
+            misses += 1
+        else:
             out.append((t, data.get("message", "?")))
-    return out
-
-
-#: the fault events' kinds that stop the cell (``Cell.fault`` and the e-stop)
-STOPPING = ("cell", "estop")
+    return out, misses
 
 
 def pick_time(conn: sqlite3.Connection, run_id: int, view: TraceView,
@@ -69,9 +69,10 @@ def pick_time(conn: sqlite3.Connection, run_id: int, view: TraceView,
     """The time asked for, and a few words saying what it is."""
     t_first, t_last = view.span
     if before_fault is not None:
-        found = faults(conn, run_id)
+        found, misses = faults(conn, run_id)
         if not found:
-            raise EventLogError(f"run {run_id} had no fault: give --at SECONDS instead")
+            also = f" ({misses} miss{'es' * (misses != 1)}, each retried)" if misses else ""
+            raise EventLogError(f"run {run_id} had no fault{also}: give --at SECONDS instead")
         tf, why = found[0]
         t = max(t_first, tf - before_fault)
         return t, f"{tf - t:g} s before the fault at {tf:.2f} s ({why})"

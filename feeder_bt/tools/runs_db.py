@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..eventlog import EventLogError
+from ..vocabulary import MISS_KINDS, split, story
 
 
 @dataclass
@@ -21,7 +22,8 @@ class Series:
     horizontal_mm_s: np.ndarray
     retrieved: np.ndarray                 # cumulative, at each sample
     retrieved_t: dict[str, np.ndarray]    # retrieval times per part type
-    faults_t: np.ndarray
+    faults_t: np.ndarray                  # faults: the cell stopped or ran degraded
+    misses_t: np.ndarray                  # misses: a grab or pick retried (vocabulary.py)
     t0: float                             # the run's first event (start command)
 
 
@@ -58,7 +60,9 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
             out.update(state=report["state"], duration_s=report["feed_seconds"],
                        parts_per_minute=report["parts_per_minute"], retrieved=p["retrieved"],
                        located=p["located"], missed=p["missed"], lost=p["lost"],
-                       faults=report["faults"])
+                       faults=split(report["faults"])[0],
+                       misses={**split(report["faults"])[1], **(report.get("misses") or {})},
+                       story=story(report))
             return out
         by_type = dict(conn.execute(
             "SELECT json_extract(data, '$.type'), count(*) FROM events "
@@ -76,7 +80,7 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
     out.update(state="incomplete", duration_s=round(duration, 3),
                parts_per_minute=round(total * 60.0 / duration, 3) if duration > 0 else 0.0,
                retrieved=by_type, located=int(located or 0), missed=None, lost=None,
-               faults=faults)
+               faults=split(faults)[0], misses=split(faults)[1], story=story({"faults": faults}))
     return out
 
 
@@ -88,8 +92,10 @@ def series(conn: sqlite3.Connection, run_id: int) -> Series:
         ret = conn.execute("SELECT t, json_extract(data, '$.type') FROM events "
                            "WHERE run_id=? AND kind='retrieved' ORDER BY t",
                            (run_id,)).fetchall()
-        faults = [r[0] for r in conn.execute(
-            "SELECT t FROM events WHERE run_id=? AND kind='fault' ORDER BY t", (run_id,))]
+        faults, misses = [], []               # a miss is not a fault (vocabulary.py)
+        for t, kind in conn.execute("SELECT t, json_extract(data, '$.kind') FROM events "
+                                    "WHERE run_id=? AND kind='fault' ORDER BY t", (run_id,)):
+            (misses if kind in MISS_KINDS else faults).append(t)
         t0 = conn.execute("SELECT min(t) FROM events WHERE run_id=?", (run_id,)).fetchone()[0]
     except sqlite3.Error as e:
         raise EventLogError(f"run {run_id}: damaged record ({e})") from None
@@ -100,7 +106,8 @@ def series(conn: sqlite3.Connection, run_id: int) -> Series:
     return Series(t=arr[:, 0], queue=arr[:, 1], horizontal_mm_s=arr[:, 2],
                   retrieved=arr[:, 3],
                   retrieved_t={k: np.asarray(v) for k, v in by_type.items()},
-                  faults_t=np.asarray(faults, dtype=float), t0=float(t0 or 0.0))
+                  faults_t=np.asarray(faults, dtype=float),
+                  misses_t=np.asarray(misses, dtype=float), t0=float(t0 or 0.0))
 
 
 def rolling_ppm(t: np.ndarray, cumulative: np.ndarray, window_s: float = 60.0,

@@ -159,14 +159,17 @@ class Control:
         return f"refused: {self.holder.user} has control"
 
     def state_for(self, session: Session) -> dict[str, str | int | None]:
-        """The indicator: ``available``, ``you``, or ``other`` with the holder's name, and
-        ``free_in`` (whole seconds) when the holder has left."""
+        """The indicator: ``available``, ``you``, or ``other`` with the holder's name (and
+        ``same_user: true`` when the holder is this user's other session), and ``free_in`` (whole
+        seconds) when the holder has left."""
         if self.holder is None:
             return {"state": "available", "holder": None}
         left = self.free_in()
         extra = {} if left is None else {"free_in": math.ceil(left)}
         if self.holder.token == session.token:
             return {"state": "you", "holder": session.user, **extra}
+        if self.holder.user == session.user:            # her other tab, browser or PC
+            extra["same_user"] = True
         return {"state": "other", "holder": self.holder.user, **extra}
 
 

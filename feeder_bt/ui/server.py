@@ -49,6 +49,7 @@ from .bridge import Bridge, Outcome
 from .camera import CameraFeed, CameraView
 from .control import Control, Session, Sessions, retry_after
 from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
+from .openapi import spec as openapi_spec
 from .operate import COMMANDS
 from .responses import SecurityHeaders, client_ip, json_response, refuse, same_origin
 from .serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
@@ -120,6 +121,7 @@ class UiApp:
             Route("/api/status", self.status),
             Route("/api/control", self.control_action, methods=["POST"]),
             Route("/api/command", self.command, methods=["POST"]),
+            Route("/api/openapi.json", lambda r: json_response(openapi_spec())),   # the API
             *self.camera.routes,
             WebSocketRoute("/ws", self.websocket),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),

@@ -16,6 +16,7 @@ from ..behaviours.common import Event, Stats
 from ..cell import Cell, CellState
 from ..eventlog import ACCESS_KINDS
 from ..view import figures, tree_text
+from ..vocabulary import MISS_KINDS, split
 from .bridge import Message, Snapshot
 from .operate import Limits, blackboard_speeds
 
@@ -39,7 +40,8 @@ def message_text(ev: Event) -> str:
     if ev.kind == "state":
         return f"state {d.get('old')} \u2192 {d.get('new')}"
     if ev.kind == "fault":
-        return f"fault ({d.get('kind', '?')}): {d.get('message', '')}"
+        word = "miss" if d.get("kind") in MISS_KINDS else "fault"     # vocabulary.py
+        return f"{word} ({d.get('kind', '?')}): {d.get('message', '')}"
     if ev.kind == "operator":
         who, action = d.get("user", "?"), d.get("action", "?")
         rest = {k: v for k, v in d.items() if k not in ("user", "action")}
@@ -139,6 +141,10 @@ class CellPanel:
             "located": s.counts["located"],
             "missed": s.counts["missed"],
             "too_far": s.counts["too_far"],
+            # faults (recovered so far) and misses apart: vocabulary.py
+            "faults": sum(split(s.faults)[0].values()),
+            "recovered": sum(s.recoveries.values()),
+            "misses": sum(split(s.faults)[1].values()),
             "queue": int(f["queue"]),
             "speeds": blackboard_speeds() if cell.ctx is not None else
             dict.fromkeys(("horizontal_mm_s", "incline_pct", "robot_speed_pct")),

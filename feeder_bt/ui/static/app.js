@@ -141,6 +141,9 @@ function renderSession(s) {
   const leaving = (c.free_in !== undefined && c.free_in !== null)
     ? ` \u2014 control free in ${c.free_in} s` : "";   // the holder has no page open
   el.textContent = c.state === "you" ? "Control: you have control"
+    : c.state === "other" && c.same_user
+      ? `Control: your other session has control (${c.holder}, another tab or browser)` +
+        leaving
     : c.state === "other" ? `Control: someone else has control (${c.holder})${leaving}`
     : "Control: available";
   $("force").hidden = !(s.admin && c.state === "other");
@@ -169,6 +172,7 @@ function renderStatus(st) {
     `${fmt(sp.incline_pct)} %, robot ${fmt(sp.robot_speed_pct)} %`;
   $("st-hal-horizontal").textContent = `${fmt(st.hal.horizontal_mm_s)} mm/s`;
   $("st-hal-incline").textContent = `${fmt(st.hal.incline_mm_s)} mm/s`;
+  $("st-faults").textContent = `${st.faults} (${st.recovered}) / ${st.misses}`;
   $("st-fault").textContent = st.fault || "-";
   $("adjust-state").textContent = st.adjuster
     ? `${st.adjuster}, ${st.auto_adjust ? "engaged" : "disengaged"}` : "-";

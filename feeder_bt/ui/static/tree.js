@@ -68,8 +68,25 @@
       const line = el("div", {class: "tv-timeline"});
       line.append(this.slider, this.marks);
       this.graph = svg("svg", {class: "tv-graph", id: "tv-graph"});
-      const scroll = el("div", {class: "tv-scroll"});
+      const scroll = el("div", {class: "tv-scroll", id: "tv-scroll"});
       scroll.append(this.graph);
+      this.scroll = scroll;
+      this.fit = true;
+      this.fitBtn = el("button", {type: "button", id: "tv-zoom"}, "Zoom 1:1");
+      this.fitBtn.addEventListener("click", () => { this.fit = !this.fit; this.zoom(); });
+      this.bar.insertBefore(this.fitBtn, this.time);
+      window.addEventListener("resize", () => this.zoom());
+      let drag = null;                    // pan: drag the background
+      scroll.addEventListener("mousedown", (ev) => {
+        if (ev.target.closest && ev.target.closest(".tv-node")) return;
+        drag = [ev.clientX, ev.clientY, scroll.scrollLeft, scroll.scrollTop];
+      });
+      window.addEventListener("mouseup", () => { drag = null; });
+      scroll.addEventListener("mousemove", (ev) => {
+        if (!drag) return;
+        scroll.scrollLeft = drag[2] - (ev.clientX - drag[0]);
+        scroll.scrollTop = drag[3] - (ev.clientY - drag[1]);
+      });
       this.board = el("table", {class: "tv-board", id: "tv-board"});
       const main = el("div", {class: "tv-main"});
       const side = el("div", {class: "tv-side"});
@@ -101,7 +118,7 @@
     // ------------------------------------------------------------ data
     start() {
       if (this.timer) return;
-      this.follow();
+      if (this.live) this.follow(); else this.openReplay();
       this.timer = setInterval(() => { if (this.following) this.fetchAt(null); }, POLL_MS);
     }
 
@@ -118,6 +135,32 @@
     }
 
     shownT() { return this.state ? this.state.t : 0; }
+
+    // A past run opens on the moment that matters: a second before its first fault (a
+    // miss is not one), else a second before it stopped (its last activity), not on
+    // its end, where every node is idle.
+    async openReplay() {
+      this.following = false;
+      let st = null;
+      try {
+        const resp = await fetch("/api/tree/at", {credentials: "same-origin"});
+        if (resp.ok) st = await resp.json();
+      } catch (e) { /* no answer: the end, as before */ }
+      if (!st) { this.follow(); return; }
+      const [t0, t1] = st.span;
+      const fault = st.marks.find(([, what]) => what.startsWith("fault"));
+      const stops = st.marks.filter(([, what]) => what === "STOPPING" || what === "FAULTING");
+      let t = t1, why = "end of the run";
+      if (fault) {
+        t = Math.max(t0, fault[0] - 1);
+        why = `${(fault[0] - t).toFixed(0)} s before the first fault`;
+      } else if (stops.length) {
+        t = Math.max(t0, stops[stops.length - 1][0] - 1);
+        why = "the last activity";
+      }
+      this.opened = {t: Number(t.toFixed(3)), why};
+      this.seek(this.opened.t);
+    }
 
     seek(t) {
       this.following = false;
@@ -197,6 +240,7 @@
       this.slider.max = String(st.span[1]);
       if (this.following) this.slider.value = String(st.span[1]);
       const when = this.following ? (this.live ? "live" : "end of the run")
+        : this.opened && Math.abs(this.opened.t - st.t) < 1e-3 ? this.opened.why
         : `${(st.span[1] - st.t).toFixed(2)} s before the ${this.live ? "latest" : "end"}`;
       this.time.textContent = `t = ${st.t.toFixed(2)} s (${when})`;
       this.time.dataset.t = String(st.t);
@@ -206,6 +250,19 @@
       this.drawMarks();
       this.draw();
       this.drawBoard();
+    }
+
+    // Fit: the whole width of the tree in its box (a deep tree drawn smaller, never
+    // larger than 1:1); 1:1: natural size, panned by dragging or with the scroll bars.
+    zoom() {
+      if (!this.size) return;
+      const [W, H] = this.size;
+      const box = Math.max(this.scroll.clientWidth - 2, 100);
+      const k = this.fit ? Math.min(1, box / W) : 1;
+      this.graph.setAttribute("width", (W * k).toFixed(1));
+      this.graph.setAttribute("height", (H * k).toFixed(1));
+      this.graph.dataset.scale = k.toFixed(3);
+      this.fitBtn.textContent = this.fit ? "Zoom 1:1" : "Zoom to fit";
     }
 
     treeName() {
@@ -244,8 +301,8 @@
       const depth = Math.max(0, ...items.map((i) => i.depth));
       const W = (depth + 1) * COL + PAD * 2, H = Math.max(row, 1) * ROW + PAD * 2;
       this.graph.setAttribute("viewBox", `0 0 ${W} ${H}`);
-      this.graph.setAttribute("width", W);
-      this.graph.setAttribute("height", H);
+      this.size = [W, H];
+      this.zoom();
       const edges = [], boxes = [];
       const xy = (it) => [PAD + it.depth * COL, PAD + it.y * ROW];
       for (const it of items) {
@@ -296,7 +353,8 @@
       for (const [t, what] of st.marks) {
         const x = ((t - t0) / span * 1000).toFixed(1);
         const m = svg("line", {x1: x, x2: x, y1: 0, y2: 12,
-                               class: what.startsWith("fault") ? "fault" : "state"});
+                               class: what.startsWith("fault") ? "fault"
+                                 : what.startsWith("miss") ? "miss" : "state"});
         m.append(svg("title", {}, `${t.toFixed(2)} s: ${what}`));
         m.addEventListener("click", () => this.seek(t));
         marks.push(m);
