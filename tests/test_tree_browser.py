@@ -47,14 +47,18 @@ def replay(tmp_path_factory):
     ui.stop()
 
 
-@pytest.fixture(scope="module")
-def page(browser, replay):
-    pg = new_page(browser)
-    pg.goto(replay[1])                      # the replay asks for a login first (issue 28)
+def _log_in(pg, url: str) -> None:
+    pg.goto(url)                            # the replay asks for a login first (issue 28)
     pg.fill("#login-user", "alice")
     pg.fill("#login-password", PASSWORD)
     pg.click("#login-submit")
     expect(pg.locator("#tv-time")).to_be_visible()
+
+
+@pytest.fixture(scope="module")
+def page(browser, replay):
+    pg = new_page(browser)
+    _log_in(pg, replay[1])
     yield pg
     pg.context.close()
 
@@ -101,7 +105,7 @@ def test_the_tree_fits_its_box_and_pans_at_1_to_1(replay, browser, width):
     db, url = replay
     pg = browser.new_context(viewport={"width": width, "height": 1000}).new_page()
     try:
-        pg.goto(url)
+        _log_in(pg, url)
         expect(pg.locator("#tv-time")).to_contain_text("before the first fault")
         expect(pg.locator("#tv-graph g.tv-node").first).to_be_visible()
 

@@ -69,10 +69,11 @@ def spec() -> dict[str, Any]:
                 "responses": _ok("statuses, blackboard, span and timeline marks")}},
             "/api/camera": {"get": {"summary": "the camera's last frame: what was located "
                                     "and rejected", "responses": _ok("frame metadata")}},
-            "/api/camera/{seq}.jpg": {"get": {
-                "summary": "a frame as JPEG", "parameters": [
-                    {"name": "seq", "in": "path", "required": True,
-                     "schema": {"type": "integer"}}],
+            "/api/camera/{name}": {"get": {
+                "summary": "a frame as JPEG: name is SEQ.jpg, SEQ its number (at most 18 "
+                           "digits; anything else is a 404)", "parameters": [
+                    {"name": "name", "in": "path", "required": True,
+                     "schema": {"type": "string", "pattern": "^[0-9]{1,18}\\.jpg$"}}],
                 "responses": _ok("image/jpeg")}},
             "/api/openapi.json": {"get": {"summary": "this description",
                                           "responses": _ok("OpenAPI 3.1")}},
