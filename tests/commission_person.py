@@ -22,7 +22,8 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parent.parent
-PROMPT = re.compile(r"\[([A-Za-z0-9_.\-]+)\] $")
+# a question ends "[KEY] " ("[yes/no]" is not a key); other output (a card event) may follow
+PROMPT = re.compile(r"\[([A-Za-z0-9_.\-]+)\] ")
 WAIT_S = 120.0                     # generous: the machine may be loaded
 
 
@@ -209,9 +210,9 @@ def commission(what: str, cell: Path, report: Path, person: Person, *extra: str
             m = proc.wait(lambda t: PROMPT.search(t))
             if m is None:
                 break
-            prompt = proc.text[proc.pos:]
+            prompt = proc.text[proc.pos:proc.pos + m.end()]
             key = m.group(1)
-            proc.pos += len(prompt)
+            proc.pos += m.end()
             proc.write(person.respond(key, prompt.splitlines()[-1]) + "\n")
         code = proc.p.wait(WAIT_S)
         return code, proc.text

@@ -79,6 +79,9 @@ def read_actions(operator, stdin: TextIO, out: TextIO, lock: threading.Lock) -> 
         if answer is not None:
             with lock:
                 print(answer, file=out, flush=True)
+    with lock:
+        print("end of actions (standard input closed); serving on until Ctrl-C", file=out,
+              flush=True)
 
 
 def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
