@@ -27,7 +27,16 @@ from ...calibration.files import robot_frame_path, write_calibration_file
 from ...clock import RealClock
 from ...encoder import EncoderSync, FreshAnchor, diff
 from ...scenario.model import CellSpec
-from .common import Asker, Report, active_low, estop_step, try_step, wait, wait_for
+from .common import (
+    Asker,
+    Report,
+    active_low,
+    ensure_motor_on,
+    estop_step,
+    try_step,
+    wait,
+    wait_for,
+)
 from .frame import FrameFit, fit_frame, frame_record, touch_points
 
 JOG_S = 1.0
@@ -160,11 +169,8 @@ def _drift(cell: CellSpec, ctl: Any, conv: Any, name: str, position: Any, sync: 
            ask: Asker, opts: argparse.Namespace) -> dict[str, Any]:
     anchored = sync.reference
     assert anchored is not None
-    st = ctl.status(conv.axis)
-    if st is None or st.motor_off:
-        if not ask.yes(f"servo.{name}", f"The motor of {name} is off. Turn it on?"):
-            return {"ok": False, "error": "motor off"}
-        wait(conv.servo(True), cell.galil.timeout_s + 1)
+    if not ensure_motor_on(ctl, conv, name, ask, cell.galil.timeout_s + 1):
+        return {"ok": False, "error": "motor off (left off)"}
     # twice the jog, within the belt's limit (the driver refuses a speed above it)
     wait(conv.set_speed(min(opts.jog_mm_s * 2, cell.conveyors[name].max_mm_s)), 10.0)
     time.sleep(JOG_S * 2)

@@ -26,7 +26,7 @@ from ...clock import RealClock
 from ...encoder import diff
 from ...scenario.model import CameraCalibration, CellSpec
 from ...vision.calibration import Calibration
-from .common import Asker, Report, try_step, wait
+from .common import Asker, Report, ensure_motor_on, try_step, wait
 
 TIMING_SPEEDS_MM_S = (100.0, 200.0)
 FRAME_GAP_S = 0.15           # between triggered frames while the marker crosses the view
@@ -134,12 +134,8 @@ def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration
     rows: list[tuple[float, float, float]] = []          # travelled mm, speed, residual mm
     try:
         ctl.ready.result(g.timeout_s * 4 + 5)
-        st = ctl.status(axis)
-        if st is None or st.motor_off:
-            if not ask.yes(f"servo.{name}", f"The motor of {name} (axis {axis}) is off. "
-                                            "Turn it on?"):
-                return {"ok": False, "error": "motor off (left off)"}
-            wait(conv.servo(True), t)
+        if not ensure_motor_on(ctl, conv, name, ask, t):
+            return {"ok": False, "error": "motor off (left off)"}
 
         def shot() -> tuple[int, tuple[float, float] | None]:
             wait(conv.arm_latch(), t)

@@ -147,3 +147,21 @@ def estop_step(ask: Asker, active: Callable[[], bool | None], where: str, wait_s
     released = wait_for(lambda: active() is False, wait_s)
     return {"ok": bool(pressed and released), "where": where, "pressed_seen": bool(pressed),
             "released_seen": bool(released)}
+
+
+def motor_off(ctl: Any, axis: str, timeout: float) -> bool:
+    """``_MOx`` read now (1: the amplifier is off), not the status cache: an e-stop a moment
+    ago has turned it off whatever the last status poll said."""
+    return ctl.submit(ctl.ask_number, f"MG _MO{axis.upper()}").result(timeout) == 1
+
+
+def ensure_motor_on(ctl: Any, conv: Any, name: str, ask: Asker, timeout: float) -> bool:
+    """Turn the motor of ``conv`` on only if the person says so (the first ``SH`` is
+    theirs); False if they say no."""
+    if not motor_off(ctl, conv.axis, timeout):
+        return True
+    if not ask.yes(f"servo.{name}", f"The motor of {name} (axis {conv.axis}) is off. Turn it "
+                                    "on?"):
+        return False
+    wait(conv.servo(True), timeout)
+    return True

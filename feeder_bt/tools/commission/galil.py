@@ -20,7 +20,17 @@ from typing import Any
 from ...clock import RealClock
 from ...encoder import diff
 from ...scenario.model import CellSpec
-from .common import Asker, Report, active_low, estop_step, try_step, wait, wait_for
+from .common import (
+    Asker,
+    Report,
+    active_low,
+    ensure_motor_on,
+    estop_step,
+    motor_off,
+    try_step,
+    wait,
+    wait_for,
+)
 
 JOG_S = 1.0
 PUSH_MM = 50.0           # how far the person pushes a belt by hand for the encoder sign
@@ -136,8 +146,7 @@ def _limit(ctl: Any, ask: Asker, name: str, axis: str, forward: bool, t: float,
 
 def _encoder_sign(cell: CellSpec, ctl: Any, ask: Asker, name: str, conv: Any, t: float
                   ) -> dict[str, Any]:
-    st = ctl.status(conv.axis)
-    if st is None or not st.motor_off:
+    if not motor_off(ctl, conv.axis, t):
         wait(conv.servo(False), t)                   # MO: a motor that is off never runs away
     before = ctl.submit(ctl.read_position, conv.axis).result(t)
     ask(f"push.{name}", f"Motor of {name} (axis {conv.axis}) is OFF. Push the {name} belt "
@@ -176,11 +185,8 @@ def _latch(cell: CellSpec, conveyors: dict[str, Any], ctl: Any, ask: Asker
 def _axis(cell: CellSpec, ctl: Any, name: str, conv: Any, ask: Asker,
           opts: argparse.Namespace) -> dict[str, Any]:
     axis = conv.axis
-    st = ctl.status(axis)
-    if st is None or st.motor_off:
-        if not ask.yes(f"servo.{name}", f"The motor of {name} (axis {axis}) is off. Turn it on?"):
-            return {"ok": False, "axis": axis, "motor": "off (left off)"}
-        wait(conv.servo(True), cell.galil.timeout_s + 1)
+    if not ensure_motor_on(ctl, conv, name, ask, cell.galil.timeout_s + 1):
+        return {"ok": False, "axis": axis, "motor": "off (left off)"}
     before = ctl.submit(ctl.read_position, axis).result(cell.galil.timeout_s + 1)
     wait(conv.set_speed(opts.jog_mm_s), 10.0)
     time.sleep(JOG_S)
