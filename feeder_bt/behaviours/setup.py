@@ -61,4 +61,5 @@ class SyncEncoders(Leaf):
         if self.ctx.now() - self.started > self.timeout_s:
             self.feedback_message = f"no encoder sync in {self.timeout_s:g} s: {self.anchor.why}"
             return Status.FAILURE
+        self.ctx.clock.wake_at(self.ctx.now() + 1e-3)    # look again next tick: no skipping
         return Status.RUNNING
