@@ -230,3 +230,41 @@ def test_commission_reports_a_bad_answers_file_in_one_line(tmp_path, capsys):
                  str(bad), "--report", str(tmp_path / "r.yaml")])
     err = capsys.readouterr().err
     assert code == 2 and "answers must be a mapping" in err and "Traceback" not in err
+
+
+def test_a_runs_sync_waits_for_fresh_reads_and_says_why_it_gave_up():
+    """The run's set-up anchors as commissioning does: a stale cached count is never used."""
+    from types import SimpleNamespace
+
+    from py_trees.common import Status
+
+    from feeder_bt.behaviours.setup import SyncEncoders
+    from feeder_bt.clock import SimClock
+    from feeder_bt.encoder import EncoderSync
+
+    clock = SimClock()
+    conv = SimpleNamespace(count=5000, age=3.0)
+    conveyor = SimpleNamespace(position=lambda: conv.count, position_age=lambda: conv.age)
+    robot = SimpleNamespace(belt_encoder=lambda: 77, age=lambda: 0.0)
+    sync = EncoderSync()
+    ctx = SimpleNamespace(cell=SimpleNamespace(encoder=SimpleNamespace(conveyor_bits=32,
+                                                                      robot_bits=24)),
+                          hal=SimpleNamespace(conveyors={"horizontal": conveyor},
+                                              robot_position=robot),
+                          encoder=sync, clock=clock, now=clock.now)
+    leaf = SyncEncoders("sync", ctx, timeout_s=1.0)      # type: ignore[arg-type]
+    leaf.initialise()
+    for _ in range(5):                                    # the Galil's count is 3 s old
+        clock.advance_to(clock.now() + 0.1)
+        assert leaf.update() is Status.RUNNING
+    assert not sync.is_reset
+    conv.age = 0.0                                        # fresh reads come
+    clock.advance_to(clock.now() + 0.1)
+    assert leaf.update() is Status.RUNNING                # one fresh read is not two
+    clock.advance_to(clock.now() + 0.1)
+    assert leaf.update() is Status.SUCCESS and sync.reference == (5000, 77)
+    leaf.initialise()
+    conv.age = 3.0
+    while leaf.update() is Status.RUNNING:
+        clock.advance_to(clock.now() + 0.1)
+    assert "not fresh" in leaf.feedback_message and "1 s" in leaf.feedback_message
