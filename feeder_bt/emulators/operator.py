@@ -162,30 +162,36 @@ class Operator:
             on = False
         return f"arm power {'on' if on else 'off (refused: e-stop active?)'}"
 
+    def _grip_signals(self) -> tuple[str | None, str | None]:
+        """The cell's grip sensor input and vacuum output (names containing grip, vacuum)."""
+        io = self.plant.cell.io
+        sensor = next((n for n, s in io.items() if s.dir == "in" and "grip" in n), None)
+        vacuum = next((n for n, s in io.items() if s.dir != "in" and "vacuum" in n), None)
+        return sensor, vacuum
+
     def _part(self, args: list[str]) -> str:
         word = _one(args, "on|off").lower()
         if word not in ("on", "off"):
             raise ActionError(f"expected on or off, got {word!r}")
-        sensor = next((n for n, s in self.plant.cell.io.items()
-                       if s.dir == "in" and "grip" in n), None)
+        sensor, _ = self._grip_signals()
+        if sensor is None:
+            raise ActionError("the cell names no grip sensor input (io.grip: {controller: "
+                              "adept, bit: 3, dir: in})")
         self.part_held = word == "on"
-        vacuum = next((n for n, s in self.plant.cell.io.items()
-                       if s.dir != "in" and "vacuum" in n), None)
-        if sensor is not None:      # the vacuum switch: on while a part seals the cup
-            self.plant.set_signal(sensor, self.part_held and vacuum is not None
-                                  and self.plant.signal(vacuum))
+        self.sync_grip()
+        if not self.part_held:
+            self.plant.set_signal(sensor, False)
         return f"part {'held to' if self.part_held else 'away from'} the gripper"
 
     def sync_grip(self) -> None:
-        """The grip sensor follows the vacuum while a part is held (called by the loop)."""
-        sensor = next((n for n, s in self.plant.cell.io.items()
-                       if s.dir == "in" and "grip" in n), None)
-        vacuum = next((n for n, s in self.plant.cell.io.items()
-                       if s.dir != "in" and "vacuum" in n), None)
-        if sensor is not None and vacuum is not None:
-            want = self.part_held and self.plant.signal(vacuum)
-            if self.plant.signal(sensor) != want:
-                self.plant.set_signal(sensor, want)
+        """While the person holds a part to the cup, the vacuum switch follows the vacuum
+        (called often by the emulator); otherwise the sensor is left to the robot."""
+        sensor, vacuum = self._grip_signals()
+        if not self.part_held or sensor is None:
+            return
+        want = vacuum is not None and self.plant.signal(vacuum)
+        if self.plant.signal(sensor) != want:
+            self.plant.set_signal(sensor, want)
 
     # ------------------------------------------------------------------ camera
     def _marker(self, args: list[str]) -> str:
