@@ -179,17 +179,21 @@ class Operator:
                               "adept, bit: 3, dir: in})")
         self.part_held = word == "on"
         self.sync_grip()
-        if not self.part_held:
-            self.plant.set_signal(sensor, False)
         return f"part {'held to' if self.part_held else 'away from'} the gripper"
 
     def sync_grip(self) -> None:
-        """While the person holds a part to the cup, the vacuum switch follows the vacuum
-        (called often by the emulator); otherwise the sensor is left to the robot."""
+        """The grip sensor (a cell input named ``grip``, the V+ programs' vacuum switch)
+        reads what the cup holds: while the person holds a part to it, whether the vacuum
+        is on; otherwise whether the simulated gripper holds a part (a run's picks). Called
+        every few ms by the emulator."""
         sensor, vacuum = self._grip_signals()
-        if not self.part_held or sensor is None:
+        if sensor is None:
             return
-        want = vacuum is not None and self.plant.signal(vacuum)
+        if self.part_held:
+            want = vacuum is not None and self.plant.signal(vacuum)
+        else:
+            with self.plant.lock:
+                want = self.plant.world.gripper is not None
         if self.plant.signal(sensor) != want:
             self.plant.set_signal(sensor, want)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import inspect
 import math
 import time
 from pathlib import Path
@@ -78,8 +79,13 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
         def connect() -> dict[str, Any]:
             nonlocal adept
             ctl.ready.result(cell.galil.timeout_s * 4 + 5)
+            kwargs: dict[str, Any] = {}
+            params = inspect.signature(AdeptController).parameters
+            if "robot" in params:         # the driver sends FRAME/DEFSAFE (FRAME_SPEC)
+                kwargs.update(robot=cell.robot, counts_per_mm=cell.encoder.counts_per_mm)
             adept = AdeptController(cell.adept, clock,
-                                    inputs=[estop_bit] if estop_bit is not None else [])
+                                    inputs=[estop_bit] if estop_bit is not None else [],
+                                    **kwargs)
             return {"host": cell.adept.host, "galil": cell.galil.url}
         if not try_step(report, "adept.connect", connect):
             return
