@@ -198,6 +198,13 @@ def test_the_robot_frame_file_replaces_the_cells_base(tmp_path):
     (tmp_path / "calibration" / "robot.yaml").write_text(
         "base_mm: [1372.5, 301.0]\nbase_deg: 0.0\nrms_mm: 0.2\n")
     assert load_cell(tmp_path / "cell.yaml").robot.base_mm == (1372.5, 301.0)
+    (tmp_path / "calibration" / "robot.yaml").write_text("base_mm: [1372.5, 301.0]\n"
+                                                         "base_deg: 1.5\n")
+    if hasattr(load_cell(ROOT / "cells" / "sim.yaml").robot, "base_deg"):
+        assert load_cell(tmp_path / "cell.yaml").robot.base_deg == 1.5
+    else:                                # before the frame contract's RobotSpec.base_deg
+        with pytest.raises(ConfigError, match="no robot.base_deg"):
+            load_cell(tmp_path / "cell.yaml")
     (tmp_path / "calibration" / "robot.yaml").write_text("base_mm: [1372.5]\nbase_deg: 0\n")
     with pytest.raises(ConfigError, match=r"robot.yaml:1: base_mm: expected \[x, y\]"):
         load_cell(tmp_path / "cell.yaml")

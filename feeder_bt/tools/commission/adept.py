@@ -44,19 +44,22 @@ JOG_S = 1.0
 DRIFT_TOLERANCE_MM = 0.5
 CORNER_SPEED_PCT = 10.0        # SPEED 10: the first moves in a new frame are slow
 REACH_TOLERANCE_MM = 1.0
+REACH_MARGIN_MM = 10.0         # the corners stay this far inside the arm's reach
 GRIP_SENSE = 1003              # vplus/a_server.v2: grip.sense (the vacuum switch)
 
 
-def pick_window(cell: CellSpec) -> list[tuple[float, float]]:
+def pick_window(cell: CellSpec, margin_mm: float = REACH_MARGIN_MM
+                ) -> list[tuple[float, float]]:
     """Corners (cell frame, mm) of the pick window: the stretch of belt, full width, that is
-    inside the robot's reach, up to the end of the horizontal belt."""
+    inside the robot's reach less ``margin_mm``, up to the end of the horizontal belt."""
     r = cell.robot
     bx, by = r.base_mm
     conv = cell.conveyors.get("horizontal")
     width = conv.width_mm if conv else 610.0
     length = conv.length_mm if conv else 1219.0
     dy = max(abs(0.0 - by), abs(width - by))
-    x0 = bx - math.sqrt(max(0.0, r.reach_mm ** 2 - dy ** 2))
+    reach = r.reach_mm - margin_mm
+    x0 = bx - math.sqrt(max(0.0, reach ** 2 - dy ** 2))
     x1 = min(length, bx)
     return [(x0, 0.0), (x0, width), (x1, 0.0), (x1, width)]
 
