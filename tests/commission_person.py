@@ -150,8 +150,10 @@ def _xy(prompt: str) -> tuple[str, str]:
 class Person:
     """Plays the person: ``skip`` holds prompt keys the person answers without acting."""
 
-    def __init__(self, emulator: Emulator, skip: tuple[str, ...] = ()) -> None:
+    def __init__(self, emulator: Emulator, skip: tuple[str, ...] = (),
+                 miss: dict[str, tuple[float, float]] | None = None) -> None:
         self.emu, self.skip = emulator, skip
+        self.miss = miss or {}                          # touch key -> (dx, dy) off the mark
         self.actions: list[tuple[str, str]] = []        # (action, the emulator's answer)
 
     def _do(self, action: str) -> str:
@@ -186,7 +188,9 @@ class Person:
         elif key == "grip.away":
             self._do("part off")
         elif parts[0] == "touch":
-            self._do("touch {} {}".format(*_xy(prompt)))
+            x, y = (float(v) for v in _xy(prompt))
+            dx, dy = self.miss.get(key, (0.0, 0.0))
+            self._do(f"touch {x + dx} {y + dy}")
         elif key == "target.lay":
             x, y = _xy(prompt)
             deg = re.search(rf"{NUM} deg", prompt)

@@ -151,6 +151,30 @@ def test_commission_adept_fits_the_true_robot_base(tmp_path):
     assert {f"adept.corner{i}" for i in range(1, 5)} <= set(steps)
 
 
+def test_commission_adept_refuses_a_frame_that_does_not_fit(tmp_path):
+    """One mark touched 6 mm off: the residual is over the limit, nothing is written and
+    the arm does not move."""
+    from feeder_bt.emulators.adept import AdeptEmulator
+    if not hasattr(AdeptEmulator, "pendant_to_cell"):
+        pytest.skip("needs the vplus branch's AdeptEmulator.pendant_to_cell and HERE")
+    port = free_block()
+    cell = write_cell(tmp_path, port)
+    emu = Emulator(cell, port, "--robot-error", "5", "-3", "2")
+    frame = tmp_path / "robot.yaml"
+    try:
+        report = tmp_path / "adept.json"
+        code, out = commission("adept", cell, report, Person(emu, miss={"touch.2": (6.0, 0.0)}),
+                               "--write", str(frame))
+    finally:
+        emu.stop()
+    steps = _steps(report)
+    assert code == 1, out
+    fit = steps["adept.frame"]
+    assert not fit["ok"] and fit["rms_mm"] > 1.0 and fit["written"] is None
+    assert not frame.exists()
+    assert not any(k.startswith("adept.corner") for k in steps)
+
+
 def test_the_emulator_serves_on_after_its_standard_input_ends(cell_and_emulator):
     cell, emu = cell_and_emulator
     assert emu.act("help").startswith("ok actions:")
