@@ -127,10 +127,10 @@ def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
             while not stop.wait(GRIP_SYNC_S):
                 operator.sync_grip()
         threading.Thread(target=grip_loop, name="grip-sensor", daemon=True).start()
+        print("actions on standard input ('help'); Ctrl-C to stop", flush=True)
         threading.Thread(target=read_actions, args=(operator, stdin or sys.stdin, sys.stdout,
                                                     out_lock),
                          name="operator", daemon=True).start()
-        print("actions on standard input ('help'); Ctrl-C to stop", flush=True)
         while not stop.wait(0.5):
             pass
     except KeyboardInterrupt:
