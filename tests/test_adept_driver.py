@@ -54,7 +54,7 @@ def rig():
                                notify_port=ports["notify"], timeout_s=1.0,
                                motion_timeout_s=10.0)
     inputs = [s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"]
-    ctrl = AdeptController(spec, RealClock(), inputs=inputs)
+    ctrl = AdeptController(spec, RealClock(), inputs=inputs, robot=cell.robot)
     plant.jog("A", BELT_COUNTS_S)
     plant.jog("B", BELT_COUNTS_S)
     try:
@@ -308,9 +308,9 @@ def test_serve_picks_consecutive_ports_and_wrong_wiring_is_detected():
                                       position_port=p["motion"], io_port=p["io"],
                                       notify_port=p["notify"], timeout_s=1.0)
         with pytest.raises(CommsLost, match="answers as the 'position' server"):
-            AdeptController(swapped, RealClock())
+            AdeptController(swapped, RealClock(), robot=cell.robot)
         right = dataclasses.replace(swapped, motion_port=p["motion"], position_port=p["position"])
-        ctrl = AdeptController(right, RealClock())
+        ctrl = AdeptController(right, RealClock(), robot=cell.robot)
         ctrl.close()                                   # a closed driver fails jobs, never raises
         job = ctrl.robot.move_safe()
         assert job.state is JobState.FAILED and isinstance(job.error, CommsLost)

@@ -32,7 +32,8 @@ def _rig(belt_direction: int = 1, spec_direction: str = "forward"):
                                position_port=p["position"], io_port=p["io"],
                                notify_port=p["notify"], timeout_s=1.0, motion_timeout_s=10.0,
                                belt_direction=spec_direction)
-    ctrl = AdeptController(spec, RealClock())
+    ctrl = AdeptController(spec, RealClock(), robot=cell.robot,
+                           counts_per_mm=cell.encoder.counts_per_mm)
     plant.jog("A", BELT_COUNTS_S)
     plant.jog("B", BELT_COUNTS_S)
     return plant, emu, ctrl, faults, scenario

@@ -12,7 +12,6 @@ import pytest
 from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.drivers import OperatorTouch, real_waiter
 from feeder_bt.cli import main
-from feeder_bt.hal.interfaces import Pose
 from feeder_bt.scenario import load_cell
 from feeder_bt.tools import calibrate
 
@@ -62,8 +61,8 @@ def test_operator_at_the_terminal_on_the_emulated_cell(cell, monkeypatch):
             if not marker:
                 marker.update(x=800.0, y=305.0, p0=belt)
             x = marker["x"] + belt - marker["p0"]
-            job = plant.hal.robot.move_to(Pose(x, marker["y"], 0.0, 0.0))
-        assert plant.wait(job, timeout=10.0)
+        # the person jogs the tool onto the marker (the V+ emulator's pendant)
+        seen["hal"].extras["adept_emulator"].pendant_to_cell(x, marker["y"])
         return ""
 
     fit = calibrate.driver_belt(cell, "emulated", seed=2, ask=pendant, operator=True)

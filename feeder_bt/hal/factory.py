@@ -90,6 +90,16 @@ class DriverHal(Hal):
                 pass
 
 
+def adept_estop(cell: CellSpec) -> int | None:
+    """The e-stop input the V+ motion server watches (ESTOP), from the cell's ``io.estop``
+    on the Adept controller: negative when the input is active low; None if not wired."""
+    from .adept.protocol import estop_signal
+    sig = cell.io.get("estop")
+    if sig is None or sig.controller != "adept" or sig.dir != "in":
+        return None
+    return estop_signal(sig.bit, sig.active_low)
+
+
 def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
     from .adept import AdeptController
@@ -101,7 +111,9 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         galil, conveyors, galil_io = make_galil(cell, clock, PROGRAMS_DIR)
         closers.append(galil.close)
         adept = AdeptController(cell.adept, clock, inputs=[
-            s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"])
+            s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"],
+            robot=cell.robot, estop=adept_estop(cell),
+            counts_per_mm=cell.encoder.counts_per_mm)
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")

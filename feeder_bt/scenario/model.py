@@ -232,6 +232,9 @@ class CameraSpec:
 class RobotSpec:
     model: str = "cobra600"
     base_mm: tuple[float, float] = (1370.0, 305.0)
+    # the robot base's turn in the cell frame: a point p in the robot's own world frame is
+    # Rot(base_deg) p + base_mm in the cell frame (vplus/PROTOCOL.md "Frames"; sent as FRAME)
+    base_deg: float = 0.0
     reach_mm: float = 600.0
     inner_reach_mm: float = 160.0
     v_max_mm_s: float = 4000.0

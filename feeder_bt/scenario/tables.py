@@ -163,6 +163,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (RenderSpec, "highlight"): Range(0, 255),
     (RenderSpec, "noise_sigma"): NON_NEGATIVE,
     (RenderSpec, "blur_px"): NON_NEGATIVE,
+    (RobotSpec, "base_deg"): Range(-360, 360),
     (RobotSpec, "reach_mm"): POSITIVE,
     (RobotSpec, "inner_reach_mm"): NON_NEGATIVE,
     (RobotSpec, "v_max_mm_s"): POSITIVE,

@@ -61,6 +61,9 @@ class LineSocket:
         self._buf = b""
         self._lock = threading.RLock()
         self._closed = threading.Event()
+        # runs on every new connection before anything else is sent (the motion socket's
+        # set-up: FRAME, DEFSAFE, ESTOP); an error drops the connection again
+        self.on_connect: Callable[[], object] | None = None
 
     @property
     def where(self) -> str:
@@ -102,6 +105,14 @@ class LineSocket:
             self._sock, self._buf = sock, b""
             self.backoff.succeeded()
             self.connects += 1
+            if self.on_connect is not None:
+                try:
+                    self.on_connect()
+                except BaseException:
+                    self.drop()
+                    raise
+                if self._sock is None:           # the set-up lost the link: try again
+                    continue
         return self._sock
 
     @staticmethod

@@ -8,7 +8,7 @@ from collections.abc import Iterable
 
 from ...clock import Clock
 from ...errors import CommsLost, HalError
-from ...scenario.model import AdeptSpec
+from ...scenario.model import AdeptSpec, RobotSpec
 from . import protocol
 from .client import LineSocket, ServerClient
 from .robot import AdeptIO, AdeptRobot, AdeptRobotPosition
@@ -21,10 +21,21 @@ class AdeptController:
     ``inputs``: the cell description's Adept input bits, read once at start-up (inputs the
     notify socket reports are learned anyway). Raises ``CommsLost`` if a server does not
     answer within ``spec.timeout_s``.
+
+    ``robot``: the cell description's robot, whose base pose (``base_mm``, ``base_deg``) and
+    safe pose go to the motion server as FRAME and DEFSAFE on every (re)connection of the
+    motion socket, before any motion (vplus/PROTOCOL.md, "Frames"); without them V+
+    answers every motion -9008. ``estop``: the e-stop's V+ input, negative when active low
+    (``protocol.estop_signal``), sent as ESTOP; None leaves the V+ default (input 1001).
+    ``counts_per_mm``: the belt encoder's counts per mm, sent (signed by
+    ``spec.belt_direction``) as BELTSCALE; None leaves the V+ program's ``belt.scale``.
     """
 
-    def __init__(self, spec: AdeptSpec, clock: Clock, inputs: Iterable[int] = ()) -> None:
+    def __init__(self, spec: AdeptSpec, clock: Clock, inputs: Iterable[int] = (),
+                 robot: RobotSpec | None = None, estop: int | None = None,
+                 counts_per_mm: float | None = None) -> None:
         self.spec, self.clock = spec, clock
+        self.robot_spec, self.estop, self.counts_per_mm = robot, estop, counts_per_mm
         host, t = spec.host, spec.timeout_s
         self.clients = {
             "motion": ServerClient("motion", host, spec.motion_port, t),
@@ -39,6 +50,7 @@ class AdeptController:
         self.position = AdeptRobotPosition(self.clients["position"], 1.0 / spec.poll_hz,
                                            belt_sign=sign)
         self.io = AdeptIO(self.clients["io"], self.notify_link, clock, inputs)
+        self.clients["motion"].link.on_connect = self._set_up_motion
         try:
             for name, client in self.clients.items():
                 self._hello(name, client)
@@ -51,14 +63,31 @@ class AdeptController:
         self.position.start()
         self.io.start()
 
-    def _hello(self, name: str, client: ServerClient) -> None:
-        version, server = protocol.decode_hello(client.call("HELLO"))
+    def _hello(self, name: str, client: ServerClient, timeout: float | None = None) -> None:
+        version, server = protocol.decode_hello(client.call("HELLO", timeout=timeout))
         if server != name:
             raise CommsLost(f"{client.link.where}: answers as the {server!r} server: "
                             "check the ports in the cell description")
         if version != protocol.PROTOCOL_VERSION:
             raise HalError(f"{client.link.where}: protocol version {version}, this driver "
                            f"speaks {protocol.PROTOCOL_VERSION}: load the matching vplus/ programs")
+
+    def _set_up_motion(self) -> None:
+        """Every new motion connection: check the server, then FRAME, DEFSAFE and ESTOP,
+        before any motion (the V+ program may have restarted and forgotten them)."""
+        client = self.clients["motion"]
+        t = self.spec.motion_timeout_s      # a motion whose link was cut runs on: the
+        self._hello("motion", client, t)    # server answers once it has ended
+        if self.robot_spec is not None:
+            r = self.robot_spec
+            client.call("FRAME", *protocol.frame_args(r.base_mm, r.base_deg), timeout=t)
+            client.call("DEFSAFE", float(r.safe_mm[0]), float(r.safe_mm[1]), 0.0, 0.0,
+                        timeout=t)
+        if self.counts_per_mm:
+            sign = -1.0 if self.spec.belt_direction == "reverse" else 1.0
+            client.call("BELTSCALE", sign / self.counts_per_mm, timeout=t)
+        if self.estop is not None:
+            client.call("ESTOP", int(self.estop), timeout=t)
 
     def close(self) -> None:
         """Stop the poller and listener, close every socket and worker."""

@@ -67,6 +67,10 @@ COMMANDS: dict[str, tuple[Command, ...]] = {
         Command("PLACE", ("x", "y", "z", "rz"), (), motion=True),
         Command("MOVE", ("x", "y", "z", "rz"), (), motion=True),
         Command("SAFE", (), (), motion=True),
+        Command("FRAME", ("x", "y", "rz"), ()),
+        Command("DEFSAFE", ("x", "y", "z", "rz"), ()),
+        Command("BELTSCALE", ("mm",), ()),
+        Command("ESTOP", ("signal",), ()),
         Command("SPEED", ("pct",), ()),
         Command("RECOVER", ("power",), (), motion=True),
         Command("HOLDING", (), ("held",)),
@@ -77,6 +81,7 @@ COMMANDS: dict[str, tuple[Command, ...]] = {
         Command("WHERE", (), ("x", "y", "z", "rz")),
         Command("BELT", (), ("count",)),
         Command("POLL", (), ("x", "y", "z", "rz", "count")),
+        Command("HERE", (), ("x", "y", "z", "rz")),
         Command("STOP", (), ()),
     ),
     "io": (
@@ -118,6 +123,7 @@ CODE_OUTSIDE_WINDOW = -9004
 CODE_REJECTED = -9005
 CODE_STOPPED = -9006
 CODE_ESTOP = -9007
+CODE_NO_FRAME = -9008
 
 VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
     CODE_POWER_OFF: ("*Robot power off*", ServoTimeout),
@@ -133,6 +139,7 @@ VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
     CODE_REJECTED: ("*Request rejected*", VplusError),
     CODE_STOPPED: ("*Stopped by request*", VplusError),
     CODE_ESTOP: ("*E-stop input active*", ServoTimeout),
+    CODE_NO_FRAME: ("*No cell frame*", VplusError),
 }
 
 # A controller release that numbers its messages differently still says the same words:
@@ -286,6 +293,18 @@ def decode_where(values: list[str]) -> Pose:
     x, y, z, rz = (_float(v, n, "reply to WHERE") for v, n in zip(values, "x y z rz".split(),
                                                                      strict=True))
     return Pose(x, y, z, rz)
+
+
+def frame_args(base_mm: tuple[float, float], base_deg: float) -> tuple[float, float, float]:
+    """FRAME's arguments: the robot base's pose in the cell frame (mm, mm, deg)."""
+    return float(base_mm[0]), float(base_mm[1]), float(base_deg)
+
+
+def estop_signal(bit: int, active_low: bool) -> int:
+    """ESTOP's argument: the V+ input number of the e-stop, negative when the input is
+    off while the e-stop is active (V+ ``SIG(-s)`` is the complement of ``SIG(s)``)."""
+    signal = signal_of(bit, True)
+    return -signal if active_low else signal
 
 
 def wrap_robot(count: int) -> int:

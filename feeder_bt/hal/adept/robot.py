@@ -250,6 +250,7 @@ class AdeptIO:
                  inputs: Iterable[int] = ()) -> None:
         self.io, self.notify, self.clock = io, notify, clock
         self.inputs = set(inputs)
+        self.declared = set(inputs)              # the cell description's inputs
         self._in: dict[int, bool] = {}
         self._out: dict[int, bool] = {}
         self._changes: list[tuple[int, bool, float]] = []
@@ -275,6 +276,10 @@ class AdeptIO:
 
     def get(self, bit: int) -> bool:
         with self._lock:
+            # an output we set wins over an input of the same bit number that io_notify
+            # reports (it watches inputs 1001..1012 whatever the cell wires)
+            if bit in self._out and bit not in self.declared:
+                return self._out[bit]
             if bit in self._in:
                 return self._in[bit]
             return self._out.get(bit, False)
