@@ -90,6 +90,56 @@ class EncoderSync:
         return self.robot_diff(a_robot, b_robot) / counts_per_mm
 
 
+class FreshAnchor:
+    """The pair of counts a sync is anchored on: fresh, aged, and at rest (issue 25).
+
+    Both controllers' counts reach the PC as cached reads of different ages: the Galil's
+    from a ``TP`` poll, the robot's from its position poller. A pair taken from the caches
+    as they stand may hold a count read before the belt stopped, or one read long ago
+    over a link that has since dropped, and the sync is then off by however far the belt
+    moved in between, for the whole run. ``offer`` is fed the caches' counts with their
+    ages (seconds since each was read, ``now`` on the same clock) each poll; a pair is
+    returned only when each counter has been read twice, after the anchor began and
+    within ``max_age_s`` of ``now``, with the same count both times (the belt is at rest),
+    the conveyor's count carried to the moment of the robot's read by the speed its two
+    reads show (zero at rest: the age compensation DriftWatch applies while running).
+    Commissioning (``feeder commission adept``) and every run's set-up
+    (``behaviours.setup.SyncEncoders``) anchor through this one helper.
+    """
+
+    def __init__(self, conveyor_bits: int = 32, robot_bits: int = 24, max_age_s: float = 0.5,
+                 rest_counts: int = 0) -> None:
+        self.conveyor_bits, self.robot_bits = conveyor_bits, robot_bits
+        self.max_age_s, self.rest_counts = max_age_s, rest_counts
+        self._conv: list[tuple[float, int]] = []       # (time of read, count), distinct reads
+        self._robot: list[tuple[float, int]] = []
+        self.why = "no fresh reads yet"                 # why no pair yet (for a time-out)
+
+    def offer(self, now: float, conveyor: int, conveyor_age: float | None, robot: int,
+              robot_age: float | None) -> tuple[int, int] | None:
+        """One look at both caches; the anchoring ``(conveyor, robot)`` pair, or None."""
+        for reads, count, age, what in ((self._conv, conveyor, conveyor_age, "conveyor"),
+                                        (self._robot, robot, robot_age, "robot")):
+            if age is None or age > self.max_age_s:
+                self.why = f"the {what} count is not fresh (age {age})"
+                return None
+            t = now - age
+            if not reads or t > reads[-1][0] + 1e-9:
+                reads.append((t, count))
+                del reads[:-2]
+        if len(self._conv) < 2 or len(self._robot) < 2:
+            self.why = "waiting for a second fresh read of each counter"
+            return None
+        (tc0, c0), (tc1, c1) = self._conv
+        (_, r0), (tr1, r1) = self._robot
+        if (abs(diff(c1, c0, self.conveyor_bits)) > self.rest_counts
+                or abs(diff(r1, r0, self.robot_bits)) > self.rest_counts):
+            self.why = "the belt is moving (the counts change between reads)"
+            return None
+        speed = diff(c1, c0, self.conveyor_bits) / (tc1 - tc0) if tc1 > tc0 else 0.0
+        return wrap(c1 + round(speed * (tr1 - tc1)), self.conveyor_bits), r1
+
+
 class DriftWatch:
     """Re-checks, during a run, that the two controllers still count the same belt.
 

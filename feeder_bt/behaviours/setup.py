@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
+from ..encoder import FreshAnchor
 from ..jobs import Job
 from .common import Ctx, JobLeaf, Leaf
 
@@ -31,9 +32,34 @@ class ClearWindow(JobLeaf):
 
 
 class SyncEncoders(Leaf):
-    """With the belt at rest, tie the conveyor controller's count to the robot's (5.3.1)."""
+    """With the belt at rest, tie the conveyor controller's count to the robot's (5.3.1),
+    on a fresh, aged pair of reads (``encoder.FreshAnchor``, as commissioning does): the
+    leaf looks at both caches each tick, never waiting on a link, and fails after
+    ``timeout_s`` with the reason no pair came."""
+
+    def __init__(self, name: str, ctx: Ctx, timeout_s: float = 5.0) -> None:
+        super().__init__(name, ctx)
+        self.timeout_s = timeout_s
+        self.anchor: FreshAnchor | None = None
+        self.started = 0.0
+
+    def initialise(self) -> None:
+        enc = self.ctx.cell.encoder
+        self.anchor = FreshAnchor(enc.conveyor_bits, enc.robot_bits)
+        self.started = self.ctx.now()
 
     def update(self) -> Status:
+        assert self.anchor is not None
         conv = self.ctx.hal.conveyors["horizontal"]
-        self.ctx.encoder.reset(conv.position(), self.ctx.hal.robot_position.belt_encoder())
-        return Status.SUCCESS
+        pos = self.ctx.hal.robot_position
+        count = conv.position()                  # asks a real driver for a fresh TP read
+        pair = self.anchor.offer(self.ctx.now(), count, conv.position_age(),
+                                 pos.belt_encoder(), pos.age())
+        if pair is not None:
+            self.ctx.encoder.reset(*pair)
+            return Status.SUCCESS
+        if self.ctx.now() - self.started > self.timeout_s:
+            self.feedback_message = f"no encoder sync in {self.timeout_s:g} s: {self.anchor.why}"
+            return Status.FAILURE
+        self.ctx.clock.wake_at(self.ctx.now() + 1e-3)    # look again next tick: no skipping
+        return Status.RUNNING

@@ -54,15 +54,16 @@ def calibration_path(cell: CellSpec) -> Path | None:
     return p if p.is_absolute() else Path(os.path.normpath(Path(cell.path).parent / p))
 
 
-def read_camera_calibration(path: str | Path) -> CameraCalibration:
-    """Read and check a camera calibration file; every problem is one ``FILE:LINE: key:``
-    line."""
+def _read_mapping(path: str | Path, required: tuple[str, ...], command: str
+                  ) -> dict[str, Any]:
+    """A calibration file's top-level keys -> YAML nodes; every problem is one
+    ``FILE:LINE: key:`` line (``command`` says how to write the file)."""
     file = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ConfigError("calibration file not found (write it with `feeder calibrate "
-                          "camera CELL --write FILE`)", file=file) from None
+        raise ConfigError(f"calibration file not found (write it with `{command}`)",
+                          file=file) from None
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(f"cannot read: {getattr(e, 'strerror', None) or e}",
                           file=file) from None
@@ -73,7 +74,7 @@ def read_camera_calibration(path: str | Path) -> CameraCalibration:
         raise ConfigError(f"YAML syntax error: {getattr(e, 'problem', None) or e}", file=file,
                           line=mark.line + 1 if mark else None) from None
     if not isinstance(root, MappingNode):
-        raise ConfigError("expected a mapping with origin_mm, mm_per_px, rotation_deg",
+        raise ConfigError(f"expected a mapping with {', '.join(required)}",
                           file=file, line=root.start_mark.line + 1 if root else 1)
     nodes: dict[str, Any] = {}
     for k, v in root.value:
@@ -82,37 +83,53 @@ def read_camera_calibration(path: str | Path) -> CameraCalibration:
             raise ConfigError(f"duplicate key {key!r}", file=file, line=k.start_mark.line + 1,
                               key=key)
         nodes[key] = v
-    for key in REQUIRED:
+    for key in required:
         if key not in nodes:
             raise ConfigError(f"missing required key {key!r}", file=file,
                               line=root.start_mark.line + 1)
+    return nodes
 
-    def number(node: Any, key: str) -> float:
-        line = node.start_mark.line + 1
-        v = _CONSTRUCT.construct_object(node) if isinstance(node, ScalarNode) else None
-        if isinstance(v, str) and node.style is None:      # PyYAML reads 1e3 as a string
-            try:
-                v = float(v)
-            except ValueError:
-                pass
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise ConfigError(f"expected a finite number, got {_show(node)}", file=file,
-                              line=line, key=key)
-        return float(v)
 
-    o = nodes["origin_mm"]
-    if not isinstance(o, SequenceNode) or len(o.value) != 2:
-        raise ConfigError(f"expected [x, y] in mm, got {_show(o)}", file=file,
-                          line=o.start_mark.line + 1, key="origin_mm")
-    origin = (number(o.value[0], "origin_mm"), number(o.value[1], "origin_mm"))
-    s = number(nodes["mm_per_px"], "mm_per_px")
+def _number(node: Any, key: str, file: str) -> float:
+    line = node.start_mark.line + 1
+    v = _CONSTRUCT.construct_object(node) if isinstance(node, ScalarNode) else None
+    if isinstance(v, str) and node.style is None:      # PyYAML reads 1e3 as a string
+        try:
+            v = float(v)
+        except ValueError:
+            pass
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ConfigError(f"expected a finite number, got {_show(node)}", file=file,
+                          line=line, key=key)
+    return float(v)
+
+
+def _pair(node: Any, key: str, file: str) -> tuple[float, float]:
+    if not isinstance(node, SequenceNode) or len(node.value) != 2:
+        raise ConfigError(f"expected [x, y] in mm, got {_show(node)}", file=file,
+                          line=node.start_mark.line + 1, key=key)
+    return (_number(node.value[0], key, file), _number(node.value[1], key, file))
+
+
+def _angle(node: Any, key: str, file: str) -> float:
+    r = _number(node, key, file)
+    if not -180.0 <= r <= 180.0:
+        raise ConfigError(f"must be in [-180, 180], got {r:g}", file=file,
+                          line=node.start_mark.line + 1, key=key)
+    return r
+
+
+def read_camera_calibration(path: str | Path) -> CameraCalibration:
+    """Read and check a camera calibration file; every problem is one ``FILE:LINE: key:``
+    line."""
+    file = str(path)
+    nodes = _read_mapping(path, REQUIRED, "feeder calibrate camera CELL --write FILE")
+    origin = _pair(nodes["origin_mm"], "origin_mm", file)
+    s = _number(nodes["mm_per_px"], "mm_per_px", file)
     if s <= 0:
         raise ConfigError(f"must be > 0, got {s:g}", file=file,
                           line=nodes["mm_per_px"].start_mark.line + 1, key="mm_per_px")
-    r = number(nodes["rotation_deg"], "rotation_deg")
-    if not -180.0 <= r <= 180.0:
-        raise ConfigError(f"must be in [-180, 180], got {r:g}", file=file,
-                          line=nodes["rotation_deg"].start_mark.line + 1, key="rotation_deg")
+    r = _angle(nodes["rotation_deg"], "rotation_deg", file)
 
     def numbers(key: str, sizes: tuple[int, ...], what: str) -> list[float] | None:
         node = nodes.get(key)
@@ -122,7 +139,7 @@ def read_camera_calibration(path: str | Path) -> CameraCalibration:
             raise ConfigError(f"expected {what}, got {_show(node)}"
                               + (f" of {len(node.value)}" if isinstance(node, SequenceNode)
                                  else ""), file=file, line=node.start_mark.line + 1, key=key)
-        return [number(v, key) for v in node.value]
+        return [_number(v, key, file) for v in node.value]
 
     intr = numbers("intrinsics", (4,), "[fx, fy, cx, cy] in px")
     if intr is not None and not (intr[0] > 0 and intr[1] > 0):
@@ -166,3 +183,48 @@ def apply_calibration_file(cell: CellSpec, line: int | None = None) -> CellSpec:
     cal = read_camera_calibration(path)
     camera = dataclasses.replace(cell.camera, calibration=cal)
     return dataclasses.replace(cell, camera=camera)
+
+
+# ---------------------------------------------------------------------------- robot frame
+# FRAME_SPEC (issue 25): ``robot.frame_file`` names a file holding ``base_mm: [x, y]`` and
+# ``base_deg: a``, the robot base's pose in the cell frame, which `feeder commission adept`
+# fits from touch points; its values replace ``robot.base_mm``/``robot.base_deg``.
+FRAME_REQUIRED = ("base_mm", "base_deg")
+
+
+def robot_frame_path(cell: CellSpec) -> Path | None:
+    """The robot frame file a cell names, resolved against the cell file's folder."""
+    name = getattr(cell.robot, "frame_file", None)
+    if not name:
+        return None
+    p = Path(name)
+    return p if p.is_absolute() else Path(os.path.normpath(Path(cell.path).parent / p))
+
+
+def read_robot_frame(path: str | Path) -> tuple[tuple[float, float], float]:
+    """``(base_mm, base_deg)`` from a robot frame file; problems are ``FILE:LINE: key:``."""
+    file = str(path)
+    nodes = _read_mapping(path, FRAME_REQUIRED, "feeder commission adept CELL")
+    return (_pair(nodes["base_mm"], "base_mm", file),
+            _angle(nodes["base_deg"], "base_deg", file))
+
+
+def apply_robot_frame_file(cell: CellSpec, line: int | None = None) -> CellSpec:
+    """The cell with ``robot.base_mm``/``base_deg`` from its ``robot.frame_file`` (the same
+    object when it names none)."""
+    path = robot_frame_path(cell)
+    if path is None:
+        return cell
+    if not path.is_file():
+        what = "is not a file" if path.exists() else "not found"
+        raise ConfigError(f"robot frame file {cell.robot.frame_file!r} {what} (looked for "
+                          f"{path}; write it with `feeder commission adept CELL`)",
+                          file=str(cell.path), line=line, key="robot.frame_file")
+    base, deg = read_robot_frame(path)
+    changes: dict[str, Any] = {"base_mm": base}
+    if any(f.name == "base_deg" for f in dataclasses.fields(cell.robot)):
+        changes["base_deg"] = deg
+    elif abs(deg) > 1e-9:
+        raise ConfigError(f"base_deg {deg:g}: this version has no robot.base_deg (a turned "
+                          "robot base)", file=str(path), key="base_deg")
+    return dataclasses.replace(cell, robot=dataclasses.replace(cell.robot, **changes))

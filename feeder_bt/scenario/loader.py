@@ -150,8 +150,9 @@ def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _C
         ctx.collect(_check_cell, cell, ctx)
     ctx.raise_problems()
     if calibration_files:
-        from ..calibration.files import apply_calibration_file  # local: avoids a cycle
+        from ..calibration.files import apply_calibration_file, apply_robot_frame_file
         cell = apply_calibration_file(cell, line=ctx.line("camera.calibration_file"))
+        cell = apply_robot_frame_file(cell, line=ctx.line("robot.frame_file"))
     return cell, ctx
 
 

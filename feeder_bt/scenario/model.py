@@ -257,6 +257,10 @@ class RobotSpec:
     track_settle_s: float = 0.030
     safe_mm: tuple[float, float] = (1370.0, -150.0)
     grip_tolerance_mm: float = 4.0
+    # the calibrated base pose (commission adept writes it; calibration.files), and the
+    # cell-frame points the person touches for it (empty: three spread over the pick window)
+    frame_file: str | None = None
+    touch_points_mm: list[tuple[float, float]] = field(default_factory=list)
     # controller time per pick and per place before the arm moves: command round trips,
     # program start-up (0 for our V+ servers, which get one line per pick or place)
     command_overhead_s: float = 0.0

@@ -1,60 +1,138 @@
 """``feeder emulate``: the controller emulators as servers, for driver work without a cell.
 
 ``galil`` serves the Galil DMC protocol, ``adept`` the V+ servers (motion, position, I/O,
-notify on four consecutive ports), ``cell`` both over one simulated cell, so a robot
-picks the parts the conveyors carry. They run until Ctrl-C.
+notify on four consecutive ports), ``cell`` both and the camera (``GRAB`` on the port after
+the V+ ones: ``camera.source: emulated-camera://HOST:PORT``) over one simulated cell, so a
+robot picks the parts the conveyors carry.
+
+Standard input carries the person's actions on the cell, one a line, each answered with
+one line on standard output (``feeder_bt.emulators.operator``; ``help`` lists them): so
+``feeder commission`` in another process can be rehearsed with a person's hands. The end
+of standard input (none in CI) leaves the emulators running; only Ctrl-C or SIGTERM stops
+them.
 """
 
 from __future__ import annotations
 
 import argparse
+import inspect
+import signal
+import sys
 import threading
+from typing import TextIO
 
 from ..scenario import load_scenario
 
 DEFAULT_SCENARIO = "scenarios/lenses.yaml"
+GRIP_SYNC_S = 0.02           # how often the grip sensor follows the vacuum and a held part
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = subparsers.add_parser("emulate", help="serve the Galil and/or V+ controller emulators "
-                                              "on 127.0.0.1, backed by the simulated cell")
+                                              "on 127.0.0.1, backed by the simulated cell; "
+                                              "the person's actions on standard input")
     p.add_argument("controller", choices=["galil", "adept", "cell"],
-                   help="galil, adept, or cell (both over one simulated cell)")
+                   help="galil, adept, or cell (both and the camera over one simulated cell)")
     p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                    help=f"scenario whose parts the simulated cell carries (default {DEFAULT_SCENARIO})")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
     p.add_argument("--port", type=int, default=None, metavar="N",
                    help="galil: its port (default 2323); adept: the first of four ports "
-                        "(default 1401); cell: the Galil port, V+ from N+1")
+                        "(default 1401); cell: the Galil port, V+ from N+1, camera N+5")
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     p.add_argument("--seed", type=int, default=1, help="random seed of the simulated cell")
+    p.add_argument("--robot-error", type=float, nargs=3, default=None,
+                   metavar=("DX", "DY", "DEG"),
+                   help="the simulated robot's true base differs from the cell file's by this "
+                        "(mm, mm, deg): what `feeder commission adept` must measure")
+    p.add_argument("--camera-delay-ms", type=float, default=0.0, metavar="MS",
+                   help="the emulated camera exposes this long after its trigger (default 0): "
+                        "what the timing step of `feeder commission camera` must find")
     p.set_defaults(handler=cmd_emulate)
     return p
 
 
-def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+def true_base(cell, error: list[float] | None) -> tuple[float, float, float] | None:
+    """The robot base's true pose: the cell file's plus ``--robot-error``."""
+    if error is None:
+        return None
+    bx, by = cell.robot.base_mm
+    return (bx + error[0], by + error[1], float(getattr(cell.robot, "base_deg", 0.0)) + error[2])
+
+
+def _adept(plant, host: str, ports: dict[str, int], base):
     from ..emulators.adept import AdeptEmulator
+    kwargs = {}
+    if base is not None:
+        if "true_base" not in inspect.signature(AdeptEmulator).parameters:
+            raise SystemExit("emulate: --robot-error needs a V+ emulator with a true base "
+                             "(AdeptEmulator(true_base=...), FRAME_SPEC)")
+        kwargs["true_base"] = base
+    return AdeptEmulator(plant, host=host, ports=ports, **kwargs).start()
+
+
+def read_actions(operator, stdin: TextIO, out: TextIO, lock: threading.Lock) -> None:
+    """The person's actions, a line each, until the end of input (then nothing: the
+    emulators serve on)."""
+    for line in stdin:
+        answer = operator.handle(line)
+        if answer is not None:
+            with lock:
+                print(answer, file=out, flush=True)
+    with lock:
+        print("end of actions (standard input closed); serving on until Ctrl-C", file=out,
+              flush=True)
+
+
+def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
+                stdin: TextIO | None = None) -> int:
+    from ..emulators.camera_server import CameraScene, CameraServer
     from ..emulators.galil import GalilEmulator
+    from ..emulators.operator import Operator
     from ..emulators.plant import Plant
+    from .commission.camera import cell_target
 
     scenario, cell = load_scenario(args.scenario, args.cell)
     plant = Plant(scenario, cell, args.seed).start()
-    servers = []
+    stop = stop or threading.Event()
+    servers: list = []
+    galil = adept = scene = None
+    out_lock = threading.Lock()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         if args.controller in ("galil", "cell"):
             port = 2323 if args.port is None else args.port
-            servers.append(GalilEmulator(plant, host=args.host, port=port).start())
-            print(f"galil emulator: socket://{args.host}:{servers[-1].port}", flush=True)
+            galil = GalilEmulator(plant, host=args.host, port=port).start()
+            servers.append(galil)
+            print(f"galil emulator: socket://{args.host}:{galil.port}", flush=True)
         if args.controller in ("adept", "cell"):
             first = 1401 if args.port is None else args.port + (args.controller == "cell")
             names = ("motion", "position", "io", "notify")
             ports = {name: first + i for i, name in enumerate(names)}
-            servers.append(AdeptEmulator(plant, host=args.host, ports=ports).start())
+            adept = _adept(plant, args.host, ports,
+                           true_base(cell, getattr(args, "robot_error", None)))
+            servers.append(adept)
             print("adept emulator: " + ", ".join(f"{k} {args.host}:{v}"
-                                                   for k, v in servers[-1].ports.items()),
-                  flush=True)
-        print("Ctrl-C to stop", flush=True)
-        (stop or threading.Event()).wait()
+                                                   for k, v in adept.ports.items()), flush=True)
+        if args.controller == "cell":
+            scene = CameraScene(plant, getattr(args, "camera_delay_ms", 0.0) / 1000.0, args.seed)
+            cam_port = 0 if args.port is None else args.port + 5
+            camera = CameraServer(scene, args.host, cam_port).start()
+            servers.append(camera)
+            print(f"camera emulator: emulated-camera://{args.host}:{camera.port}", flush=True)
+        operator = Operator(plant, galil, adept, scene, cell_target(cell))
+
+        def grip_loop() -> None:
+            while not stop.wait(GRIP_SYNC_S):
+                operator.sync_grip()
+        threading.Thread(target=grip_loop, name="grip-sensor", daemon=True).start()
+        print("actions on standard input ('help'); Ctrl-C to stop", flush=True)
+        threading.Thread(target=read_actions, args=(operator, stdin or sys.stdin, sys.stdout,
+                                                    out_lock),
+                         name="operator", daemon=True).start()
+        while not stop.wait(0.5):
+            pass
     except KeyboardInterrupt:
         pass
     finally:

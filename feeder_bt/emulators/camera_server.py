@@ -1,0 +1,175 @@
+"""The emulated camera as a server, for ``feeder commission camera`` in another process.
+
+One TCP socket on loopback; a client sends ``GRAB`` and gets ``OK W H`` followed by
+``W*H`` bytes of grey image. A grab fires the plant's camera trigger (so the Galil
+emulator latches the belt's count at that instant, the wiring of thesis section 2.3) and
+renders what lies under the camera at the instant of exposure: the calibration target the
+person laid on the stopped belt, or the marker riding the belt, or else the plant's belt.
+``exposure_delay_s`` is the camera's true delay from trigger to exposure, which the
+timing step of commissioning must find (0: exposure at the trigger).
+
+The renderings go through the simulated camera's *truth* calibration; the client sees
+only pixels.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+
+import numpy as np
+
+from ..calibration.camera import Target, TargetPose
+from ..hal.sim.imperfect import true_calibration
+from ..hal.sim.render import Renderer
+from ..hal.sim.target import TargetCamera
+from .camera import PlantCameraSource
+from .plant import Plant
+
+MARKER_MM = 20.0            # diameter of the round calibration marker the person puts down
+POLL_S = 0.1
+
+
+class CameraScene:
+    """What the person laid under the camera: a target (stopped belt) or a marker (riding
+    the horizontal belt). Every method is thread-safe."""
+
+    def __init__(self, plant: Plant, exposure_delay_s: float = 0.0, seed: int = 1) -> None:
+        self.plant = plant
+        self.delay_s = exposure_delay_s
+        self.seed = seed
+        truth = true_calibration(plant.cell)
+        self._targets = TargetCamera(plant.cell.camera, truth, seed=seed)
+        self._renderer = Renderer(plant.cell.camera, truth)
+        self._belt = PlantCameraSource(plant)
+        self._lock = threading.Lock()
+        self.target: tuple[Target, TargetPose] | None = None
+        self.marker: tuple[float, float, float] | None = None   # x, y, belt position then
+        self.frames = 0
+
+    def _belt_mm(self, t: float | None = None) -> float:
+        with self.plant.lock:
+            t = self.plant.world.now() if t is None else t
+            return self.plant.world.horizontal.pos(t)
+
+    def lay_target(self, target: Target | None, pose: TargetPose | None = None) -> None:
+        with self._lock:
+            self.target = None if target is None or pose is None else (target, pose)
+            self._targets.place(target, pose)
+
+    def put_marker(self, x_mm: float, y_mm: float) -> None:
+        with self._lock:
+            self.marker = (x_mm, y_mm, self._belt_mm())
+
+    def take_marker(self) -> None:
+        with self._lock:
+            self.marker = None
+
+    def grab(self) -> np.ndarray:
+        """Trigger and expose: one grey frame."""
+        with self._lock:
+            target, marker = self.target, self.marker
+            self.frames += 1
+            index = self.frames
+        if target is None and marker is None:
+            return self._belt.capture()
+        t = self.plant.trigger()
+        if target is not None:
+            return self._targets.grab().result.image
+        x0, y0, p0 = marker                                    # type: ignore[misc]
+        x = x0 + self._belt_mm(t + self.delay_s) - p0          # where it is at exposure
+        ring = [(x + MARKER_MM / 2 * math.cos(a), y0 + MARKER_MM / 2 * math.sin(a))
+                for a in np.linspace(0.0, 2 * math.pi, 48, endpoint=False)]
+        rng = np.random.default_rng([self.seed, index])
+        return self._renderer.render([np.array(ring)], rng)
+
+
+class CameraServer:
+    """Serves ``CameraScene.grab`` on a socket, one client at a time."""
+
+    def __init__(self, scene: CameraScene, host: str = "127.0.0.1", port: int = 0) -> None:
+        self.scene, self.host, self.port = scene, host, port
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lsock: socket.socket | None = None
+
+    def start(self) -> CameraServer:
+        lsock = socket.socket()
+        lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        lsock.bind((self.host, self.port))
+        lsock.listen(1)
+        lsock.settimeout(POLL_S)
+        self.port = lsock.getsockname()[1]
+        self._lsock = lsock
+        self._thread = threading.Thread(target=self._serve, name="camera-emu", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+        if self._lsock is not None:
+            self._lsock.close()
+
+    def _serve(self) -> None:
+        assert self._lsock is not None
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._lsock.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            with conn:
+                self._session(conn)
+
+    def _session(self, conn: socket.socket) -> None:
+        conn.settimeout(POLL_S)
+        buf = b""
+        while not self._stop.is_set():
+            try:
+                data = conn.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            while b"\n" in buf:
+                line, buf = buf.split(b"\n", 1)
+                verb = line.decode("ascii", "replace").strip().upper()
+                if verb == "GRAB":
+                    img = np.ascontiguousarray(self.scene.grab(), dtype=np.uint8)
+                    h, w = img.shape[:2]
+                    conn.sendall(f"OK {w} {h}\n".encode() + img.tobytes())
+                elif verb:
+                    conn.sendall(f"ERR unknown request {verb[:20]!r}\n".encode())
+
+
+class CameraClient:
+    """A ``FrameSource`` (``capture``/``close``) on ``emulated-camera://HOST:PORT``."""
+
+    SCHEME = "emulated-camera://"
+
+    def __init__(self, spec: str, timeout_s: float = 10.0) -> None:
+        host, _, port = spec[len(self.SCHEME):].partition(":")
+        self.sock = socket.create_connection((host, int(port)), timeout=timeout_s)
+        self._file = self.sock.makefile("rb")
+
+    def capture(self) -> np.ndarray:
+        self.sock.sendall(b"GRAB\n")
+        head = self._file.readline().decode("ascii", "replace").split()
+        if len(head) != 3 or head[0] != "OK":
+            raise OSError(f"emulated camera: bad reply {' '.join(head)[:60]!r}")
+        w, h = int(head[1]), int(head[2])
+        data = self._file.read(w * h)
+        if len(data) != w * h:
+            raise OSError("emulated camera: the image was cut short")
+        return np.frombuffer(data, np.uint8).reshape(h, w).copy()
+
+    def close(self) -> None:
+        self._file.close()
+        self.sock.close()
