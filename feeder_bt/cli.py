@@ -216,6 +216,7 @@ def summary(report: dict) -> str:
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
+            + (f", misoriented {p['misoriented']}" if p.get("misoriented") is not None else "")
             + _ceiling_line(report) + _robots_line(report))
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from ..errors import HalError, UnknownPart
+from ..geometry import wrap_deg
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
 from ..parts import Part
@@ -143,8 +144,10 @@ class Pick(PartJob):
 class Place(PartJob):
     def start(self) -> Job:
         part = self.part
-        place = self.ctx.scenario.parts[part.type].place
-        rz = -part.angle_deg if place.orient else 0.0
+        spec = self.ctx.scenario.parts[part.type]
+        place = spec.place
+        # a symmetric part needs only its angle modulo its period: the shortest turn
+        rz = -wrap_deg(part.angle_deg, spec.period_deg) if place.orient else 0.0
         self.bb.set(PHASE, "place")
         self.timing = self._timing("place", end=(place.x, place.y))
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))

@@ -55,6 +55,16 @@ class PartSpec:
     place: PlacePose
     tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation_tolerance_deg: float = 5.0
+    # issue 27: the outline looks the same turned by 360/symmetry degrees (a chain-link
+    # plate: 2, a square: 4, a hex nut: 6), and, with mirror_symmetric, turned over; angles
+    # are then only defined (placed, judged, searched) modulo 360/symmetry
+    symmetry: int = 1
+    mirror_symmetric: bool = False
+
+    @property
+    def period_deg(self) -> float:
+        """The turn after which the part looks the same: 360 / ``symmetry``."""
+        return 360.0 / self.symmetry
 
 
 # ---------------------------------------------------------------------------- vision

@@ -118,6 +118,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (Scenario, "tick_hz"): Range(5, 1000),
     (StablePose, "probability"): Range(0, 1),
     (PartSpec, "orientation_tolerance_deg"): Range(0, 180, lo_open=True),
+    (PartSpec, "symmetry"): Range(1, 360),
     (Threshold, "value"): GREY,
     (Threshold, "block_px"): Range(lo=3),
     (Morphology, "open_px"): NON_NEGATIVE,

@@ -58,7 +58,7 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
             out.update(state=report["state"], duration_s=report["feed_seconds"],
                        parts_per_minute=report["parts_per_minute"], retrieved=p["retrieved"],
                        located=p["located"], missed=p["missed"], lost=p["lost"],
-                       faults=report["faults"])
+                       misoriented=p.get("misoriented"), faults=report["faults"])
             return out
         by_type = dict(conn.execute(
             "SELECT json_extract(data, '$.type'), count(*) FROM events "
@@ -76,7 +76,7 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
     out.update(state="incomplete", duration_s=round(duration, 3),
                parts_per_minute=round(total * 60.0 / duration, 3) if duration > 0 else 0.0,
                retrieved=by_type, located=int(located or 0), missed=None, lost=None,
-               faults=faults)
+               misoriented=None, faults=faults)
     return out
 
 

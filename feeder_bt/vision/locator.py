@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..geometry import wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .blobs import (
     Blob,
@@ -241,6 +242,8 @@ class Locator(Segmenter):
             det.reason = "no class (face)" if looked else self._no_class(b)
         else:
             det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
+            # a symmetric part's angle is defined modulo its period (``PartSpec.symmetry``)
+            det.angle_deg = wrap_deg(det.angle_deg, self.parts[chosen.part].period_deg)
         return True
 
     def _no_class(self, b: Blob) -> str:

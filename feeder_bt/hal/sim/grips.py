@@ -151,7 +151,11 @@ class RobotGrips:
         spec = self.scenario.parts[part.type]
         if math.hypot(pose.x - spec.place.x, pose.y - spec.place.y) > PLACE_TOL_MM:
             self.misplaced_by_type[part.type] += 1     # another type's station, say
-        if spec.place.orient and abs(part.held_error_deg) > spec.orientation_tolerance_deg:
+        # how far the placed part is from angle 0, modulo the turns it looks the same after
+        # (its ``symmetry``): the place pose turned it by -angle as located, which the held
+        # error is the truth's difference from
+        if spec.place.orient and abs(wrap_deg(part.held_error_deg, spec.period_deg)) > \
+                spec.orientation_tolerance_deg:
             self.counts["misoriented"] += 1
         return pid
 
