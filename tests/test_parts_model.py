@@ -99,3 +99,126 @@ def test_the_locator_reports_a_symmetric_part_modulo_its_period():
         got = res.parts[0].angle_deg
         assert -90.0 < got <= 90.0
         assert abs((got - angle + 90.0) % 180.0 - 90.0) < 2.0
+
+
+# ---------------------------------------------------------------- grips and clearance
+
+FINGERS = """    pick:       # a two-finger gripper closing across the lens
+      grips: GRIPS
+      fingers: [{offset_mm: [0, 29.5], size_mm: [10, 6]}, {offset_mm: [0, -29.5], size_mm: [10, 6]}]
+      clearance_mm: 1
+"""
+
+
+def _finger_lenses(tmp_path: Path, grips: str = "[{angle_deg: 0}]", crowded: bool = False,
+                   check: bool = True) -> Path:
+    """lenses.yaml with a finger gripper; ``crowded``: on a cell whose hopper lets out
+    five times as many parts, a third of them against the one before, on a slower belt."""
+    edits = [("    tool_offset: [0, 0, 0]\n",
+              "    tool_offset: [0, 0, 0]\n" + FINGERS.replace("GRIPS", grips))]
+    if not check:
+        edits.append(("  orientation: none", "  orientation: none\n  check_clearance: false"))
+    if crowded:
+        cell = (ROOT / "cells" / "sim.yaml").read_text().replace(
+            "release_per_mm: 0.030", "release_per_mm: 0.150") + "\nsim:\n  clump_prob: 0.3\n"
+        (tmp_path / "crowded.yaml").write_text(cell)
+        edits += [("horizontal_mm_s: 150", "horizontal_mm_s: 100")]
+    p = _scenario(tmp_path, "lenses.yaml", *edits)
+    if crowded:
+        p.write_text(p.read_text().replace(f"cell: {ROOT / 'cells'}/sim.yaml",
+                                           f"cell: {tmp_path / 'crowded.yaml'}"))
+    return p
+
+
+def _three_lenses(path: Path, gap_mm: float):
+    """A lens with a neighbour ``gap_mm`` away along x and another along y: its results."""
+    import numpy as np
+
+    from feeder_bt.geometry import place_outline, pose_outline
+    from feeder_bt.hal.sim.render import Renderer
+    from feeder_bt.scenario.loader import load_scenario
+    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.vision.locator import Locator
+    sc, cell = load_scenario(path)
+    loc = Locator(sc.vision, sc.parts, Calibration(cell.camera.calibration))
+    ren = Renderer(cell.camera)
+    rng = np.random.default_rng(1)
+    loc.set_golden(ren.golden(rng))
+    out = pose_outline(sc.parts["lens"], "flat")
+    step = 50.8 + gap_mm
+    res = loc.locate(ren.render([place_outline(out, 200.0, 250.0, 0.0),
+                                 place_outline(out, 200.0, 250.0 + step, 0.0),
+                                 place_outline(out, 200.0 + step, 250.0, 0.0)], rng))
+    return {(round(d.x_mm), round(d.y_mm)): d for d in res.parts + res.rejected}
+
+
+def test_a_part_whose_every_grip_is_blocked_is_not_offered(tmp_path):
+    """Fingers closing along y need 26.5-32.5 mm (+1 clear) each side of the centre: a
+    neighbour 5 mm away along y blocks them; 9 mm away it does not."""
+    one = _finger_lenses(tmp_path)
+    dets = _three_lenses(one, 5.0)
+    assert dets[(200, 250)].reason == "gripper blocked" and dets[(200, 250)].part == "lens"
+    # the one beside it along y is blocked by it the same way; the one along x is free
+    assert dets[(200, 306)].reason == "gripper blocked" and dets[(256, 250)].reason == ""
+    assert all(d.reason == "" for d in _three_lenses(one, 9.0).values())
+    # a second grip, turned 90°, is blocked by the neighbour along x: still not offered;
+    # with a neighbour along y only, both are offered turned
+    two = _finger_lenses(tmp_path, "[{angle_deg: 0}, {angle_deg: 90}]")
+    assert _three_lenses(two, 5.0)[(200, 250)].reason == "gripper blocked"
+    import numpy as np
+
+    from feeder_bt.geometry import place_outline, pose_outline
+    from feeder_bt.hal.sim.render import Renderer
+    from feeder_bt.scenario.loader import load_scenario
+    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.vision.locator import Locator
+    sc, cell = load_scenario(two)
+    loc = Locator(sc.vision, sc.parts, Calibration(cell.camera.calibration))
+    ren = Renderer(cell.camera)
+    rng = np.random.default_rng(2)
+    loc.set_golden(ren.golden(rng))
+    out = pose_outline(sc.parts["lens"], "flat")
+    res = loc.locate(ren.render([place_outline(out, 200.0, 250.0, 0.0),
+                                 place_outline(out, 200.0, 305.8, 0.0)], rng))
+    assert [round(d.grip_deg) for d in res.parts] == [90, 90]     # each blocks the other along y
+    # without the check every lens is offered at its first grip
+    off = _finger_lenses(tmp_path, check=False)
+    assert all(d.reason == "" and d.grip_deg == 0 for d in _three_lenses(off, 5.0).values())
+
+
+def test_a_washer_is_gripped_on_its_ring_never_over_its_hole(tmp_path):
+    """The washer's cup grips sit on the ring: none over the hole; gripped at its
+    centroid (no ``pick``), every washer grip is over the hole and misses."""
+    rep = _run(ROOT / "scenarios" / "washers.yaml", 200.0)
+    assert rep["parts"]["retrieved"]["washer"] > 100
+    assert rep["parts"]["grip_misses"]["grip_on_hole"] == 0
+    p = _scenario(tmp_path, "washers.yaml",
+                  ("    pick:\n      grips: [{offset_mm: [8.5, 0]}, {offset_mm: [0, 8.5]}, "
+                   "{offset_mm: [-8.5, 0]}, {offset_mm: [0, -8.5]}]\n      cup_radius_mm: 3\n",
+                   ""))
+    rep = _run(p, 200.0)
+    assert rep["parts"]["retrieved"]["washer"] == 0
+    assert rep["parts"]["grip_misses"]["grip_on_hole"] > 100
+
+
+def test_on_a_crowded_belt_grips_on_a_neighbour_fall_to_zero(tmp_path):
+    """A crowded belt, fingers across the lens: without the clearance check some picks
+    land on a neighbour; with it none do, and blocked parts were not offered."""
+    off = _run(_finger_lenses(tmp_path, crowded=True, check=False), 300.0)
+    on = _run(_finger_lenses(tmp_path, crowded=True), 300.0)
+    assert off["parts"]["grip_misses"]["grip_on_neighbour"] >= 4
+    assert on["parts"]["grip_misses"]["grip_on_neighbour"] == 0
+    assert on["vision"]["gripper_blocked"] > 5 and off["vision"]["gripper_blocked"] == 0
+    assert on["parts"]["retrieved"]["lens"] >= 0.97 * off["parts"]["retrieved"]["lens"]
+
+
+def test_grips_are_mirrored_with_a_face_down_part():
+    from feeder_bt.gripper import footprint, grip_poses
+    from feeder_bt.scenario.model import Finger, Grip, PickSpec
+    pick = PickSpec(grips=[Grip((10.0, 5.0), 30.0)], fingers=[Finger((0.0, 4.0), (2.0, 2.0))])
+    (x, y, a), = grip_poses(pick, 100.0, 50.0, 90.0, mirrored=False)
+    assert (x, y, a) == pytest.approx((95.0, 60.0, 120.0))
+    (x, y, a), = grip_poses(pick, 100.0, 50.0, 90.0, mirrored=True)
+    assert (x, y, a) == pytest.approx((105.0, 60.0, 60.0))
+    box, = footprint(pick, 0.0, 0.0, 90.0)
+    assert box.mean(axis=0) == pytest.approx((-4.0, 0.0))

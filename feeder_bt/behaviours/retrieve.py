@@ -109,14 +109,17 @@ class Pick(PartJob):
         self.feedback_message = f"picking part {part.id}"
         self.bb.set(PHASE, "pick")          # recorded before the command leaves
         ox, oy, _ = spec.tool_offset
+        ox, oy = ox + part.grip_dx_mm, oy + part.grip_dy_mm      # the grip offered
         x, y = belt_x_now(self.ctx, part) + ox, part.y_mm + oy
         tracking = self.ctx.scenario.retrieve.tracking
         self.timing = self._timing(      # in reach now: the arm cannot wait for the part
             "pick", usable=robot_fit(self.ctx).nominal.reachable(x, y), tool_y=y,
             belt_mm_s=self.ctx.hal.conveyors["horizontal"].speed(), tracking=tracking)
         return self.ctx.hal.robot.pick(PickTarget(
-            part_id=part.id, x_mm=part.x_mm, y_mm=part.y_mm, angle_deg=part.angle_deg,
+            part_id=part.id, x_mm=part.x_mm + part.grip_dx_mm,
+            y_mm=part.y_mm + part.grip_dy_mm, angle_deg=part.angle_deg,
             latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
+            grip_deg=part.grip_deg,
             tool_offset=tuple(spec.tool_offset)))
 
     def on_success(self, result: object) -> Status:

@@ -36,6 +36,10 @@ class Detection:
     v_px: float
     features: dict[str, float]
     reason: str = ""           # empty if accepted, else why rejected
+    # the grip offered (``PartSpec.pick``): its point's offset from (x_mm, y_mm), belt mm
+    grip_dx_mm: float = 0.0
+    grip_dy_mm: float = 0.0
+    grip_deg: float = 0.0      # and its turn from angle_deg
 
 
 class Blob:

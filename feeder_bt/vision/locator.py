@@ -59,6 +59,7 @@ from .blobs import (
     principal_angle,
 )
 from .calibration import Calibration
+from .clearance import offer_grips
 from .corners import _corner_signatures, _CornerSignature, _cut_corner, _orient, _part_signature
 from .features import FEATURES, GROUP_OF
 from .overlay import draw
@@ -115,6 +116,9 @@ class Locator(Segmenter):
                 if sig is None:
                     raise ValueError(f"part {cls.part}: no cut corner to orient by")
                 self._signatures[cls.part] = sig
+        self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
+                          if cls.part in parts)
+        self._clearance = recipe.check_clearance
         super().__init__(recipe)       # the segmentation, once the classes are known good
 
     # -------------------------------------------------------------- locate
@@ -137,6 +141,9 @@ class Locator(Segmenter):
             self._faces(waiting, img, diff, level)
             for b in waiting:
                 self._classify(b)
+        if self._picks:
+            offer_grips(blobs, self.parts, self.calibration,   # gripper clearance
+                        check=self._clearance)
         parts: list[Detection] = []
         rejected: list[Detection] = []
         for b in blobs:
