@@ -138,7 +138,7 @@ class VisionRecipe:
     min_area_mm2: float = 100.0
     min_hole_mm2: float = 3.0            # smaller holes in a blob are not counted (specks)
     classes: list[VisionClass] = field(default_factory=list)
-    orientation: str = "none"            # none | cut_corner | principal_axis
+    orientation: str = "none"            # none | cut_corner | principal_axis | outline
     # offer only grips whose footprint is clear of other blobs (``PartSpec.pick``);
     # false: offer the first grip whatever is beside it (to measure what the check saves)
     check_clearance: bool = True

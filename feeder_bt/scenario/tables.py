@@ -46,7 +46,7 @@ THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 FOREGROUNDS: tuple[str, ...] = ("dark", "light")
 LIGHTINGS: tuple[str, ...] = ("backlit", "frontlit")
 TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
-ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
+ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner", "outline")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
 

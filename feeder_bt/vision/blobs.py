@@ -63,7 +63,8 @@ class Blob:
         self.hull: np.ndarray | None = None         # convex hull (``hull``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
-        self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
+        # part -> angle, face (None: no face; a str: why not, ``orientation: outline``)
+        self.oriented: dict[str, tuple[float, bool] | str | None] = {}
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,

@@ -62,6 +62,7 @@ from .calibration import Calibration
 from .clearance import offer_grips
 from .corners import _corner_signatures, _CornerSignature, _cut_corner, _orient, _part_signature
 from .features import FEATURES, GROUP_OF
+from .outline import OutlineModel, orient_outline
 from .overlay import draw
 from .segment import Segmenter, to_grey
 
@@ -116,6 +117,12 @@ class Locator(Segmenter):
                 if sig is None:
                     raise ValueError(f"part {cls.part}: no cut corner to orient by")
                 self._signatures[cls.part] = sig
+        # orientation: outline: every class's part, matched by its outline (vision.outline)
+        self._outlines: dict[str, OutlineModel] = {}
+        if recipe.orientation == "outline":
+            for cls in recipe.classes:
+                if cls.part in parts and cls.part not in self._outlines:
+                    self._outlines[cls.part] = OutlineModel(parts[cls.part])
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
@@ -219,8 +226,27 @@ class Locator(Segmenter):
         det = b.det
         chosen: VisionClass | None = None
         looked = False                       # a face was asked for
+        why = ""                             # the outline match's reason, if it failed
         for cls, checks in self._checks:
             if not self._in_ranges(b, checks):
+                continue
+            outline = self._outlines.get(cls.part)
+            if outline is not None:
+                looked = True
+                oriented = b.oriented.get(cls.part, False)
+                if oriented is False:
+                    oriented = b.oriented[cls.part] = orient_outline(
+                        outline, contour_mm(b, self.calibration),
+                        (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
+                if isinstance(oriented, str):
+                    why = oriented
+                    continue
+                angle, mirrored = oriented
+                det.features["mirrored"] = 1.0 if mirrored else 0.0
+                if cls.mirrored is None or mirrored == cls.mirrored:
+                    chosen = cls
+                    det.angle_deg = angle
+                    break
                 continue
             if cls.mirrored is None:
                 chosen = cls
@@ -246,7 +272,8 @@ class Locator(Segmenter):
                 det.angle_deg = angle
                 break
         if chosen is None:
-            det.reason = "no class (face)" if looked else self._no_class(b)
+            det.reason = (f"no class ({why})" if why else "no class (face)") if looked \
+                else self._no_class(b)
         else:
             det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
             # a symmetric part's angle is defined modulo its period (``PartSpec.symmetry``)
