@@ -142,6 +142,8 @@ class VisionRecipe:
     # offer only grips whose footprint is clear of other blobs (``PartSpec.pick``);
     # false: offer the first grip whatever is beside it (to measure what the check saves)
     check_clearance: bool = True
+    # cut blobs that fit no class into parts (distance transform, watershed: vision.split)
+    split_touching: bool = False
     leaf: str | None = None              # "pkg.mod:Class": a locator class used instead of ours
 
 

@@ -65,6 +65,7 @@ from .features import FEATURES, GROUP_OF
 from .outline import OutlineModel, orient_outline
 from .overlay import draw
 from .segment import Segmenter, to_grey
+from .split import split_blob
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
@@ -148,6 +149,8 @@ class Locator(Segmenter):
             self._faces(waiting, img, diff, level)
             for b in waiting:
                 self._classify(b)
+        if self.recipe.split_touching:
+            blobs = self._split(blobs, img, diff, level)
         if self._picks:
             offer_grips(blobs, self.parts, self.calibration,   # gripper clearance
                         check=self._clearance)
@@ -171,6 +174,32 @@ class Locator(Segmenter):
         contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
         blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
         return [b.det for b in blobs]
+
+    def _split(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
+               level: float | None) -> list[Blob]:
+        """``split_touching``: each blob that fits no class, cut into pieces
+        (``vision.split``); if every piece is a part, the pieces replace it."""
+        out: list[Blob] = []
+        for b in blobs:
+            if not b.det.reason.startswith("no class"):
+                out.append(b)
+                continue
+            pieces = split_blob(b)
+            new = find_blobs([c for c, _ in pieces], img.shape[:2], self.calibration,
+                             self.recipe.min_area_mm2, full=True,
+                             holes=[hs for _, hs in pieces]) if pieces else []
+            waiting = [p for p in new if not p.det.reason and not self._classify(p)]
+            if waiting:
+                self._faces(waiting, img, diff, level)
+                for p in waiting:
+                    self._classify(p)
+            if new and all(not p.det.reason for p in new):
+                for p in new:
+                    p.det.features["split"] = 1.0
+                out += new
+            else:
+                out.append(b)
+        return out
 
     # -------------------------------------------------------------- per blob
 
