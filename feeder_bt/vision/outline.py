@@ -6,11 +6,12 @@ Measured, not guessed: the hypotheses are the part's outline face up and face do
 blob's (two turns, 180° apart: four hypotheses), or, for an outline whose inertia is
 nearly the same in every direction (no principal axis to trust), every 6°. Each is drawn
 at the blob's centroid and scored by its overlap with the blob (intersection over union
-on a raster of ``RES_MM``); the best is refined by halving turns. Moments alone give the
-axis to a fraction of a degree but cannot tell the ends or the faces apart; a contour
-signature needs resampling and is upset by the rounded corners of a blurred, thresholded
-outline; the rendered template is robust to both and cheap at this raster (the whole
-search is a few dozen small ``fillPoly`` calls; see benchmarks/vision_bench.py).
+on a raster of ``RES_MM``); the best is refined by halving turns (only without an axis:
+with one, the moments' axis is the finer angle). So moments give the angle and the
+rendered template the end and the face, which moments alone cannot tell apart. Measured
+on drawn frames of 12 light L-brackets, half face-down, over 360° (300 parts): every face
+right, angle error mean 0.33°, max 1.76°, 2.8 ms per frame for the whole locate. A
+contour signature (turning function) was not measured against it.
 
 A part that is nearly symmetric has two hypotheses that score almost the same (the
 L-bracket with equal legs turned over, say): unless its ``symmetry`` and
