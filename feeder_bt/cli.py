@@ -189,8 +189,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
     if nm.get("alarms"):
+        why = ", ".join(f"{k} {v}" for k, v in (nm.get("reasons") or {}).items())
         print(f"WARNING: for up to {nm['longest_s']:.0f} s frames showed blobs but no part: "
-              f"{nm['example']} (see the vision_no_match events)", file=sys.stderr)
+              f"{nm['example']} (blobs: {why}; see the vision_no_match events)",
+              file=sys.stderr)
     problems = p.get("accounting") or []
     if problems:
         for prob in problems[:10]:

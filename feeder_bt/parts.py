@@ -32,6 +32,10 @@ class Part:
     pickable: bool = True
     frame: int = 0
     features: dict[str, float] = field(default_factory=dict)
+    # where to grip it (``PartSpec.pick``): offset of the grip point from (x_mm, y_mm)
+    grip_dx_mm: float = 0.0
+    grip_dy_mm: float = 0.0
+    grip_deg: float = 0.0      # the gripper's turn from angle_deg at the grip
 
     def x_at(self, count: int, bits: int, counts_per_mm: float) -> float:
         """Its x when the robot's belt encoder reads ``count``: it moved with the belt."""

@@ -95,6 +95,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "misplaced": dict(world.misplaced_by_type) if world else None,
         "dropped": s.counts["dropped"],
     }
+    if world is not None:                 # why the simulated grips missed (issue 27)
+        parts["grip_misses"] = {k: world.counts[k] for k in (
+            "grip_empty", "grip_refused", "grip_slipped", "grip_on_hole", "grip_on_neighbour")}
     if world is not None:                 # every part that entered the cell, and left it
         parts["supplied"] = world.total
         parts["shipped"] = world.counts["shipped"]
@@ -127,7 +130,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "encoder_drift": dict(s.drift),
         "tick": ticker.stats.summary(),
         "vision": {"frames": s.counts["frames"], "p50_ms": _pct(s.vision_ms, 50),
-                   "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell)},
+                   "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell),
+                   "gripper_blocked": s.counts["gripper_blocked"]},
     }
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)

@@ -32,7 +32,7 @@ parts:
     shape: {{disc: {{diameter_mm: 50.8}}}}
     poses:
       flat: {{probability: 0.85, pickable: true}}
-      on_edge: {{probability: 0.15, pickable: false}}
+      on_edge: {{silhouette: {{rect: {{size_mm: [50.8, 14.0]}}}}, probability: 0.15, pickable: false}}
     place: {{x: 1330, y: -120}}
 hopper:
   parts: {{lens: 300}}
@@ -332,7 +332,7 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         "retrieve.sequence[1]", ["unknown part 'nut'"]),
     "frame_spacing_too_large": (
         [("frame_spacing_mm: 300", "frame_spacing_mm: 440")], 23, "locate.frame_spacing_mm",
-        ["433.1", "'lens'"]),   # 484 px at the calibrated 0.99995 mm/px, less 50.8 mm
+        ["431.28", "'lens'"]),   # 484 px at the calibrated 0.99995 mm/px, less 52.7 mm (on edge)
     "frame_spacing_not_positive": (
         [("frame_spacing_mm: 300", "frame_spacing_mm: -1")], 23, "locate.frame_spacing_mm",
         ["> 0"]),
@@ -373,7 +373,7 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         [("{disc: {diameter_mm: 50.8}}", "{polygon: {points_mm: [[0, 0], [1, 0], [1]]}}")],
         6, "parts.lens.shape.polygon.points_mm[2]", ["2 values"]),
     "silhouette_rect": (
-        [("0.15, pickable: false}", "0.15, pickable: false, silhouette: {rect: {size_mm: 3}}}")],
+        [("size_mm: [50.8, 14.0]", "size_mm: 3")],
         9, "parts.lens.poses.on_edge.silhouette.rect.size_mm", ["expected a list"]),
     "tool_offset_length": (
         [("    place:", "    tool_offset: [0, 0]\n    place:")], 10, "parts.lens.tool_offset",

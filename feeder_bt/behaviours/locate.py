@@ -132,7 +132,10 @@ class Enqueue(Leaf):
             part = Part(id=next(self._ids), type=det.part, x_mm=det.x_mm, y_mm=det.y_mm,
                         angle_deg=det.angle_deg, latch=latch, located_at=frame.t,
                         pose=det.pose or "", pickable=det.pickable, frame=frame.index,
-                        features=dict(det.features))
+                        features=dict(det.features),
+                        grip_dx_mm=getattr(det, "grip_dx_mm", 0.0),     # a plug-in's may
+                        grip_dy_mm=getattr(det, "grip_dy_mm", 0.0),     # have none
+                        grip_deg=getattr(det, "grip_deg", 0.0))
             if not self.seen.is_new(part, tol):
                 stats.count("duplicates")
                 continue
@@ -150,6 +153,9 @@ class Enqueue(Leaf):
             else:
                 stats.count("located_unpickable")
         stats.count("rejected_blobs", len(result.rejected))
+        blocked = sum(getattr(d, "reason", "") == "gripper blocked" for d in result.rejected)
+        if blocked:                       # not offered: a neighbour where the gripper goes
+            stats.count("gripper_blocked", blocked)
         recipe_watch(self.ctx.extras).feed(frame.t, result, stats)   # no silent zero
         hand_over(self.ctx.extras, frame, result)      # a reference, for the camera view
         self.bb.set("/locate/found", new)

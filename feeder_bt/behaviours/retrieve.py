@@ -11,6 +11,7 @@ from __future__ import annotations
 from py_trees.common import Status
 
 from ..errors import HalError, UnknownPart
+from ..geometry import wrap_deg
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
 from ..parts import Part
@@ -108,14 +109,17 @@ class Pick(PartJob):
         self.feedback_message = f"picking part {part.id}"
         self.bb.set(PHASE, "pick")          # recorded before the command leaves
         ox, oy, _ = spec.tool_offset
+        ox, oy = ox + part.grip_dx_mm, oy + part.grip_dy_mm      # the grip offered
         x, y = belt_x_now(self.ctx, part) + ox, part.y_mm + oy
         tracking = self.ctx.scenario.retrieve.tracking
         self.timing = self._timing(      # in reach now: the arm cannot wait for the part
             "pick", usable=robot_fit(self.ctx).nominal.reachable(x, y), tool_y=y,
             belt_mm_s=self.ctx.hal.conveyors["horizontal"].speed(), tracking=tracking)
         return self.ctx.hal.robot.pick(PickTarget(
-            part_id=part.id, x_mm=part.x_mm, y_mm=part.y_mm, angle_deg=part.angle_deg,
+            part_id=part.id, x_mm=part.x_mm + part.grip_dx_mm,
+            y_mm=part.y_mm + part.grip_dy_mm, angle_deg=part.angle_deg,
             latch=part.latch, tracking=self.ctx.scenario.retrieve.tracking,
+            grip_deg=part.grip_deg,
             tool_offset=tuple(spec.tool_offset)))
 
     def on_success(self, result: object) -> Status:
@@ -143,8 +147,10 @@ class Pick(PartJob):
 class Place(PartJob):
     def start(self) -> Job:
         part = self.part
-        place = self.ctx.scenario.parts[part.type].place
-        rz = -part.angle_deg if place.orient else 0.0
+        spec = self.ctx.scenario.parts[part.type]
+        place = spec.place
+        # a symmetric part needs only its angle modulo its period: the shortest turn
+        rz = -wrap_deg(part.angle_deg, spec.period_deg) if place.orient else 0.0
         self.bb.set(PHASE, "place")
         self.timing = self._timing("place", end=(place.x, place.y))
         return self.ctx.hal.robot.place(Pose(place.x, place.y, place.z, rz))

@@ -490,6 +490,7 @@ class ServeRobots(NextPart):
             self.seq_i += 1
         spec = self.ctx.scenario.parts[part.type]
         ox, oy, oz = spec.tool_offset
+        ox, oy = ox + part.grip_dx_mm, oy + part.grip_dy_mm      # the grip offered
         v = self.v_mm_s if r.tracking else 0.0
         left = (r.too_far_mm - self.x_now(part)) / v if v > 0 else math.inf
         return part, Offer(part.id, part.type, part.x_mm + ox, part.y_mm + oy, oz,

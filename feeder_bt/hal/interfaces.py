@@ -36,6 +36,9 @@ class PickTarget:
     latch: int           # robot encoder count at the latch
     tracking: bool = True
     tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # the grip's turn from the part's angle (``PartSpec.pick``): the gripper closes at
+    # angle_deg + grip_deg; the part is still placed by angle_deg
+    grip_deg: float = 0.0
 
 
 @dataclass

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
+from feeder_bt.scenario.area_checks import check_class_areas
 from feeder_bt.scenario.model import AdjustParams, CellSpec, Scenario
 from feeder_bt.scenario.special import part_size_mm
 from feeder_bt.scenario.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
@@ -220,6 +221,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
 
     if not sc.parts:
         return                                # listed by _check_scenario
+    check_class_areas(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
                         key=lambda t: t[1])

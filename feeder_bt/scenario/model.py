@@ -48,6 +48,36 @@ class PlacePose:
 
 
 @dataclass
+class Grip:
+    """One place the gripper may take a part, in the part's own frame (origin at the area
+    centroid, angle 0 as drawn; mirrored with the part when it lies face-down)."""
+
+    offset_mm: tuple[float, float] = (0.0, 0.0)
+    angle_deg: float = 0.0               # the gripper's turn from the part's angle 0
+
+
+@dataclass
+class Finger:
+    """A finger of the gripper: a box in the grip's frame (x along the grip's angle)."""
+
+    offset_mm: tuple[float, float]       # the box's centre
+    size_mm: tuple[float, float]         # its extent along x and y
+
+
+@dataclass
+class PickSpec:
+    """Where a part is gripped and what the gripper needs clear around it (issue 27): the
+    locator offers the first grip whose footprint (the cup, or the fingers, grown by
+    ``clearance_mm``) is clear of every other blob; the simulator judges a grip over a
+    hole, or whose footprint lies on a neighbour, as a miss."""
+
+    grips: list[Grip] = field(default_factory=lambda: [Grip()])
+    cup_radius_mm: float = 0.0           # a suction cup's radius (0: none)
+    fingers: list[Finger] = field(default_factory=list)
+    clearance_mm: float = 1.0
+
+
+@dataclass
 class PartSpec:
     name: str
     shape: Shape
@@ -55,6 +85,17 @@ class PartSpec:
     place: PlacePose
     tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation_tolerance_deg: float = 5.0
+    # issue 27: the outline looks the same turned by 360/symmetry degrees (a chain-link
+    # plate: 2, a square: 4, a hex nut: 6), and, with mirror_symmetric, turned over; angles
+    # are then only defined (placed, judged, searched) modulo 360/symmetry
+    symmetry: int = 1
+    mirror_symmetric: bool = False
+    pick: PickSpec | None = None         # None: gripped at the area centroid, nothing checked
+
+    @property
+    def period_deg(self) -> float:
+        """The turn after which the part looks the same: 360 / ``symmetry``."""
+        return 360.0 / self.symmetry
 
 
 # ---------------------------------------------------------------------------- vision
@@ -97,7 +138,12 @@ class VisionRecipe:
     min_area_mm2: float = 100.0
     min_hole_mm2: float = 3.0            # smaller holes in a blob are not counted (specks)
     classes: list[VisionClass] = field(default_factory=list)
-    orientation: str = "none"            # none | cut_corner | principal_axis
+    orientation: str = "none"            # none | cut_corner | principal_axis | outline
+    # offer only grips whose footprint is clear of other blobs (``PartSpec.pick``);
+    # false: offer the first grip whatever is beside it (to measure what the check saves)
+    check_clearance: bool = True
+    # cut blobs that fit no class into parts (distance transform, watershed: vision.split)
+    split_touching: bool = False
     leaf: str | None = None              # "pkg.mod:Class": a locator class used instead of ours
 
 

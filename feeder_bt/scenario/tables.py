@@ -24,6 +24,7 @@ from feeder_bt.scenario.model import (
     LocateParams,
     Morphology,
     PartSpec,
+    PickSpec,
     PresentParams,
     RenderSpec,
     RetrieveParams,
@@ -45,7 +46,7 @@ THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 FOREGROUNDS: tuple[str, ...] = ("dark", "light")
 LIGHTINGS: tuple[str, ...] = ("backlit", "frontlit")
 TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
-ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner")
+ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner", "outline")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
 
@@ -118,6 +119,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (Scenario, "tick_hz"): Range(5, 1000),
     (StablePose, "probability"): Range(0, 1),
     (PartSpec, "orientation_tolerance_deg"): Range(0, 180, lo_open=True),
+    (PartSpec, "symmetry"): Range(1, 360),
+    (PickSpec, "cup_radius_mm"): NON_NEGATIVE,
+    (PickSpec, "clearance_mm"): NON_NEGATIVE,
     (Threshold, "value"): GREY,
     (Threshold, "block_px"): Range(lo=3),
     (Morphology, "open_px"): NON_NEGATIVE,

@@ -36,6 +36,10 @@ class Detection:
     v_px: float
     features: dict[str, float]
     reason: str = ""           # empty if accepted, else why rejected
+    # the grip offered (``PartSpec.pick``): its point's offset from (x_mm, y_mm), belt mm
+    grip_dx_mm: float = 0.0
+    grip_dy_mm: float = 0.0
+    grip_deg: float = 0.0      # and its turn from angle_deg
 
 
 class Blob:
@@ -59,7 +63,8 @@ class Blob:
         self.hull: np.ndarray | None = None         # convex hull (``hull``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
-        self.oriented: dict[str, tuple[float, bool] | None] = {}   # part -> angle, face
+        # part -> angle, face (None: no face; a str: why not, ``orientation: outline``)
+        self.oriented: dict[str, tuple[float, bool] | str | None] = {}
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
@@ -104,14 +109,13 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         b.det.features["area_mm2"] = area = b.area_px * s2
         if not b.det.reason and area < min_area_mm2:
             b.det.reason = "too small"
-    xy = calibration.px_to_mm(np.array(centres)).tolist()
-    for b, (x, y) in zip(blobs, xy, strict=True):
+    xy, scales = calibration.px_to_mm_scale(np.array(centres))
+    for b, (x, y) in zip(blobs, xy.tolist(), strict=True):
         b.det.x_mm, b.det.y_mm = x, y
     if not calibration.linear:
         # a lens or a tilted camera: the scale where each blob lies (a few per mille
         # from the calibration's mm_per_px over the window), for areas and lengths
-        scales = calibration.local_scale(np.array(centres))
-        for b, sc in zip(blobs, scales, strict=True):
+        for b, sc in zip(blobs, scales.tolist(), strict=True):
             b.scale = float(sc)
             b.det.features["area_mm2"] = area = b.area_px * b.scale ** 2
             reason = b.det.reason

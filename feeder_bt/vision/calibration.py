@@ -88,12 +88,17 @@ class Calibration:
     def local_scale(self, uv: np.ndarray) -> np.ndarray:
         """mm per px at each of ``(N, 2)`` pixels: the square root of the mapping's area
         scale there (``mm_per_px`` everywhere for a similarity)."""
+        return self.px_to_mm_scale(uv)[1]
+
+    def px_to_mm_scale(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``px_to_mm`` and ``local_scale`` of the same pixels in one mapping (the
+        locator's centroids: one undistortion a frame, not two)."""
         uv = np.asarray(uv, dtype=float).reshape(-1, 2)
         if self.linear or len(uv) == 0:
-            return np.full(len(uv), self._s)
+            return self.px_to_mm(uv), np.full(len(uv), self._s)
         p = self.px_to_mm(np.vstack([uv, uv + [1.0, 0.0], uv + [0.0, 1.0]])).reshape(3, -1, 2)
         du, dv = p[1] - p[0], p[2] - p[0]
-        return np.sqrt(np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]))
+        return p[0], np.sqrt(np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]))
 
     def undistort(self, uv: np.ndarray) -> np.ndarray:
         """``(N, 2)`` pixels -> where an ideal (distortion-free) lens would have put them."""

@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..geometry import wrap_deg
 from ..scenario.model import PartSpec, VisionClass, VisionRecipe
 from .blobs import (
     Blob,
@@ -58,10 +59,13 @@ from .blobs import (
     principal_angle,
 )
 from .calibration import Calibration
+from .clearance import offer_grips
 from .corners import _corner_signatures, _CornerSignature, _cut_corner, _orient, _part_signature
 from .features import FEATURES, GROUP_OF
+from .outline import OutlineModel, orient_outline
 from .overlay import draw
 from .segment import Segmenter, to_grey
+from .split import split_blob
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
@@ -114,6 +118,15 @@ class Locator(Segmenter):
                 if sig is None:
                     raise ValueError(f"part {cls.part}: no cut corner to orient by")
                 self._signatures[cls.part] = sig
+        # orientation: outline: every class's part, matched by its outline (vision.outline)
+        self._outlines: dict[str, OutlineModel] = {}
+        if recipe.orientation == "outline":
+            for cls in recipe.classes:
+                if cls.part in parts and cls.part not in self._outlines:
+                    self._outlines[cls.part] = OutlineModel(parts[cls.part])
+        self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
+                          if cls.part in parts)
+        self._clearance = recipe.check_clearance
         super().__init__(recipe)       # the segmentation, once the classes are known good
 
     # -------------------------------------------------------------- locate
@@ -136,6 +149,11 @@ class Locator(Segmenter):
             self._faces(waiting, img, diff, level)
             for b in waiting:
                 self._classify(b)
+        if self.recipe.split_touching:
+            blobs = self._split(blobs, img, diff, level)
+        if self._picks:
+            offer_grips(blobs, self.parts, self.calibration,   # gripper clearance
+                        check=self._clearance)
         parts: list[Detection] = []
         rejected: list[Detection] = []
         for b in blobs:
@@ -156,6 +174,32 @@ class Locator(Segmenter):
         contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
         blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
         return [b.det for b in blobs]
+
+    def _split(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
+               level: float | None) -> list[Blob]:
+        """``split_touching``: each blob that fits no class, cut into pieces
+        (``vision.split``); if every piece is a part, the pieces replace it."""
+        out: list[Blob] = []
+        for b in blobs:
+            if not b.det.reason.startswith("no class"):
+                out.append(b)
+                continue
+            pieces = split_blob(b)
+            new = find_blobs([c for c, _ in pieces], img.shape[:2], self.calibration,
+                             self.recipe.min_area_mm2, full=True,
+                             holes=[hs for _, hs in pieces]) if pieces else []
+            waiting = [p for p in new if not p.det.reason and not self._classify(p)]
+            if waiting:
+                self._faces(waiting, img, diff, level)
+                for p in waiting:
+                    self._classify(p)
+            if new and all(not p.det.reason for p in new):
+                for p in new:
+                    p.det.features["split"] = 1.0
+                out += new
+            else:
+                out.append(b)
+        return out
 
     # -------------------------------------------------------------- per blob
 
@@ -194,11 +238,37 @@ class Locator(Segmenter):
         """Measure each blob's cut-corner signature (``Blob.face``) on its outline to a
         fraction of a pixel (``Segmenter._edge_points``), all of a frame's blobs at once."""
         pts, counts = self._edge_points([b.contour for b in blobs], img, diff, level)
-        xy = self.calibration.px_to_mm(pts).astype(np.float32)
         ends = np.cumsum(counts).tolist()
+        xy = self._to_mm_near(pts, counts, [(b.det.u_px, b.det.v_px) for b in blobs])
         sigs = _corner_signatures([xy[e - n:e] for e, n in zip(ends, counts, strict=True)])
         for b, sig in zip(blobs, sigs, strict=True):
             b.face, b.faced = sig, True
+
+    def _to_mm_near(self, pts: np.ndarray, counts: list[int],
+                    centres: list[tuple[float, float]]) -> np.ndarray:
+        """``pts`` (px; ``counts`` of them per blob) to belt mm, float32. Through a lens
+        each blob's points go through the mapping's second-order expansion at the blob's
+        centroid (six points mapped per blob): over a part's few dozen pixels it is the
+        mapping to about 0.01 mm (tests/test_parts_model.py), and it spares undistorting
+        thousands of edge points one by one (the iterative inverse of the lens model was
+        the largest cost of a face, benchmarks/vision_bench.py)."""
+        cal = self.calibration
+        if cal.linear:
+            return cal.px_to_mm(pts).astype(np.float32)
+        c = np.asarray(centres, dtype=float).reshape(-1, 2)
+        h = 16.0                                         # central differences, +-h px
+        p = cal.px_to_mm(np.vstack([c, c + [h, 0.0], c - [h, 0.0], c + [0.0, h],
+                                    c - [0.0, h], c + [h, h]])).reshape(6, -1, 2)
+        ju, jv = (p[1] - p[2]) / (2 * h), (p[3] - p[4]) / (2 * h)   # first derivatives
+        huu = (p[1] - 2 * p[0] + p[2]) / (h * h)                     # and second
+        hvv = (p[3] - 2 * p[0] + p[4]) / (h * h)
+        huv = (p[5] - p[1] - p[3] + p[0]) / (h * h)
+        k = np.repeat(np.arange(len(counts)), counts)
+        d = pts - c[k]
+        du, dv = d[:, :1], d[:, 1:]
+        out = (p[0][k] + du * ju[k] + dv * jv[k]
+               + 0.5 * du * du * huu[k] + 0.5 * dv * dv * hvv[k] + du * dv * huv[k])
+        return out.astype(np.float32)
 
     def _classify(self, b: Blob) -> bool:
         """First class whose ranges (and face, for chiral parts) fit; else a reason. False
@@ -211,8 +281,27 @@ class Locator(Segmenter):
         det = b.det
         chosen: VisionClass | None = None
         looked = False                       # a face was asked for
+        why = ""                             # the outline match's reason, if it failed
         for cls, checks in self._checks:
             if not self._in_ranges(b, checks):
+                continue
+            outline = self._outlines.get(cls.part)
+            if outline is not None:
+                looked = True
+                oriented = b.oriented.get(cls.part, False)
+                if oriented is False:
+                    oriented = b.oriented[cls.part] = orient_outline(
+                        outline, contour_mm(b, self.calibration),
+                        (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
+                if isinstance(oriented, str):
+                    why = oriented
+                    continue
+                angle, mirrored = oriented
+                det.features["mirrored"] = 1.0 if mirrored else 0.0
+                if cls.mirrored is None or mirrored == cls.mirrored:
+                    chosen = cls
+                    det.angle_deg = angle
+                    break
                 continue
             if cls.mirrored is None:
                 chosen = cls
@@ -238,9 +327,12 @@ class Locator(Segmenter):
                 det.angle_deg = angle
                 break
         if chosen is None:
-            det.reason = "no class (face)" if looked else self._no_class(b)
+            det.reason = (f"no class ({why})" if why else "no class (face)") if looked \
+                else self._no_class(b)
         else:
             det.part, det.pose, det.pickable = chosen.part, chosen.pose, chosen.pickable
+            # a symmetric part's angle is defined modulo its period (``PartSpec.symmetry``)
+            det.angle_deg = wrap_deg(det.angle_deg, self.parts[chosen.part].period_deg)
         return True
 
     def _no_class(self, b: Blob) -> str:

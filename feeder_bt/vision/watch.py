@@ -1,14 +1,18 @@
-"""No silent zero: notice when the recipe stops matching what the camera shows.
+"""No silent zero: notice when frames show blobs but the recipe finds no part in them.
 
 A recipe whose class ranges were measured at another threshold, on another camera or for
-another part finds blobs on every frame and classes none of them: the cell runs, locates
-nothing and would stop at the end with nothing said. ``RecipeWatch`` sees every frame's
-result; when frames have shown blobs that fit no class, and no part at all, for
-``after_s`` of the run's time, it emits a ``vision_no_match`` event (the live view and
-the event log show it; again every ``repeat_s`` while it lasts) naming the class nearest
-the blobs and the feature most often out of range, and keeps a summary for the report.
-A frame with a part in it ends the spell (``vision_matches`` if an alarm was raised).
-Empty frames and blobs rejected for the border or their size are not evidence either way.
+another part finds blobs on every frame and classes none of them; a size in the wrong unit
+makes every blob "too small"; a part too big for the window always "touches border". The
+cell runs, locates nothing and would stop at the end with nothing said. ``RecipeWatch``
+sees every frame's result; when frames have shown blobs, for any reason none of them a
+part (no class, too small, touching the border), and no part at all, for ``after_s`` of
+the run's time, it emits a ``vision_no_match`` event (the live view and the event log show
+it; again every ``repeat_s`` while it lasts) naming the commonest reason (for "no class",
+the class nearest the blobs and the feature most often out of range), and keeps a summary
+for the report. A frame with a part in it ends the spell (``vision_matches`` if an alarm
+was raised). Empty frames are not evidence either way. A part that touches the border in
+one frame is seen whole in the next (``locate.frame_spacing_mm`` is checked for it), so
+a normal run never has a spell of border blobs this long.
 """
 
 from __future__ import annotations
@@ -47,14 +51,13 @@ class RecipeWatch:
                 stats.emit(t, "vision_matches", after_s=round(t - self.since, 1))
             self.since = self.last_alarm = None
             return
-        unmatched = [d.reason for d in result.rejected if d.reason.startswith("no class")]
+        unmatched = [d.reason for d in result.rejected if d.reason]
         if not unmatched:
             return
         self.frames_no_match += 1
         spell = Counter()
         for reason in unmatched:
-            m = _REASON.match(reason)
-            key = (m["cls"], m["feature"]) if m else ("-", reason)
+            key = _key(reason)
             spell[key] += 1
             self.nearest[key] += 1
         if self.since is None:
@@ -69,8 +72,7 @@ class RecipeWatch:
             (cls, feature), _ = spell.most_common(1)[0]
             stats.emit(t, "vision_no_match", seconds=round(lasted, 1), nearest=cls,
                        feature=feature, example=self.example,
-                       hint=f"{len(unmatched)} blob(s) in the last frame fit no class; "
-                            f"check the ranges of {cls} ({feature}) with `feeder locate`")
+                       hint=_hint(len(unmatched), cls, feature))
 
     def summary(self) -> dict[str, Any]:
         """For the run report: how long the recipe matched nothing, and why."""
@@ -78,8 +80,33 @@ class RecipeWatch:
                                "longest_s": round(self.longest_s, 1)}
         if self.nearest:
             (cls, feature), n = self.nearest.most_common(1)[0]
-            out.update(nearest=cls, feature=feature, blobs=n, example=self.example)
+            out.update(nearest=cls, feature=feature, blobs=n, example=self.example,
+                       reasons={_reason_name(k): v for k, v in self.nearest.items()})
         return out
+
+
+def _key(reason: str) -> tuple[str, str]:
+    """(class, feature) of a "no class" reason; ("-", reason) of the others."""
+    m = _REASON.match(reason)
+    return (m["cls"], m["feature"]) if m else ("-", reason)
+
+
+def _reason_name(key: tuple[str, str]) -> str:
+    return key[1] if key[0] == "-" else f"no class ({key[0]} {key[1]})"
+
+
+def _hint(n: int, cls: str, feature: str) -> str:
+    """What to look at, by the commonest reason of the spell."""
+    if feature == "too small":
+        return (f"{n} blob(s) in the last frame, all under vision.min_area_mm2: a part's "
+                f"size in the wrong unit, or the camera's mm_per_px? (`feeder locate`)")
+    if feature == "touches border":
+        return (f"{n} blob(s) in the last frame, all cut by the image border: parts too "
+                f"big for the camera window, or frames too far apart?")
+    if cls == "-":
+        return f"{n} blob(s) in the last frame rejected: {feature}"
+    return (f"{n} blob(s) in the last frame fit no class; check the ranges of {cls} "
+            f"({feature}) with `feeder locate`")
 
 
 def recipe_watch(extras: dict[str, Any]) -> RecipeWatch:

@@ -16,9 +16,13 @@ import heapq
 import math
 from collections import Counter
 
+import cv2
+import numpy as np
+
 from ...encoder import diff
 from ...errors import EnvelopeError, HalError, MissedGrab
-from ...geometry import wrap_deg
+from ...geometry import near, outer, place_outline, rings, wrap_deg
+from ...gripper import footprint, grip_poses
 from ...jobs import Job
 from ...robot_model import RobotModel
 from ...scenario.model import CellSpec, Scenario
@@ -114,8 +118,7 @@ class RobotGrips:
             raise HalError(f"the gripper already holds part {self.gripper}")
         best, best_d = None, math.inf
         for part in self.on_horizontal.values():
-            x, y = self.part_xy(part, t)
-            d = math.hypot(x - cx, y - cy)
+            d = self._grip_distance(part, cx, cy, t)
             if d < best_d:
                 best, best_d = part, d
         if best is None or best_d > self.imperfect.grip_reach_mm():
@@ -125,6 +128,7 @@ class RobotGrips:
             self.counts["grip_refused"] += 1
             why = "not singulated" if best.pickable else f"lying {best.pose}"
             raise MissedGrab(f"part under the gripper is {why}")
+        self._judge_footprint(best, cx, cy, target.angle_deg + target.grip_deg, t)
         if not self.imperfect.grip_holds(best_d):
             self.counts["grip_slipped"] += 1
             raise MissedGrab(f"the grip did not hold ({best_d:.1f} mm off the centre)")
@@ -136,6 +140,50 @@ class RobotGrips:
         self.held_cmd = target.part_id
         self.counts["gripped"] += 1
         return PickResult(part_id=best.id, t=t, belt_x_mm=cx)
+
+    def _grip_distance(self, part: SimPart, cx: float, cy: float, t: float) -> float:
+        """How far the gripper at (cx, cy) is from where the part is meant to be gripped
+        (its nearest grip, ``PartSpec.pick``; else its centroid)."""
+        x, y = self.part_xy(part, t)
+        spec = self.scenario.parts[part.type]
+        d = math.hypot(x - cx, y - cy)
+        if spec.pick is None or d > part.radius + self.imperfect.grip_reach_mm():
+            return d
+        # a symmetric part is the same part turned by its period: so are its grips
+        mirrored = spec.poses[part.pose].mirror
+        grips = [g for k in range(spec.symmetry)
+                 for g in grip_poses(spec.pick, x, y, part.angle + k * spec.period_deg,
+                                     mirrored)]
+        return min(math.hypot(gx - cx, gy - cy) for gx, gy, _ in grips)
+
+    def _judge_footprint(self, part: SimPart, cx: float, cy: float, angle: float,
+                         t: float) -> None:
+        """A cup over a hole of the part grips nothing; a gripper whose footprint lands on
+        a neighbour does not reach the part (issue 27). Judged on the true outlines."""
+        x, y = self.part_xy(part, t)
+        placed = place_outline(part.outline, x, y, part.angle)
+        for hole in rings(placed)[1:]:
+            if cv2.pointPolygonTest(hole.astype(np.float32).reshape(-1, 1, 2),
+                                    (float(cx), float(cy)), False) > 0:
+                self.counts["grip_on_hole"] += 1
+                raise MissedGrab(f"the gripper is over a hole of part {part.id}")
+        pick = self.scenario.parts[part.type].pick
+        if pick is None:
+            return
+        foot = footprint(pick, cx, cy, angle)
+        if not foot:
+            return
+        reach = max(float(np.hypot(*(r - (cx, cy)).T).max()) for r in foot)
+        for other in self.on_horizontal.values():
+            if other is part:
+                continue
+            ox, oy = self.part_xy(other, t)
+            if math.hypot(ox - cx, oy - cy) > reach + other.radius:
+                continue
+            ring = outer(place_outline(other.outline, ox, oy, other.angle))
+            if any(near(f, ring, 0.0) for f in foot):
+                self.counts["grip_on_neighbour"] += 1
+                raise MissedGrab(f"the gripper lands on part {other.id} beside part {part.id}")
 
     def release(self, pose: Pose, t: float) -> int | None:
         """Put the held part down at ``pose``; judge its orientation against the truth."""
@@ -151,7 +199,11 @@ class RobotGrips:
         spec = self.scenario.parts[part.type]
         if math.hypot(pose.x - spec.place.x, pose.y - spec.place.y) > PLACE_TOL_MM:
             self.misplaced_by_type[part.type] += 1     # another type's station, say
-        if spec.place.orient and abs(part.held_error_deg) > spec.orientation_tolerance_deg:
+        # how far the placed part is from angle 0, modulo the turns it looks the same after
+        # (its ``symmetry``): the place pose turned it by -angle as located, which the held
+        # error is the truth's difference from
+        if spec.place.orient and abs(wrap_deg(part.held_error_deg, spec.period_deg)) > \
+                spec.orientation_tolerance_deg:
             self.counts["misoriented"] += 1
         return pid
 

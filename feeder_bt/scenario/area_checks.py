@@ -1,0 +1,65 @@
+"""A vision class against its part's outline (issue 27, "no silent zero").
+
+A class whose ``area_mm2`` range cannot hold the area of the outline it names (a unit
+mistake: ``diameter_mm: 2`` for a 2-inch lens) would reject every blob of that part as
+"too small" or "no class" and the run would feed nothing, silently. ``feeder check``
+names it instead, with both areas.
+
+What a blob of the part can measure: the outline's area, give or take a pixel all along
+its edge (threshold and blur move the edge by up to about a pixel: perimeter times
+``mm_per_px``) and a few per cent of scale (the lens, the tilt, the calibration's error).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.scenario.tables import _num
+from feeder_bt.scenario.walker import _Ctx
+
+SCALE_SLACK = 0.05             # the calibration's scale error, lens and tilt, as a fraction
+
+
+def _perimeter(outline: np.ndarray) -> float:
+    from feeder_bt.geometry import rings  # geometry imports the model: not at the top
+    return sum(float(np.linalg.norm(np.diff(np.vstack([r, r[:1]]), axis=0), axis=1).sum())
+               for r in rings(outline))
+
+
+def outline_area_span(sc: Scenario, part: str, pose: str, mm_per_px: float
+                      ) -> tuple[float, float, float]:
+    """The outline's area (mm²) and the lowest and highest area a blob of it can measure
+    through a camera of ``mm_per_px``."""
+    from feeder_bt.geometry import polygon_area, pose_outline
+    out = pose_outline(sc.parts[part], pose)
+    area = polygon_area(out)
+    edge = _perimeter(out) * mm_per_px
+    return area, max(area * (1 - SCALE_SLACK) - edge, 0.0), area * (1 + SCALE_SLACK) + edge
+
+
+def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
+    """Each class's ``area_mm2`` range against its outline's area, and the recipe's
+    ``min_area_mm2`` against every pickable outline (see the module docstring)."""
+    s = cell.camera.calibration.mm_per_px
+    for i, vc in enumerate(sc.vision.classes):
+        if vc.part not in sc.parts or vc.pose not in sc.parts[vc.part].poses:
+            continue                              # listed by _check_scenario
+        area, lo, hi = outline_area_span(sc, vc.part, vc.pose, s)
+        rng = vc.ranges.get("area_mm2")
+        if rng is not None and (rng[1] < lo or rng[0] > hi):
+            ctx.add_problem(f"vision.classes[{i}].area_mm2",
+                            f"[{_num(rng[0])}, {_num(rng[1])}] cannot hold {vc.part}/{vc.pose}: "
+                            f"its outline is {area:.4g} mm², measured {lo:.4g}-{hi:.4g} mm² "
+                            f"at the cell's {_num(s)} mm/px; is a size in the wrong unit?")
+        if vc.pickable and hi < sc.vision.min_area_mm2:
+            ctx.add_problem("vision.min_area_mm2",
+                            f"{_num(sc.vision.min_area_mm2)} mm² is above {vc.part}/{vc.pose}'s "
+                            f"outline area {area:.4g} mm² (at most {hi:.4g} mm² measured at "
+                            f"{_num(s)} mm/px): every one would be rejected as too small")
+        if area / (s * s) < 4 * math.pi:          # under a 4-px-wide disc: no shape to see
+            ctx.add_problem(f"parts.{vc.part}.shape",
+                            f"{vc.part}/{vc.pose} is {area:.4g} mm², {area / (s * s):.3g} px "
+                            f"at the cell's {_num(s)} mm/px: too small to see")
