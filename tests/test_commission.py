@@ -32,6 +32,7 @@ def _steps(report) -> dict[str, dict]:
     return {s["step"]: s for s in data["steps"]}
 
 
+@pytest.mark.soak      # real time: two processes and a person
 def test_commission_galil_every_step_with_the_persons_hands(cell_and_emulator, tmp_path):
     cell, emu = cell_and_emulator
     report = tmp_path / "galil.json"
@@ -60,6 +61,7 @@ def test_commission_galil_every_step_with_the_persons_hands(cell_and_emulator, t
     assert "press horizontal.forward_limit" in done
 
 
+@pytest.mark.soak      # real time: two processes and a person
 def test_commission_galil_fails_the_input_nobody_toggled(cell_and_emulator, tmp_path):
     cell, emu = cell_and_emulator
     report = tmp_path / "galil.json"
@@ -72,6 +74,7 @@ def test_commission_galil_fails_the_input_nobody_toggled(cell_and_emulator, tmp_
     assert steps["galil.output.backlight"]["ok"]          # the rest went on
 
 
+@pytest.mark.soak      # real time: two processes and a person
 def test_commission_camera_calibration_and_timing(cell_and_emulator, tmp_path):
     cell, emu = cell_and_emulator
     report = tmp_path / "camera.json"
@@ -126,6 +129,7 @@ def test_commission_adept_io_sync_and_an_untouched_frame(cell_and_emulator, tmp_
     assert ("power on", "ok arm power on") in person.actions
 
 
+@pytest.mark.soak      # real time: two processes and a person
 def test_commission_adept_fits_the_true_robot_base(tmp_path):
     """With the V+ emulator's pendant (FRAME_SPEC): the fitted base is the true one."""
     from feeder_bt.emulators.adept import AdeptEmulator

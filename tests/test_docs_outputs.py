@@ -25,12 +25,13 @@ def test_the_docs_quote_what_they_must():
     assert [png for _, _, png in build.figures()] == ["report-example.png"]
 
 
-@pytest.mark.slow
+@pytest.mark.soak      # reruns every quoted command: a minute
 def test_every_quoted_output_and_figure_is_current():
     bad = build.check(build.quotes())
     assert not bad, "\n".join(bad)
 
 
+@pytest.mark.soak      # reruns every quoted command: a minute
 def test_an_edited_quote_fails_and_the_wall_clock_does_not(tmp_path):
     doc = tmp_path / "adding-a-part.md"
     text = (ROOT / "docs/adding-a-part.md").read_text()

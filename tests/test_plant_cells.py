@@ -71,6 +71,7 @@ async def until(c: Client, path: tuple[str, ...], ok) -> object:
         await asyncio.sleep(0.2)
 
 
+@pytest.mark.soak      # real time: two cells in two processes
 def test_two_cells_in_two_processes_supervised_from_one_client(tmp_path):
     users = tmp_path / "users.json"
     UsersFile(users).add("alice", "alice-pass-1")

@@ -119,6 +119,7 @@ def _run(tmp_path: Path, *extra: str) -> Terminal:
                      "--db", str(tmp_path / "r.db"), *extra])
 
 
+@pytest.mark.soak      # real time in a terminal
 def test_status_line_stays_on_screen_resize_and_ctrl_c(tmp_path):
     term = _run(tmp_path, "--duration", "600")
     try:
