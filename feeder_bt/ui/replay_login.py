@@ -18,10 +18,10 @@ from starlette.requests import HTTPConnection, Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from .access import BadBody, Settings, parse_body
+from .access import Settings
 from .control import Session, Sessions, retry_after
 from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
-from .responses import client_ip, json_response, refuse, same_origin
+from .responses import client_ip, json_body, json_response, refuse, same_origin
 from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
 
 COOKIE = "feeder_replay_session"
@@ -59,19 +59,7 @@ class ReplayLogin:
         return None if self.session(request) is not None else refuse("not logged in", 401)
 
     async def _body(self, request: Request) -> dict | Response:
-        if not same_origin(request):
-            return refuse("refused: request from another site", 403)
-        if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
-            return refuse("expected a JSON body (Content-Type: application/json)", 415)
-        raw = b""
-        async for chunk in request.stream():
-            raw += chunk
-            if len(raw) > MAX_BODY:
-                return refuse("request too large", 413)
-        try:
-            return parse_body(raw)
-        except BadBody as e:
-            return refuse(str(e), 400)
+        return await json_body(request, MAX_BODY)
 
     async def login(self, request: Request) -> Response:
         body = await self._body(request)

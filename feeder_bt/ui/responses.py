@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from starlette.requests import HTTPConnection
+from starlette.requests import HTTPConnection, Request
 from starlette.responses import JSONResponse, Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -81,3 +81,23 @@ def refuse(message: str, status: int, headers: dict[str, str] | None = None) -> 
 
 def client_ip(conn: HTTPConnection) -> str:
     return conn.client.host if conn.client else "?"
+
+
+async def json_body(request: Request, max_bytes: int) -> dict[str, Any] | Response:
+    """The JSON object of a state-changing request, or the refusal to send back: another
+    site's Origin, not JSON, over ``max_bytes``, or not one JSON object. One reader for the
+    dashboard and the replay's login."""
+    from .access import BadBody, parse_body
+    if not same_origin(request):
+        return refuse("refused: request from another site", 403)
+    if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
+        return refuse("expected a JSON body (Content-Type: application/json)", 415)
+    raw = b""
+    async for chunk in request.stream():
+        raw += chunk
+        if len(raw) > max_bytes:
+            return refuse("request too large", 413)
+    try:
+        return parse_body(raw)
+    except BadBody as e:
+        return refuse(str(e), 400)

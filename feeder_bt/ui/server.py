@@ -39,11 +39,9 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from .access import (
     MAX_HOST_CHARS,
     AccessRecorder,
-    BadBody,
     Gate,
     Settings,
     allowed_hosts,
-    parse_body,
 )
 from .bridge import Bridge, Outcome
 from .camera import CameraFeed, CameraView
@@ -51,7 +49,14 @@ from .control import Control, Session, Sessions, retry_after
 from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
 from .openapi import spec as openapi_spec
 from .operate import COMMANDS
-from .responses import SecurityHeaders, client_ip, json_response, refuse, same_origin
+from .responses import (
+    SecurityHeaders,
+    client_ip,
+    json_body,
+    json_response,
+    refuse,
+    same_origin,
+)
 from .serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
 from .treedata import tree_routes
 from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
@@ -232,21 +237,11 @@ class UiApp:
         return FileResponse(STATIC / "index.html", headers={"cache-control": "no-store"})
 
     async def _body(self, request: Request) -> dict[str, Any] | Response:
-        """The JSON object of a state-changing request, or the refusal to send back."""
+        """The JSON object of a state-changing request, or the refusal to send back (one
+        from another site recorded)."""
         if not same_origin(request):
             self.record("request_refused", "-", ip=client_ip(request), why="another site's Origin")
-            return refuse("refused: request from another site", 403)
-        if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
-            return refuse("expected a JSON body (Content-Type: application/json)", 415)
-        raw = b""
-        async for chunk in request.stream():
-            raw += chunk
-            if len(raw) > MAX_BODY:
-                return refuse("request too large", 413)
-        try:
-            return parse_body(raw)
-        except BadBody as e:
-            return refuse(str(e), 400)
+        return await json_body(request, MAX_BODY)
 
     async def _signed_in_body(self, request: Request
                               ) -> tuple[dict[str, Any], Session] | Response:
