@@ -57,6 +57,8 @@ class Stats:
         self.retried: Counter[str] = Counter()
         #: the in-run encoder re-check (``CheckDrift``): last and largest drift, samples
         self.drift: dict[str, Any] = {}
+        #: picks that failed (missed, out of reach) since the last part placed
+        self.failed_picks_in_a_row = 0
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n

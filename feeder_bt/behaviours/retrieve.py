@@ -69,11 +69,26 @@ class NextPart(Leaf):
 PHASE = "/retrieve/phase"
 
 
+class FailedPicksBelow(Leaf):
+    """One more pick failed (missed, out of reach): SUCCESS while fewer than the scenario's
+    ``max_failed_picks`` have failed since the last part placed, FAILURE at the limit, so
+    the branch calls the operator. A robot in the wrong frame or a gripper without vacuum
+    misses every part: counting each miss is not enough, the cell must stop."""
+
+    def update(self) -> Status:
+        stats, limit = self.ctx.stats, self.ctx.scenario.retrieve.max_failed_picks
+        stats.failed_picks_in_a_row += 1
+        n = stats.failed_picks_in_a_row
+        self.feedback_message = f"{n} failed in a row (limit {limit or 'none'})"
+        return Status.FAILURE if limit and n >= limit else Status.SUCCESS
+
+
 def count_retrieved(ctx: Ctx, part: Part, **data: object) -> None:
     """The part is at its place pose: count it, once."""
     stats = ctx.stats
     stats.retrieved[part.type] += 1
     stats.last_retrieved = part.type
+    stats.failed_picks_in_a_row = 0
     stats.count("retrieved")
     stats.emit(ctx.now(), "retrieved", id=part.id, type=part.type, **data)
 

@@ -180,6 +180,9 @@ class RetrieveParams:
     # price picks with the robot model fitted online from measured move times
     # (feeder_bt/robot_fit.py); false: with the cell's nominal model (the fit is still reported)
     learn_robot: bool = True
+    # picks failed (missed, out of reach) since the last part placed before the cell calls
+    # the operator (FAULT): a wrong robot frame or a gripper with no vacuum; 0: never
+    max_failed_picks: int = 10
 
 
 @dataclass

@@ -138,6 +138,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (RetrieveParams, "robot_speed_pct"): Range(1, 200),    # 1 %: ui/operate.py MIN_ROBOT_PCT
     (RetrieveParams, "too_far_mm"): POSITIVE,
     (RetrieveParams, "reach_time_s"): NON_NEGATIVE,
+    (RetrieveParams, "max_failed_picks"): Range(0, 1000),
     (AdjustParams, "period_s"): POSITIVE,
     (ConveyorSpec, "length_mm"): POSITIVE,
     (ConveyorSpec, "width_mm"): POSITIVE,

@@ -16,6 +16,7 @@ from py_trees.decorators import Inverter
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
 from ..behaviours.retrieve import (
+    FailedPicksBelow,
     FollowRobotSpeed,
     Holding,
     MoveSafe,
@@ -30,6 +31,8 @@ from ..scenario.plugins import load_class
 
 KEY = "/retrieve/error"
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
+FAILED_PICKS = ("picks failed one after another with none placed: check the robot frame "
+                "(robot.base_mm, base_deg, frame_file) and the gripper")
 
 
 def _place_held(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -44,6 +47,16 @@ def _settle(ctx: Ctx, name: str) -> py_trees.behaviour.Behaviour:
         Selector("place it if held", memory=True, children=[
             Inverter("not held?", PhaseIs("held?", ctx, "held")),
             Place("place", ctx)])])
+
+
+def _failed_pick(ctx: Ctx, name: str, kind: str, counter: str) -> py_trees.behaviour.Behaviour:
+    """Count a pick that failed and skip the part, unless too many failed in a row."""
+    return Sequence(name, memory=True, children=[
+        ErrorIs(f"{counter}?", ctx, KEY, (kind,)),
+        CountFault(f"count {counter}", ctx, KEY, counter=counter),
+        Selector("or too many in a row", memory=True, children=[
+            FailedPicksBelow("fewer in a row than the limit?", ctx),
+            Escalate("to the operator", ctx, None, FAILED_PICKS)])])
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -62,14 +75,8 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         pick("pick", ctx),
         Place("place", ctx),
     ])
-    missed = Sequence("missed grab", memory=True, children=[
-        ErrorIs("missed?", ctx, KEY, ("missed_grab",)),
-        CountFault("count miss", ctx, KEY, counter="missed"),
-    ])
-    unreachable = Sequence("out of reach", memory=True, children=[
-        ErrorIs("envelope?", ctx, KEY, ("envelope",)),
-        CountFault("count unreachable", ctx, KEY, counter="unreachable"),
-    ])
+    missed = _failed_pick(ctx, "missed grab", "missed_grab", "missed")
+    unreachable = _failed_pick(ctx, "out of reach", "envelope", "unreachable")
     servo = Sequence("servo recovery", memory=True, children=[
         ErrorIs("servo time-out?", ctx, KEY, ("servo_timeout",)),
         CountFault("count servo fault", ctx, KEY),
@@ -83,12 +90,8 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
                 Inverter("hands free?", Holding("holding a part?", ctx)),
                 pick("retry pick", ctx), Place("place", ctx)]),
             # the part moved on during the recovery: a miss, not a robot failure
-            Sequence("missed on retry", memory=True, children=[
-                ErrorIs("missed?", ctx, KEY, ("missed_grab",)),
-                CountFault("count miss", ctx, KEY, counter="missed")]),
-            Sequence("gone on retry", memory=True, children=[
-                ErrorIs("envelope?", ctx, KEY, ("envelope",)),
-                CountFault("count unreachable", ctx, KEY, counter="unreachable")]),
+            _failed_pick(ctx, "missed on retry", "missed_grab", "missed"),
+            _failed_pick(ctx, "gone on retry", "envelope", "unreachable"),
             # a new servo fault on the retry: recover again, and let the part go; only a
             # recovery that fails goes to the operator
             Sequence("servo fault on retry", memory=True, children=[
