@@ -105,6 +105,13 @@ class ConveyorFault(HalError):
     kind = "conveyor"
 
 
+class CardFault(ConveyorFault):
+    """The conveyor controller's own programs stopped (a thread that cannot be restarted,
+    a stuck input monitor): no shake or retry can help, only an operator's reset."""
+
+    kind = "card_fault"
+
+
 class JobCancelled(HalError):
     kind = "cancelled"
 

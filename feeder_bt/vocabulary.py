@@ -25,7 +25,8 @@ MISS_KINDS = frozenset({"missed_grab", "envelope"})
 #: how each kind reads in a summary
 WORDS = {"missed_grab": "missed grab", "envelope": "out of reach", "servo_timeout":
          "servo timeout", "comms_lost": "link lost", "grab_failed": "camera frame lost",
-         "conveyor": "conveyor", "conveyor_jam": "conveyor jam", "estop": "e-stop",
+         "conveyor": "conveyor", "conveyor_jam": "conveyor jam",
+         "card_fault": "conveyor controller fault", "estop": "e-stop",
          "dropped": "part dropped", "cell": "cell fault"}
 
 

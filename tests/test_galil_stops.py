@@ -149,6 +149,7 @@ def test_a_card_thread_that_cannot_be_restarted_faults_the_cell_and_stops_the_be
         assert t_fault - t0 <= 2.0 and t_still - t0 <= 2.0, (t_fault - t0, t_still - t0)
         reason = bb_get("/faults/escalate")
         assert "cannot be restarted" in reason and "thread 0" in reason
+        assert reason.startswith("conveyor controller failed") and "jammed" not in reason
         assert "STAB" in r.emu.commands and "ST" not in r.emu.commands   # our axes only
         # nothing moves until an operator's reset; the reset restarts the thread
         job = wait_job(r.conveyors["horizontal"].set_speed(50.0))
@@ -173,6 +174,7 @@ def test_a_stuck_input_monitor_is_a_card_fault_that_stops_the_belts():
         assert _tick_until(root, lambda: _belts_still(r))
         assert r.plant.now() - t0 <= r.cell.galil.heartbeat_s + 2.0
         assert "heartbeat" in bb_get("/faults/escalate")
+        assert _ctx.stats.faults == {"card_fault": 1}     # not a jam, never shaken
         assert 0 in r.emu.interp.running()                # alive, yet a fault
 
 

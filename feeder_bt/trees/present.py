@@ -1,7 +1,8 @@
 """present: run the conveyors (continuous) or serve advance requests (incremental).
 
 Recovery: a dropped link to the conveyor controller is retried with back-off; a jam is
-shaken loose once, and a second jam within a minute goes to the operator (FAULT)."""
+shaken loose once, and a second jam within a minute goes to the operator (FAULT); a card
+fault (the conveyor controller's own programs stopped) goes to the operator at once."""
 
 from __future__ import annotations
 
@@ -38,13 +39,20 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
                      "conveyor jammed again within a minute of a shake"),
         ]),
     ])
+    # the controller's own programs stopped: neither a shake nor a retry can help
+    card = Sequence("card fault", memory=True, children=[
+        ErrorIs("card fault?", ctx, KEY, ("card_fault",)),
+        CountFault("count card fault", ctx, KEY),
+        Escalate("to the operator", ctx, KEY, "conveyor controller failed"),
+    ])
     other = Sequence("conveyor recovery", memory=True, children=[
-        Inverter("not handled above", ErrorIs("jam or link?", ctx, KEY, ("conveyor", "comms_lost"))),
+        Inverter("not handled above",
+                 ErrorIs("jam, card or link?", ctx, KEY, ("conveyor", "card_fault", "comms_lost"))),
         CountFault("count conveyor fault", ctx, KEY),
         StopConveyors("stop conveyors", ctx),
         Retry("settle and retry", ctx, KEY, first_s=1.0, max_attempts=3),
     ])
     return Selector("present", memory=True, children=[
-        work, link, jam, other,
+        work, link, jam, card, other,
         Escalate("conveyors failed", ctx, KEY, "conveyors do not respond"),
     ])

@@ -14,7 +14,7 @@ from typing import Any
 
 from ...clock import Clock
 from ...encoder import diff
-from ...errors import ConveyorFault, HalError
+from ...errors import CardFault, ConveyorFault, HalError
 from ...jobs import DoneJob, FutureJob, Job, JobState
 from ...scenario.model import IoSignal
 from ..interfaces import IoChange, speed_refused, watchdog_stopped
@@ -223,8 +223,8 @@ class GalilConveyor:
         pos = self.ctl.position(self.axis)
         return 0 if pos is None else pos
 
-    def _card_fault(self) -> ConveyorFault:
-        return ConveyorFault(f"{self.name}: Galil card fault, belts stopped: "
+    def _card_fault(self) -> CardFault:
+        return CardFault(f"{self.name}: Galil card fault, belts stopped: "
                              f"{self.ctl.card_fault}; an operator's reset restarts the "
                              f"card's programs")
 
