@@ -156,7 +156,7 @@ class Cell:
         for conv in self.hal.conveyors.values():
             conv.servo(True)            # the operator's reset: motors on again
         self.fault_reason = None
-        self.stats.failed_picks_in_a_row = 0    # the operator has looked at the robot
+        self.stats.failed_picks_in_a_row.clear()    # the operator has looked at the robot
         self._switch(CellState.STOPPED, None)
 
     def set_speeds(self, **speeds: float) -> None:

@@ -87,19 +87,19 @@ def test_report_names_the_plan(tmp_path):
 
 def test_a_robot_that_misses_every_pick_stops_the_cell(tmp_path):
     """A wrong frame or a gripper without vacuum: every pick misses. Each is counted and the
-    part recirculates; at retrieve.max_failed_picks (10) in a row the cell calls the
+    part recirculates; at retrieve.max_failed_picks (20) in a row the cell calls the
     operator, naming what to check."""
     plan = tmp_path / "plan.yaml"
     plan.write_text("rates:\n  missed_grab: {per_pick: 1.0}\n")
     r = run_job(RunOptions(scenario="scenarios/lenses.yaml", duration=600.0, fast=True,
                            seed=2, view="none", faults=str(plan)))
     assert r["state"] == "FAULT" and "robot frame" in r["fault"], r["fault"]
-    assert r["parts"]["missed"] == 10 and r["parts"]["lost"] == 0
+    assert r["parts"]["missed"] == 20 and r["parts"]["lost"] == 0
     assert sum(r["parts"]["retrieved"].values()) == 0
 
 
 def test_misses_now_and_then_never_stop_the_cell(tmp_path):
-    """One pick in three missed, for half an hour: never ten in a row, never a FAULT."""
+    """One pick in three missed, for half an hour: never twenty in a row, never a FAULT."""
     plan = tmp_path / "plan.yaml"
     plan.write_text("seed: 3\nrates:\n  missed_grab: {per_pick: 0.33}\n")
     r = run_job(RunOptions(scenario="scenarios/lenses.yaml", duration=1800.0, fast=True,

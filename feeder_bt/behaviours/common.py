@@ -7,6 +7,7 @@ A leaf never blocks: ``JobLeaf`` starts a HAL job in ``initialise()``, polls it 
 from __future__ import annotations
 
 from collections import Counter, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,8 +58,8 @@ class Stats:
         self.retried: Counter[str] = Counter()
         #: the in-run encoder re-check (``CheckDrift``): last and largest drift, samples
         self.drift: dict[str, Any] = {}
-        #: picks that failed (missed, out of reach) since the last part placed
-        self.failed_picks_in_a_row = 0
+        #: picks that failed (missed, out of reach) since the last part placed, by type
+        self.failed_picks_in_a_row: Counter[str] = Counter()
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n
@@ -340,9 +341,10 @@ class Escalate(Leaf):
     """Last resort of a branch: ask the cell to go to FAULT, with the reason.
 
     A transient fault that struck a recovery step itself (a link dropping during a shake)
-    is counted and the branch starts over, up to ``Retry``'s limit of attempts in a row."""
+    is counted and the branch starts over, up to ``Retry``'s limit of attempts in a row.
+    ``what`` may be a function, for a reason that says what happened (a count, a type)."""
 
-    def __init__(self, name: str, ctx: Ctx, key: str | None, what: str,
+    def __init__(self, name: str, ctx: Ctx, key: str | None, what: str | Callable[[], str],
                  max_attempts: int = 8) -> None:
         super().__init__(name, ctx)
         self.key, self.what, self.max_attempts = key, what, max_attempts
@@ -366,7 +368,8 @@ class Escalate(Leaf):
             stats.retrying(self.key, err.kind)
             self.feedback_message = f"{err}: starting over"
             return Status.SUCCESS
-        reason = f"{self.what}: {err}" if err is not None else self.what
+        what = self.what() if callable(self.what) else self.what
+        reason = f"{what}: {err}" if err is not None else what
         if self.bb.get("/faults/escalate") is None:
             self.bb.set("/faults/escalate", reason)
             episode = err is not None and stats.is_retrying(self.key, err.kind)

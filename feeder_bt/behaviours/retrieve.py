@@ -70,16 +70,24 @@ PHASE = "/retrieve/phase"
 
 
 class FailedPicksBelow(Leaf):
-    """One more pick failed (missed, out of reach): SUCCESS while fewer than the scenario's
-    ``max_failed_picks`` have failed since the last part placed, FAILURE at the limit, so
-    the branch calls the operator. A robot in the wrong frame or a gripper without vacuum
-    misses every part: counting each miss is not enough, the cell must stop."""
+    """One more pick of the part's type failed (missed, out of reach): SUCCESS while fewer
+    than the scenario's ``max_failed_picks`` have failed since the last part of that type
+    placed, FAILURE at the limit, so the branch calls the operator. A robot in the wrong
+    frame, a gripper without vacuum, a grip over a part's hole fails every pick: counting
+    each miss is not enough, the cell must stop. By type, since a part that cannot be
+    gripped fails between picks of another that can."""
+
+    def __init__(self, name: str, ctx: Ctx) -> None:
+        super().__init__(name, ctx)
+        self.bb = client(self, read=("/retrieve/part",))
 
     def update(self) -> Status:
         stats, limit = self.ctx.stats, self.ctx.scenario.retrieve.max_failed_picks
-        stats.failed_picks_in_a_row += 1
-        n = stats.failed_picks_in_a_row
-        self.feedback_message = f"{n} failed in a row (limit {limit or 'none'})"
+        part = self.bb.get("/retrieve/part")
+        ptype = part.type if part is not None else "?"
+        stats.failed_picks_in_a_row[ptype] += 1
+        n = stats.failed_picks_in_a_row[ptype]
+        self.feedback_message = f"{n} {ptype} picks failed in a row (limit {limit or 'none'})"
         return Status.FAILURE if limit and n >= limit else Status.SUCCESS
 
 
@@ -88,7 +96,7 @@ def count_retrieved(ctx: Ctx, part: Part, **data: object) -> None:
     stats = ctx.stats
     stats.retrieved[part.type] += 1
     stats.last_retrieved = part.type
-    stats.failed_picks_in_a_row = 0
+    stats.failed_picks_in_a_row[part.type] = 0
     stats.count("retrieved")
     stats.emit(ctx.now(), "retrieved", id=part.id, type=part.type, **data)
 

@@ -182,7 +182,7 @@ class RetrieveParams:
     learn_robot: bool = True
     # picks failed (missed, out of reach) since the last part placed before the cell calls
     # the operator (FAULT): a wrong robot frame or a gripper with no vacuum; 0: never
-    max_failed_picks: int = 10
+    max_failed_picks: int = 20
 
 
 @dataclass

@@ -31,8 +31,13 @@ from ..scenario.plugins import load_class
 
 KEY = "/retrieve/error"
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
-FAILED_PICKS = ("picks failed one after another with none placed: check the robot frame "
-                "(robot.base_mm, base_deg, frame_file) and the gripper")
+
+
+def _failed_picks(ctx: Ctx) -> str:
+    ptype, n = ctx.stats.failed_picks_in_a_row.most_common(1)[0]
+    return (f"{n} picks of {ptype} failed one after another with none placed: check the "
+            f"robot frame (robot.base_mm, base_deg, frame_file), the camera's calibration "
+            f"and the gripper")
 
 
 def _place_held(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -56,7 +61,7 @@ def _failed_pick(ctx: Ctx, name: str, kind: str, counter: str) -> py_trees.behav
         CountFault(f"count {counter}", ctx, KEY, counter=counter),
         Selector("or too many in a row", memory=True, children=[
             FailedPicksBelow("fewer in a row than the limit?", ctx),
-            Escalate("to the operator", ctx, None, FAILED_PICKS)])])
+            Escalate("to the operator", ctx, None, lambda: _failed_picks(ctx))])])
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
