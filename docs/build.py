@@ -7,8 +7,8 @@ A quoted output is the fenced block right under a marker comment::
     <!-- output: feeder render scenarios/x.yaml --out out/f ; feeder locate ... | grep ^x -->
 
 The commands (separated by `` ; ``) run with bash in a scratch folder holding copies of
-scenarios/, cells/, faults/, supply/ and examples/ (so a command may write a variant beside
-them), ``feeder`` being this checkout's CLI; the block is the last command's standard output
+scenarios/, cells/, faults/, supply/, examples/ and tests/data/ (so a command may write a
+variant beside them), ``feeder`` being this checkout's CLI; the block is the last command's standard output
 (``| grep RE`` keeps the lines matching the Python regex RE). A quote is exact, except
 that wall-clock figures (``… s wall``, ``… ms``) are not compared (they are the machine's,
 not the program's) and a marker ``<!-- output (±2 %): ...`` lets each number differ from a
@@ -34,7 +34,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
-COPIED = ("scenarios", "cells", "faults", "supply", "examples")
+COPIED = ("scenarios", "cells", "faults", "supply", "examples", "tests/data")
 REL_TOL = 0.0         # by default a quote is exact (the runs are deterministic)
 MARK = re.compile(r"<!-- output(?: \(±(?P<tol>[\d.]+) %\))?: (?P<cmds>.*?) -->\n+"
                   r"```(?P<lang>\w*)\n(?P<body>.*?)```", re.S)

@@ -22,6 +22,7 @@ def test_the_docs_quote_what_they_must():
     assert "recipe suggest scenarios/hex_nuts.yaml" in cmds          # the stale ones of #29
     assert "locate scenarios/brackets_dark.yaml" in cmds
     assert "--faults faults/shift.yaml" in cmds
+    assert "--target acircles --board 7x13" in cmds           # issue 26: real circle grids
     assert [png for _, _, png in build.figures()] == ["report-example.png"]
 
 

@@ -43,11 +43,14 @@ K3_GAIN = 1.02            # k3 is kept only if it lowers the rms by more than 2 
 
 @dataclass
 class View:
-    """One image's target points: ``px`` (N, 2) and their index into the board's points."""
+    """One image's target points: ``px`` (N, 2), their index into the board's points and
+    (``find_views`` sets it) those points on the board, mm (N, 2): a view carries its own
+    board, so views of different boards held in front of one camera calibrate it together."""
 
     name: str
     px: np.ndarray
     index: np.ndarray
+    board: np.ndarray | None = None
 
 
 @dataclass
@@ -99,7 +102,7 @@ def find_views(images: Sequence[tuple[str, np.ndarray]], target: Target,
         except CalibrationError as e:
             rejected.append((name, str(e)))
             continue
-        views.append(View(name, px, index))
+        views.append(View(name, px, index, target.points_board().reshape(-1, 2)[index]))
     return views, rejected
 
 
@@ -110,8 +113,8 @@ def _fit(views: list[View], target: Target, size: tuple[int, int], rational: boo
          fixed: int = 0):
     """One ``calibrateCameraExtended``; ``fixed``: 1 holds k3 at 0, 2 k2 and k3."""
     board = target.points_board().reshape(-1, 2)
-    obj = [np.column_stack([board[v.index], np.zeros(len(v.index))]).astype(np.float32)
-           for v in views]
+    obj = [np.column_stack([board[v.index] if v.board is None else v.board,
+                            np.zeros(len(v.index))]).astype(np.float32) for v in views]
     img = [v.px.astype(np.float32).reshape(-1, 1, 2) for v in views]
     flags = cv2.CALIB_RATIONAL_MODEL if rational else 0
     if len(views) < FULL_VIEWS or fixed >= 1:
@@ -133,7 +136,8 @@ def _fit(views: list[View], target: Target, size: tuple[int, int], rational: boo
 def calibrate_views(views: list[View], target: Target, size: tuple[int, int],
                     model: str = "auto") -> CameraModel:
     """The full camera model from ``views`` (``size``: image width, height); ``model``:
-    ``standard`` (k1, k2, p1, p2, k3), ``rational`` (and k4..k6) or ``auto``."""
+    ``standard`` (k1, k2, p1, p2, k3), ``rational`` (and k4..k6) or ``auto``. A view that
+    carries its own board points (``View.board``) is fitted to them, ``target``'s otherwise."""
     if model not in ("auto", "standard", "rational"):
         raise CalibrationError(f"lens model must be auto, standard or rational, got {model!r}")
     views = list(views)
