@@ -219,6 +219,8 @@ def summary(report: dict) -> str:
             f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
+            + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
+               if p.get("recirculated_per_placed") is not None else "")
             + _ceiling_line(report) + _robots_line(report) + "\n" + story_text(report))
 
 

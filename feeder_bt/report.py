@@ -101,6 +101,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if world is not None:                 # every part that entered the cell, and left it
         parts["supplied"] = world.total
         parts["shipped"] = world.counts["shipped"]
+        # wear (issue 30): passes a plant pays for, and parts worn past max_passes
+        parts["scrapped"] = world.counts["scrapped"]
+        parts["recirculated_per_placed"] = (round(world.counts["recirculated"] / total, 3)
+                                            if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario) if cell.scenario

@@ -91,6 +91,9 @@ class PartSpec:
     symmetry: int = 1
     mirror_symmetric: bool = False
     pick: PickSpec | None = None         # None: gripped at the area centroid, nothing checked
+    # wear (issue 30): the most times a part may travel the belt; one that falls off the end
+    # on its last pass goes to scrap (parts.scrapped) instead of back to the hopper; 0: no limit
+    max_passes: int = 0
 
     @property
     def period_deg(self) -> float:

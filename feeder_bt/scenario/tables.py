@@ -120,6 +120,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (StablePose, "probability"): Range(0, 1),
     (PartSpec, "orientation_tolerance_deg"): Range(0, 180, lo_open=True),
     (PartSpec, "symmetry"): Range(1, 360),
+    (PartSpec, "max_passes"): Range(0, 10_000),
     (PickSpec, "cup_radius_mm"): NON_NEGATIVE,
     (PickSpec, "clearance_mm"): NON_NEGATIVE,
     (Threshold, "value"): GREY,

@@ -2,7 +2,7 @@
 
 Each part carries its own record (``SimPart.where``); every move between places checks that
 record against the place it leaves and keeps a tally of the records by place. Every step
-compares the tally with the containers' sizes (seven integers), and a full audit matches
+compares the tally with the containers' sizes (eight integers), and a full audit matches
 each part's record against the containers one by one whenever they disagree, every
 ``AUDIT_EVERY`` steps and at every census. A part found nowhere is *lost*, one found in two
 places *duplicated*: each is named with its id and last known place (``problems``),
@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed", "shipped")
+PLACES = ("hopper", "incline", "horizontal", "return", "gripper", "placed", "shipped",
+          "scrapped")
 AUDIT_EVERY = 32                # steps between full audits when the tallies agree
 
 
@@ -49,6 +50,7 @@ class SimPart:
     slide: tuple[float, float] = (0.0, 0.0)
     settle_t0: float = 0.0
     settle_end: float = -math.inf
+    passes: int = 0             # times it has fallen off the belt's end (wear, issue 30)
 
     @property
     def singulated(self) -> bool:
@@ -67,6 +69,7 @@ class PartAccounting:
     placed: list[tuple[float, int]]
     gripper: int | None
     shipped: list[int]
+    scrapped: list[int]
     total: int
     t: float
 
@@ -99,6 +102,7 @@ class PartAccounting:
             "gripper": 0 if self.gripper is None else 1,
             "placed": len(self.placed),
             "shipped": len(self.shipped),
+            "scrapped": len(self.scrapped),
         }
 
     def census(self) -> dict[str, int]:
@@ -114,7 +118,7 @@ class PartAccounting:
                 or len(self.hopper) != t["hopper"] or len(self.on_incline) != t["incline"]
                 or len(self.on_horizontal) != t["horizontal"]
                 or len(self.returning) != t["return"] or len(self.placed) != t["placed"]
-                or len(self.shipped) != t["shipped"]
+                or len(self.shipped) != t["shipped"] or len(self.scrapped) != t["scrapped"]
                 or (self.gripper is not None) != t["gripper"]):
             self.audit()
 
@@ -126,6 +130,7 @@ class PartAccounting:
         yield "gripper", () if self.gripper is None else (self.gripper,)
         yield "placed", (pid for _, pid in self.placed)
         yield "shipped", self.shipped
+        yield "scrapped", self.scrapped
 
     def audit(self) -> list[dict]:
         """Match every part against the containers by identity; name each part that is

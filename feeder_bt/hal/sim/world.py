@@ -99,6 +99,9 @@ class World(PartAccounting, Landing, RobotGrips):
         # supply (a supply plan, docs/supply.md): placed parts leave the cell instead of
         # going back to the hopper; the incline lifts ``lift`` times its nominal rate
         self.shipped: list[int] = []
+        # wear (issue 30): a part that has travelled the belt its type's max_passes times
+        # goes to scrap when it falls off the end, not back to the hopper
+        self.scrapped: list[int] = []
         self.ship_placed = False
         self.lift = 1.0
         self.next_release = self._draw_gap(0.0)
@@ -261,6 +264,13 @@ class World(PartAccounting, Landing, RobotGrips):
     def _fall(self, t: float, pid: int) -> None:
         part = self.on_horizontal.pop(pid)
         self._untouch(part)
+        part.passes += 1
+        limit = self.scenario.parts[part.type].max_passes
+        if limit and part.passes >= limit:      # worn out: to scrap, counted, never lost
+            self._relocate(part, "horizontal", "scrapped")
+            self.scrapped.append(pid)
+            self.counts["scrapped"] += 1
+            return
         self._relocate(part, "horizontal", "return")
         heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))
         self.counts["recirculated"] += 1
