@@ -7,15 +7,24 @@ import argparse
 import math
 
 
-def positive(text: str) -> float:
-    """A finite number > 0 (seconds, mm/s)."""
+def _number(text: str, ok, what: str) -> float:
     try:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    if not (math.isfinite(v) and ok(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number {what}, got {text}")
     return v
+
+
+def positive(text: str) -> float:
+    """A finite number > 0 (seconds, mm/s)."""
+    return _number(text, lambda v: v > 0, "> 0")
+
+
+def non_negative(text: str) -> float:
+    """A finite number >= 0 (a budget that may be nothing)."""
+    return _number(text, lambda v: v >= 0, ">= 0")
 
 
 def positive_int(text: str) -> int:

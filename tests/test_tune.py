@@ -236,3 +236,31 @@ def test_ctrl_c_fails_the_open_trial_without_spending_the_budget(tmp_path, monke
     assert states == ["COMPLETE", "FAIL", "COMPLETE"]
     assert study.trials[1].user_attrs["error"] == search.INTERRUPTED
     assert len(search.finished(study)) == 2 and study.best_value == 53.0
+
+
+def test_a_wear_budget_keeps_the_best_within_it(tmp_path, capsys):
+    """--max-recirc R: a trial whose parts recirculated more than R per placed part is
+    never the best (nor the overlay written); with no trial within R, one line, exit 2."""
+    import optuna
+    db, out = tmp_path / "s.db", tmp_path / "o.yaml"
+    run = ["tune", LENSES, "--trials", "4", "--duration", "60", "--seeds", "1", "--workers",
+           "1", "--study", str(db)]
+    assert main(run) == 0
+    trials = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}").trials
+    recirc = {t.number: t.user_attrs["recirc_per_placed"] for t in trials
+              if t.user_attrs.get("recirc_per_placed") is not None}
+    frugal = min(recirc, key=recirc.get)
+    greedy = max(trials, key=lambda t: t.value).number
+    assert recirc[frugal] > 0 and greedy != frugal         # the budget has a choice to make
+    budget = recirc[frugal] + 1e-4                         # only the frugal trial is within
+    capsys.readouterr()
+    assert main([*run, "--max-recirc", f"{budget:.6f}", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert f"best: trial {frugal}," in said and "recirculated" in said
+    assert yaml.safe_load(out.read_text()) == trials[frugal].user_attrs["overlay"]
+    assert main([*run, "--max-recirc", f"{recirc[frugal] / 2:.6f}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("feeder: study") and "no trial within --max-recirc" in err
+    with pytest.raises(SystemExit) as e:                   # argparse's usage line
+        main(["tune", LENSES, "--max-recirc", "-1"])
+    assert e.value.code == 2 and "--max-recirc" in capsys.readouterr().err

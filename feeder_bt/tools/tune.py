@@ -13,7 +13,7 @@ import time
 from contextlib import ExitStack
 from typing import Any
 
-from ..argtypes import positive, positive_int
+from ..argtypes import non_negative, positive, positive_int
 from ..errors import FeederError
 from ..tuning.space import SPACES
 
@@ -55,6 +55,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--supply", metavar="PLAN.yaml", help="run every trial under this supply "
                    "plan")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    p.add_argument("--max-recirc", type=non_negative, default=None, metavar="R",
+                   help="wear budget: a setting may recirculate at most R parts per placed "
+                        "part (the mean of its seeds); those over it are never the best")
     p.add_argument("--sampler-seed", type=int, default=0,
                    help="seed of the search itself (default 0)")
     p.set_defaults(handler=cmd_tune)
@@ -92,16 +95,19 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from ..tuning.search import TuneConfig, best_overlay, describe, run_search
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
-                     supply=args.supply, sampler_seed=args.sampler_seed)
+                     supply=args.supply, sampler_seed=args.sampler_seed,
+                     max_recirc=args.max_recirc)
     wall0 = time.monotonic()
     with ExitStack() as stack:
         executor, capacity, where = _executor(args, stack)
         progress = stack.enter_context(TrialProgress(where))
         study = run_search(cfg, executor, capacity, on_start=progress.start,
                            on_trial=progress.trial)
-    overlay, best = best_overlay(study)
+    overlay, best = best_overlay(study, args.max_recirc)
     per_seed = ", ".join(f"{v:.2f}" for v in best.user_attrs.get("per_seed_ppm", []))
-    print(f"best: trial {best.number}, {best.value:.2f} parts/min (seeds {per_seed}): "
+    recirc = best.user_attrs.get("recirc_per_placed")
+    wear = f", recirculated {recirc:.2f} per placed" if recirc is not None else ""
+    print(f"best: trial {best.number}, {best.value:.2f} parts/min (seeds {per_seed}{wear}): "
           f"{describe(overlay)}")
     print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
           f"{time.monotonic() - wall0:.0f} s wall)")

@@ -71,6 +71,7 @@ def evaluate(job: Job) -> dict[str, Any]:
            "robot_busy_pct": report.get("robot_busy_pct"),
            "ceiling_ppm": report.get("ceiling_ppm"),
            "lost": parts.get("lost") or 0, "missed": parts.get("missed") or 0,
+           "recirc_per_placed": parts.get("recirculated_per_placed"),
            "fault": report.get("fault")}
     if report.get("fault"):
         out["error"] = f"the run faulted: {report['fault']}"

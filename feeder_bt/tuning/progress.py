@@ -60,7 +60,11 @@ class TrialProgress:
     def trial(self, r: TrialResult) -> None:
         self.done += 1
         name = describe(r.overlay) + (AS_WRITTEN if r.start else "")
-        if r.value is not None and (self.best is None or r.value > self.best[0]):
+        if r.value is not None and r.recirc is not None:
+            name += f"; recirculated {r.recirc:.2f} per placed" + (
+                "" if r.feasible else ", over --max-recirc")
+        if (r.value is not None and r.feasible
+                and (self.best is None or r.value > self.best[0])):
             self.best = (r.value, r.number)
         best = (f"best {self.best[0]:.2f} parts/min (trial {self.best[1]})"
                 if self.best else "no trial completed yet")

@@ -10,6 +10,7 @@ runs the same seeds 1..K, so trials differ only by their settings.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import math
 import statistics
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -40,6 +41,9 @@ class TuneConfig:
     cell: str | None = None
     supply: str | None = None
     sampler_seed: int = 0
+    # wear budget (issue 30): recirculations per placed part a setting may cost; a trial
+    # over it is infeasible (TPE's constraints), never the best
+    max_recirc: float | None = None
 
 
 @dataclass
@@ -52,6 +56,17 @@ class TrialResult:
     overlay: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
     start: bool = False                 # the scenario as written (a new study's first trial)
+    recirc: float | None = None         # recirculations per placed part, mean of the seeds
+    feasible: bool = True               # within --max-recirc
+
+
+def recirc_over(trial: Any, budget: float | None) -> float:
+    """How far a trial's recirculations per placed part exceed the budget (<= 0: within);
+    a trial that placed nothing, or has no figure, is over any budget."""
+    if budget is None:
+        return 0.0
+    r = trial.user_attrs.get("recirc_per_placed")
+    return math.inf if r is None else r - budget
 
 
 class InlineExecutor(cf.Executor):
@@ -176,7 +191,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
                 results.append(res)
                 if len(results) == cfg.seeds:
                     del open_trials[number]
-                    result = _tell(study, trial, overlay, results)
+                    result = _tell(study, trial, overlay, results, cfg.max_recirc)
                     if on_trial:
                         on_trial(result)
     except KeyboardInterrupt:
@@ -192,7 +207,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
 
 
 def _tell(study: Any, trial: Any, overlay: dict[str, Any],
-          results: list[dict[str, Any]]) -> TrialResult:
+          results: list[dict[str, Any]], budget: float | None = None) -> TrialResult:
     from optuna.trial import TrialState
     results.sort(key=lambda r: r.get("seed", 0))
     start = trial.user_attrs.get("start") == "scenario"
@@ -206,17 +221,30 @@ def _tell(study: Any, trial: Any, overlay: dict[str, Any],
     ceiling = [r.get("ceiling_ppm") or r.get("robot_bound_ppm") for r in results]
     if all(ceiling):
         trial.set_user_attr("ceiling_ppm", statistics.mean(ceiling))
+    recirc = [r.get("recirc_per_placed") for r in results]
+    mean_recirc = statistics.mean(recirc) if None not in recirc else None
+    trial.set_user_attr("recirc_per_placed", mean_recirc)
+    if budget is not None:              # TPE samples away from infeasible trials
+        trial.set_constraint("max_recirc", min(recirc_over(trial, budget), 1e9))
     value = statistics.mean(per_seed)
     study.tell(trial, value)
-    return TrialResult(trial.number, value, per_seed, overlay, start=start)
+    return TrialResult(trial.number, value, per_seed, overlay, start=start, recirc=mean_recirc,
+                       feasible=recirc_over(trial, budget) <= 0)
 
 
-def best_overlay(study: Any) -> tuple[dict[str, Any], Any]:
-    """The best trial's overlay and the trial; a study without a finished trial is an error."""
+def best_overlay(study: Any, max_recirc: float | None = None) -> tuple[dict[str, Any], Any]:
+    """The best trial within the wear budget: its overlay and the trial. A study without a
+    finished trial, or none within the budget, is an error."""
     from optuna.trial import TrialState
-    if not study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)):
+    complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+    if not complete:
         raise TuneError(f"study {study.study_name!r} has no completed trial yet")
-    best = study.best_trial
+    within = [t for t in complete if recirc_over(t, max_recirc) <= 0]
+    if not within:
+        least = min(t.user_attrs.get("recirc_per_placed") or math.inf for t in complete)
+        raise TuneError(f"study {study.study_name!r}: no trial within --max-recirc "
+                        f"{max_recirc:g} (the least was {least:.2f} per placed part)")
+    best = max(within, key=lambda t: t.value)
     return best.user_attrs["overlay"], best
 
 
