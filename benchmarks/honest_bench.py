@@ -3,7 +3,7 @@ same budget, each against the report's ceiling; JSON and a markdown table out.
 
     python benchmarks/honest_bench.py [--supply supply/batch_refill.yaml] [--trials 20]
         [--duration 600] [--tune-seeds 2] [--eval-seeds 5] [--eval-duration 600]
-        [--workers 2] [--study FILE.db] [--only thesis|tuned] [--out PATH]
+        [--workers 2] [--study FILE.db] [--only thesis|tuned] [--max-recirc R] [--out PATH]
 
 (a) The thesis table: the original feeder (scenarios/original_cwru_lenses.yaml) against
     the new feeder with the thesis's water marks (scenarios/lenses.yaml as shipped), seeds
@@ -11,8 +11,12 @@ same budget, each against the report's ceiling; JSON and a markdown table out.
 (b) Same tuning budget for each (``--trials`` x ``--tune-seeds`` runs of ``--duration``
     s, ``feeder tune``'s search, optionally under a supply plan): our full space
     (adjuster + policy + speeds + frame spacing), the thesis's water marks tuned for this
-    cell, and the best fixed belt/incline setting. Each best overlay is then run on fresh
-    seeds (101..100+N, never seen while tuning): mean, spread, ratios.
+    cell, and the best fixed belt/incline setting; every baseline searches the pick policy
+    and the frame spacing too, and the fixed setting is searched both by TPE and by a grid
+    over its two speeds and the policies (each with the budget), the better kept. With
+    ``--max-recirc R`` every search keeps to the wear budget (recirculations per placed
+    part, ``feeder tune --max-recirc``). Each best overlay is then run on fresh seeds
+    (101..100+N, never seen while tuning): mean, spread, ratios, recirculations.
 (c) Every mean as a % of the report's ceiling (``ceiling_ppm``: the lowest of the robot,
     supply and, when placed parts are shipped, inflow bounds). The supply bound depends on
     the setting; the robot and inflow bounds do not, so the lower of those two is what no
@@ -38,6 +42,7 @@ sys.path.insert(0, str(ROOT))
 
 from feeder_bt.tuning.objective import Job, evaluate  # noqa: E402
 from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search  # noqa: E402
+from feeder_bt.tuning.space import GRID_MIN_TRIALS  # noqa: E402
 
 LENSES = ROOT / "scenarios" / "lenses.yaml"
 ORIGINAL = ROOT / "scenarios" / "original_cwru_lenses.yaml"
@@ -54,6 +59,9 @@ def stats(rows: list[dict]) -> dict:
            "mean": round(statistics.mean(ppm), 2), "min": min(ppm), "max": max(ppm),
            "stdev": round(statistics.stdev(ppm), 2) if len(ppm) > 1 else 0.0,
            "lost": sum(r.get("lost") or 0 for r in rows)}
+    recirc = [r.get("recirc_per_placed") for r in rows]
+    if None not in recirc:
+        out["recirc_per_placed"] = round(statistics.mean(recirc), 2)
     if all(ceiling):
         out["ceiling_ppm"] = round(statistics.mean(ceiling), 2)
         out["of_ceiling"] = round(out["mean"] / out["ceiling_ppm"], 3)
@@ -98,21 +106,29 @@ def thesis(pool: cf.Executor, args: argparse.Namespace) -> dict:
 def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
     supply = str(Path(args.supply).resolve()) if args.supply else None
     out: dict = {"budget": {"trials": args.trials, "duration_s": args.duration,
-                            "seeds": args.tune_seeds}, "supply": args.supply}
+                            "seeds": args.tune_seeds, "max_recirc": args.max_recirc},
+                 "supply": args.supply}
     for space in SPACES:
-        cfg = TuneConfig(scenario=str(LENSES), trials=args.trials, duration=args.duration,
-                         seeds=args.tune_seeds, space=space, study=study, supply=supply)
         t0 = time.monotonic()
-        s = run_search(cfg, pool, args.workers,
-                       on_trial=lambda r, sp=space: print(
-                           f"tune {sp} trial {r.number}: "
-                           f"{'failed' if r.value is None else f'{r.value:.2f}'}", flush=True))
-        overlay, best = best_overlay(s)
+        found = []
+        grids = (False, True) if space == "fixed" and args.trials >= GRID_MIN_TRIALS else (False,)
+        for grid in grids:
+            cfg = TuneConfig(scenario=str(LENSES), trials=args.trials, duration=args.duration,
+                             seeds=args.tune_seeds, space=space, study=study, supply=supply,
+                             max_recirc=args.max_recirc, grid=grid)
+            name = space + (" grid" if grid else "")
+            s = run_search(cfg, pool, args.workers,
+                           on_trial=lambda r, sp=name: print(
+                               f"tune {sp} trial {r.number}: "
+                               f"{'failed' if r.value is None else f'{r.value:.2f}'}",
+                               flush=True))
+            found.append((*best_overlay(s, args.max_recirc), name))
+        overlay, best, searched = max(found, key=lambda f: f[1].value)
         seeds = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
         rows = run_all(pool, [Job(str(LENSES), overlay, sd, args.eval_duration, None, supply)
                               for sd in seeds])
         out[space] = {"tuned_ppm": round(best.value, 2), "trial": best.number,
-                      "setting": describe(overlay), "overlay": overlay,
+                      "searched": searched, "setting": describe(overlay), "overlay": overlay,
                       "tune_wall_s": round(time.monotonic() - t0, 1), **stats(rows)}
         print(f"{space}: tuned {best.value:.2f}, fresh seeds {out[space]['mean']:.2f} "
               f"parts/min ({describe(overlay)})", flush=True)
@@ -131,7 +147,9 @@ def _cell(s: dict) -> str:
 def _of(s: dict) -> str:
     of = f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
         else "-"
-    return of + (f"; robot busy {s['robot_busy_pct']:.0f} %" if "robot_busy_pct" in s else "")
+    of += f"; robot busy {s['robot_busy_pct']:.0f} %" if "robot_busy_pct" in s else ""
+    return of + (f"; recirculated {s['recirc_per_placed']:.2f}/placed"
+                 if "recirc_per_placed" in s else "")
 
 
 def markdown(result: dict) -> str:
@@ -170,6 +188,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--study", help="keep the three studies here (default: a fresh temp file)")
     ap.add_argument("--only", choices=["thesis", "tuned"])
+    ap.add_argument("--max-recirc", type=float, default=None, metavar="R",
+                    help="wear budget of every search: recirculations per placed part")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "honest.json"))
     args = ap.parse_args(argv)
     t0 = time.monotonic()

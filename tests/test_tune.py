@@ -170,8 +170,10 @@ def test_where_the_scenario_is_not_a_point_of_the_space_the_search_starts_anywhe
         "frame_spacing_mm: 300", "frame_spacing_mm: 20").replace(
         "cell: ../cells/sim.yaml", f"cell: {ROOT / 'cells' / 'sim.yaml'}"))
     lenses = load_scenario(sc)
-    assert start_params(lenses[0], "ours", Limits.of(*lenses)) is None      # below 0.4 x
-    assert start_params(lenses[0], "fixed", Limits.of(*lenses)) is not None
+    for space in ("ours", "watermarks", "fixed"):     # every space searches the spacing
+        assert start_params(lenses[0], space, Limits.of(*lenses)) is None   # below 0.4 x
+    assert start_params(load_scenario(LENSES)[0], "fixed",
+                        Limits.of(*load_scenario(LENSES))) is not None
 
 
 def test_resume_refuses_another_duration(study_file, capsys):
@@ -187,7 +189,7 @@ def test_progress_lines_when_not_a_terminal(tmp_path, capsys):
                  "fixed", "--study", str(tmp_path / "f.db")]) == 0
     err = capsys.readouterr().err
     assert "tune: 1 trials on this process" in err
-    assert "trial 0 [1/1]: " in err and "parts/min" in err and "none belt" in err
+    assert "trial 0 [1/1]: " in err and "parts/min" in err and "none + fifo belt" in err
     assert "(the scenario as written)" in err
 
 
@@ -264,3 +266,45 @@ def test_a_wear_budget_keeps_the_best_within_it(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:                   # argparse's usage line
         main(["tune", LENSES, "--max-recirc", "-1"])
     assert e.value.code == 2 and "--max-recirc" in capsys.readouterr().err
+
+
+def test_baselines_search_every_pick_policy_and_frame_spacing():
+    """Issue 30: a baseline gets every option ours gets but belt control."""
+    import optuna
+
+    from feeder_bt.tuning.space import Limits, suggest
+    sc = load_scenario(LENSES)
+    lim = Limits.of(*sc)
+    for space in ("watermarks", "fixed"):
+        study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=1))
+        seen = set()
+        for _ in range(40):
+            trial = study.ask()
+            overlay = suggest(trial, space, lim)
+            seen.add(overlay["retrieve"]["policy"])
+            assert 0.4 * lim.frame_spacing_mm <= overlay["locate"]["frame_spacing_mm"]
+            study.tell(trial, 0.0)
+        assert seen == {"fifo", "earliest_deadline", "shortest_cycle", "lookahead"}, space
+
+
+def test_a_grid_over_the_fixed_speeds_runs_each_point_once(tmp_path, capsys):
+    """--grid: the fixed space's two speeds (k levels each) by every policy, within the
+    trial budget; a resumed study runs the points not yet run, none twice."""
+    import optuna
+    db = tmp_path / "g.db"
+    run = ["tune", LENSES, "--space", "fixed", "--grid", *TINY, "--workers", "1",
+           "--study", str(db)]
+    assert main([*run, "--trials", "16"]) == 0
+    assert main([*run, "--trials", "20"]) == 0                # the grid is done: no more
+    trials = optuna.load_study(study_name="lenses:fixed:grid",
+                               storage=f"sqlite:///{db}").get_trials()
+    points = [(t.params["belt_mm_s"], t.params["incline_mm_s"], t.params["policy"])
+              for t in trials if t.state.name == "COMPLETE"]
+    assert len(points) == len(set(points)) == 16          # 2 x 2 speeds x 4 policies
+    assert {p[0] for p in points} == {50.0, 400.0}
+    capsys.readouterr()
+    assert main(["tune", LENSES, "--space", "ours", "--grid", "--study",
+                 str(tmp_path / "x.db")]) == 2
+    assert "--grid searches the fixed space" in capsys.readouterr().err
+    assert main([*run, "--trials", "8", "--study", str(tmp_path / "y.db")]) == 2
+    assert "--grid needs --trials 16 at least" in capsys.readouterr().err

@@ -55,6 +55,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--supply", metavar="PLAN.yaml", help="run every trial under this supply "
                    "plan")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    p.add_argument("--grid", action="store_true",
+                   help="with --space fixed: a grid over the two speeds and every pick "
+                        "policy within --trials points, instead of TPE")
     p.add_argument("--max-recirc", type=non_negative, default=None, metavar="R",
                    help="wear budget: a setting may recirculate at most R parts per placed "
                         "part (the mean of its seeds); those over it are never the best")
@@ -96,7 +99,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
                      supply=args.supply, sampler_seed=args.sampler_seed,
-                     max_recirc=args.max_recirc)
+                     max_recirc=args.max_recirc, grid=args.grid)
     wall0 = time.monotonic()
     with ExitStack() as stack:
         executor, capacity, where = _executor(args, stack)

@@ -19,7 +19,7 @@ from typing import Any
 
 from ..errors import FeederError
 from .objective import Job, evaluate
-from .space import Limits, start_params, suggest
+from .space import GRID_MIN_TRIALS, Limits, grid_space, start_params, suggest
 
 INTERRUPTED = "interrupted"
 
@@ -44,6 +44,7 @@ class TuneConfig:
     # wear budget (issue 30): recirculations per placed part a setting may cost; a trial
     # over it is infeasible (TPE's constraints), never the best
     max_recirc: float | None = None
+    grid: bool = False                  # the fixed space as a grid (space.grid_space), not TPE
 
 
 @dataclass
@@ -83,7 +84,7 @@ class InlineExecutor(cf.Executor):
 
 def study_name(cfg: TuneConfig) -> str:
     """One study per scenario, space and supply plan, so one file can hold the baselines."""
-    name = f"{Path(cfg.scenario).stem}:{cfg.space}"
+    name = f"{Path(cfg.scenario).stem}:{cfg.space}" + (":grid" if cfg.grid else "")
     return name + (f":{Path(cfg.supply).stem}" if cfg.supply else "")
 
 
@@ -144,18 +145,34 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     from optuna.trial import TrialState
 
     from ..scenario import load_scenario
+    if cfg.grid and cfg.space != "fixed":
+        raise TuneError(f"--grid searches the fixed space (two speeds), not {cfg.space!r}")
+    if cfg.grid and cfg.trials < GRID_MIN_TRIALS:
+        raise TuneError(f"--grid needs --trials {GRID_MIN_TRIALS} at least (two belt speeds "
+                        f"by two incline speeds by every pick policy), got {cfg.trials}")
     scenario, cell = load_scenario(cfg.scenario, cfg.cell)      # a bad scenario: one line
     limits = Limits.of(scenario, cell)
     study = open_study(cfg)
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         study.tell(t.number, state=TrialState.FAIL)              # left by an interrupted run
-    study.sampler = _sampler(cfg, len(study.trials))
-    if not study.trials:                    # a new study starts from the scenario as written
-        start = start_params(scenario, cfg.space, limits)
-        if start is not None:
-            study.enqueue_trial(start, user_attrs={"start": "scenario"})
     done = len(finished(study))
     todo = max(0, cfg.trials - done)
+    if cfg.grid:        # every point of the grid queued once; a resumed study runs the rest
+        import itertools
+
+        import optuna
+        if not study.trials:
+            grid = grid_space(scenario, limits, cfg.trials)
+            for point in itertools.product(*grid.values()):
+                study.enqueue_trial(dict(zip(grid, point, strict=True)))
+        study.sampler = optuna.samplers.RandomSampler(seed=cfg.sampler_seed)
+        todo = min(todo, len(study.get_trials(deepcopy=False, states=(TrialState.WAITING,))))
+    else:
+        study.sampler = _sampler(cfg, len(study.trials))
+        if not study.trials:                # a new study starts from the scenario as written
+            start = start_params(scenario, cfg.space, limits)
+            if start is not None:
+                study.enqueue_trial(start, user_attrs={"start": "scenario"})
     if on_start:
         complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
         best = max(complete, key=lambda t: t.value, default=None)

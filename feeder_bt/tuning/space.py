@@ -3,13 +3,17 @@
 Bounds come from the cell's axis limits (each conveyor's ``max_mm_s``) and the camera
 window, so no trial asks an axis for more than it can do: incline speeds are sampled in
 mm/s up to the incline's limit and turned into the percentages the scenario takes, divided
-by the highest horizontal speed they go with. Three spaces, each with the same budget:
+by the highest horizontal speed they go with. Three spaces, each with the same budget, and
+each with the frame spacing and the pick policy free (a baseline gets every option ours
+gets but belt control, issue 30):
 
 * ``ours``: adjuster (none, water_marks, supply_queue) and its parameters, belt and
-  incline speeds, frame spacing and pick policy;
-* ``watermarks``: only the thesis's water-mark adjuster's parameters (the baseline tuned
-  for this cell); the scenario's frame spacing and pick policy stay;
-* ``fixed``: only one constant belt and incline speed, no adjuster.
+  incline speeds;
+* ``watermarks``: the thesis's water-mark adjuster's parameters (the baseline tuned for
+  this cell);
+* ``fixed``: one constant belt and incline speed, no adjuster; ``grid_space`` gives it as a
+  grid over the two speeds and the policies, for a search that must not miss a corner of a
+  small space.
 
 A new study's first trial is the scenario as written, where it is a point of the space
 (``start_params``): the search starts from what the cell runs now, so the best it
@@ -99,22 +103,49 @@ def _supply_queue(trial: Any, lim: Limits, prefix: str) -> dict[str, Any]:
             "adjust": {"algorithm": "supply_queue", "params": params}}
 
 
+def _spacing_range(lim: Limits) -> tuple[float, float]:
+    return 0.4 * lim.frame_spacing_mm, 0.95 * lim.frame_spacing_mm
+
+
 def suggest(trial: Any, space: str, lim: Limits) -> dict[str, Any]:
     """Ask ``trial`` (an Optuna trial) for one point of ``space``; the overlay it means."""
     if space == "fixed":
-        return _fixed(trial, lim, "")
-    if space == "watermarks":
-        return _water_marks(trial, lim, "")
-    if space != "ours":
+        overlay = _fixed(trial, lim, "")
+    elif space == "watermarks":
+        overlay = _water_marks(trial, lim, "")
+    elif space == "ours":
+        algorithm = trial.suggest_categorical("adjuster", list(ADJUSTERS))
+        build = {"none": _fixed, "water_marks": _water_marks, "supply_queue": _supply_queue}
+        overlay = build[algorithm](trial, lim, f"{algorithm}.")
+    else:
         raise ValueError(f"unknown search space {space!r} (known: {', '.join(SPACES)})")
-    algorithm = trial.suggest_categorical("adjuster", list(ADJUSTERS))
-    build = {"none": _fixed, "water_marks": _water_marks, "supply_queue": _supply_queue}
-    overlay = build[algorithm](trial, lim, f"{algorithm}.")
     overlay["locate"] = {"frame_spacing_mm": _r(trial.suggest_float(
-        "frame_spacing_mm", 0.4 * lim.frame_spacing_mm, 0.95 * lim.frame_spacing_mm))}
+        "frame_spacing_mm", *_spacing_range(lim)))}
     overlay["retrieve"] = {"policy": trial.suggest_categorical("policy",
                                                                list(RETRIEVE_POLICIES))}
     return overlay
+
+
+#: the smallest grid: two belt speeds by two incline speeds by every policy
+GRID_MIN_TRIALS = 4 * len(RETRIEVE_POLICIES)
+
+
+def grid_space(scenario: Scenario, lim: Limits, trials: int) -> dict[str, list[Any]]:
+    """The ``fixed`` space as a grid within ``trials`` points: ``k`` belt speeds by ``k``
+    incline speeds by every policy, at the scenario's frame spacing (held inside the
+    searched range). A two-speed space is small: a grid cannot miss its corners, where
+    TPE with a small budget may."""
+    policies = list(RETRIEVE_POLICIES)
+    k = max(2, int((trials / len(policies)) ** 0.5))
+    lo, hi = _spacing_range(lim)
+
+    def levels(a: float, b: float) -> list[float]:
+        return [a + (b - a) * i / (k - 1) for i in range(k)]
+
+    return {"belt_mm_s": levels(MIN_BELT_MM_S, lim.horizontal_mm_s),
+            "incline_mm_s": levels(MIN_INCLINE_MM_S, lim.incline_mm_s),
+            "frame_spacing_mm": [min(max(scenario.locate.frame_spacing_mm, lo), hi)],
+            "policy": policies}
 
 
 class _Check:
@@ -165,8 +196,9 @@ def _scenario_params(scenario: Scenario, space: str, lim: Limits) -> dict[str, A
     else:
         return None
     if space == "ours":
-        out.update(adjuster=algorithm, frame_spacing_mm=scenario.locate.frame_spacing_mm,
-                   policy=scenario.retrieve.policy)
+        out["adjuster"] = algorithm
+    out.update(frame_spacing_mm=scenario.locate.frame_spacing_mm,
+               policy=scenario.retrieve.policy)
     return out
 
 
