@@ -170,22 +170,30 @@ class PixelGrid:
         vs = np.arange(-2 * step, h + 2 * step + 1, step, dtype=float)
         self._origin = np.array([us[0], vs[0]])
         self._n = np.array([len(us) - 2, len(vs) - 2])       # last cell index, u and v
-        self._nu = len(us)
         uu, vv = np.meshgrid(us, vs)
         xy, scale = calibration.px_to_mm_scale(np.column_stack([uu.ravel(), vv.ravel()]))
-        self._table = np.column_stack([xy, scale])            # (nodes, 3), row-major in v
+        t = np.column_stack([xy, scale]).reshape(len(vs), len(us), 3)
+        a, b, c, d = t[:-1, :-1], t[:-1, 1:], t[1:, :-1], t[1:, 1:]
+        # per cell, the bilinear form's coefficients of 1, fu, fv and fu·fv: one gather
+        # and one product a point
+        cells = np.stack([a, b - a, c - a, a - b - c + d], axis=2)    # (nv-1, nu-1, 4, 3)
+        self._cells = np.ascontiguousarray(cells.reshape(-1, 4, 3))
+        self._stride = np.array([1, len(us) - 1], dtype=np.intp)
+        self._inv = 1.0 / step
 
     def px_to_mm_scale(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, 2)`` pixels -> belt mm ``(N, 2)`` and mm per px ``(N,)`` (as
         ``Calibration.px_to_mm_scale``; points off the table are extrapolated linearly)."""
-        g = (np.asarray(uv, dtype=float).reshape(-1, 2) - self._origin) / self.step
-        cell = np.clip(np.floor(g), 0, self._n).astype(np.intp)
-        f = g - cell
-        at = cell[:, 1] * self._nu + cell[:, 0]
-        t = self._table
-        a, b, c, d = t[at], t[at + 1], t[at + self._nu], t[at + self._nu + 1]
-        fu, fv = f[:, :1], f[:, 1:]
-        out = a + fu * (b - a) + fv * (c - a) + (fu * fv) * (a - b - c + d)
+        g = np.asarray(uv, dtype=float).reshape(-1, 2) - self._origin
+        g *= self._inv
+        cell = np.floor(g).astype(np.intp)
+        np.maximum(cell, 0, out=cell)
+        np.minimum(cell, self._n, out=cell)
+        w = np.empty((len(g), 1, 4))
+        w[:, 0, 0] = 1.0
+        w[:, 0, 1:3] = g - cell                                   # fu, fv
+        w[:, 0, 3] = w[:, 0, 1] * w[:, 0, 2]
+        out = np.matmul(w, self._cells[cell @ self._stride])[:, 0]
         return out[:, :2], out[:, 2]
 
     def px_to_mm(self, uv: np.ndarray) -> np.ndarray:
