@@ -25,8 +25,8 @@ PLACE = P.command("motion", "PLACE")
 # ---------------------------------------------------------------------------- requests
 def test_encode_request_formats_numbers_and_flags():
     line = P.encode_request("motion", "PICK", 17, 812.4, 301.5, -33.25, 8012345, True,
-                            0.0, 0.0, 1.5)
-    assert line == "PICK 17 812.4 301.5 -33.25 8012345 1 0 0 1.5\n"
+                            0.0, 0.0, 1.5, 90.0)
+    assert line == "PICK 17 812.4 301.5 -33.25 8012345 1 0 0 1.5 90\n"
     assert P.encode_request("motion", "SAFE") == "SAFE\n"
     assert P.encode_request("io", "SET", 2, False) == "SET 2 0\n"
     assert P.encode_request("motion", "SPEED", -0.0001) == "SPEED 0\n"
@@ -258,9 +258,9 @@ def test_garbage_reply_raises_protocol_error_and_the_client_resyncs(server):
     link = LineSocket("motion", "127.0.0.1", srv.port, timeout_s=2.0)
     try:
         with pytest.raises(ProtocolError, match="expected 2 values"):
-            link.request("motion", "PICK", 17, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0)
+            link.request("motion", "PICK", 17, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0, 0.0)
         assert not link.connected                    # dropped: can't trust the stream
-        values = link.request("motion", "PICK", 18, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0)
+        values = link.request("motion", "PICK", 18, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0, 0.0)
         assert P.decode_pick(values) == (18, 900.5)
         assert srv.connections == 2
     finally:

@@ -365,22 +365,26 @@ def test_splitting_touching_parts_offers_more_and_none_wrong():
     assert after[1] > before[1] and after[2] == before[2] == 0
 
 
-def test_the_faces_local_mapping_is_the_lens_mapping_over_a_part():
-    """``Locator._to_mm_near`` (the faces' points through the mapping's expansion at each
-    blob's centroid) against the exact mapping, on the simulated cell's lens and tilt,
-    over a 60-px part anywhere in the window: within 0.02 mm."""
+def test_the_locators_pixel_table_is_the_lens_mapping():
+    """``Locator._mapping`` (the calibration's ``PixelGrid``: the exact mapping every 4 px,
+    read bilinearly) against the exact mapping, on the simulated cell's lens and tilt, at
+    points anywhere in the window and half a pixel beyond it: positions within 0.001 mm,
+    local scales within 1e-5."""
     import numpy as np
 
     from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.vision.calibration import Calibration, PixelGrid
     from feeder_bt.vision.locator import Locator
     sc, cell = load_scenario(ROOT / "scenarios" / "squares.yaml")
     cal = Calibration(cell.camera.calibration)
     assert not cal.linear                       # the cell has a lens model
     loc = Locator(sc.vision, sc.parts, cal)
+    shape = (cell.camera.height_px, cell.camera.width_px)
+    grid = loc._mapping(shape)
+    assert isinstance(grid, PixelGrid) and loc._mapping(shape) is grid    # built once
     rng = np.random.default_rng(3)
-    centres = [(40.0, 40.0), (600.0, 440.0), (320.0, 242.0), (600.0, 40.0)]
-    pts = np.concatenate([c + rng.uniform(-30, 30, (200, 2)) for c in centres])
-    near = loc._to_mm_near(pts, [200] * 4, centres)
-    exact = cal.px_to_mm(pts)
-    assert np.abs(near - exact).max() < 0.02
+    pts = rng.uniform([-0.5, -0.5], [shape[1] - 0.5, shape[0] - 0.5], (4000, 2))
+    near, scale = grid.px_to_mm_scale(pts)
+    exact, exact_scale = cal.px_to_mm_scale(pts)
+    assert np.abs(near - exact).max() < 0.001
+    assert np.abs(scale / exact_scale - 1).max() < 1e-5

@@ -141,6 +141,9 @@ class CellPanel:
             "located": s.counts["located"],
             "missed": s.counts["missed"],
             "too_far": s.counts["too_far"],
+            # parts placed turned or face-down: only a simulated cell can know (its world's
+            # count, as in ``feeder report``); None on a real cell
+            "misoriented": self._misoriented(),
             # faults (recovered so far) and misses apart: vocabulary.py
             "faults": sum(split(s.faults)[0].values()),
             "recovered": sum(s.recoveries.values()),
@@ -156,6 +159,12 @@ class CellPanel:
             "tree": tree_text(tree, "unicode") if tree is not None else "",
         }
         return status, tuple(self._history), tuple(self._messages)
+
+    def _misoriented(self) -> int | None:
+        """The simulated world's count of parts placed misoriented (``report.parts``)."""
+        world = getattr(self.cell.hal, "world", None)
+        counts = getattr(world, "counts", None)
+        return int(counts["misoriented"]) if counts is not None else None
 
     def _hal_speeds(self) -> dict[str, float | None]:
         """What the conveyors' controller reports (mm/s), not what the trees asked for."""

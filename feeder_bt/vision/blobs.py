@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from ..geometry import wrap_deg
-from .calibration import Calibration
+from .calibration import Calibration, PixelGrid
 from .chains import _boundary_steps, _full_chain, _smooth_length
 from .corners import _CornerSignature
 from .features import GROUP_OF
@@ -69,13 +69,15 @@ class Blob:
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
                min_area_mm2: float, full: bool = True,
-               holes: list[list[np.ndarray]] | None = None) -> list[Blob]:
+               holes: list[list[np.ndarray]] | None = None,
+               mapping: Calibration | PixelGrid | None = None) -> list[Blob]:
     """The contours worth reporting (not specks), measured as far as every blob is: area,
     centroid (mm), the border and size rules (``reason`` "touches border", "too small").
 
     ``shape``: the frame's (height, width). ``full``: the contours have every boundary
     pixel (else only the chain's corners). ``holes``: each contour's hole contours, if they
-    were looked for. The centroids go to mm in one call.
+    were looked for. The centroids go to mm in one call, through ``mapping`` (the
+    calibration's ``PixelGrid`` for this image size; default the calibration itself).
     """
     h, w = shape
     s2 = calibration.mm2_per_px2
@@ -109,7 +111,7 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         b.det.features["area_mm2"] = area = b.area_px * s2
         if not b.det.reason and area < min_area_mm2:
             b.det.reason = "too small"
-    xy, scales = calibration.px_to_mm_scale(np.array(centres))
+    xy, scales = (mapping or calibration).px_to_mm_scale(np.array(centres))
     for b, (x, y) in zip(blobs, xy.tolist(), strict=True):
         b.det.x_mm, b.det.y_mm = x, y
     if not calibration.linear:
@@ -193,8 +195,9 @@ def hull(b: Blob) -> np.ndarray:
     return b.hull
 
 
-def contour_mm(b: Blob, calibration: Calibration) -> np.ndarray:
-    """The pixel contour mapped to belt mm (float32), for angles."""
+def contour_mm(b: Blob, calibration: Calibration | PixelGrid) -> np.ndarray:
+    """The pixel contour mapped to belt mm (float32), for angles (through the calibration
+    or its ``PixelGrid``)."""
     return calibration.px_to_mm(b.contour.reshape(-1, 2)).astype(np.float32)
 
 

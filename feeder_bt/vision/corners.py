@@ -48,9 +48,10 @@ _CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's co
 _CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
 
 
-def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | None]:
+def _corner_signatures(outlines: list[np.ndarray], hulled: bool = False
+                       ) -> list[_CornerSignature | None]:
     """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
-    (at least one point each).
+    (at least one point each); ``hulled``: each is already its convex hull's vertices.
 
     The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
     from the outline is the cut one; the cut is longer along one side than the other,
@@ -59,7 +60,7 @@ def _corner_signatures(outlines: list[np.ndarray]) -> list[_CornerSignature | No
     and all the hulls go through one set of array operations on complex numbers (numpy's
     per-call cost dominates when done one by one).
     """
-    hulls = [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
+    hulls = outlines if hulled else [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
     rects = [cv2.minAreaRect(hl) for hl in hulls]
     n = len(hulls)
     counts = [len(hl) for hl in hulls]

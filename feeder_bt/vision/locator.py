@@ -58,7 +58,7 @@ from .blobs import (
     measure_feature,
     principal_angle,
 )
-from .calibration import Calibration
+from .calibration import Calibration, PixelGrid
 from .clearance import offer_grips
 from .corners import _corner_signatures, _CornerSignature, _cut_corner, _orient, _part_signature
 from .features import FEATURES, GROUP_OF
@@ -127,6 +127,7 @@ class Locator(Segmenter):
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
+        self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
         super().__init__(recipe)       # the segmentation, once the classes are known good
 
     # -------------------------------------------------------------- locate
@@ -187,7 +188,8 @@ class Locator(Segmenter):
             pieces = split_blob(b)
             new = find_blobs([c for c, _ in pieces], img.shape[:2], self.calibration,
                              self.recipe.min_area_mm2, full=True,
-                             holes=[hs for _, hs in pieces]) if pieces else []
+                             holes=[hs for _, hs in pieces],
+                             mapping=self._mapping(img.shape[:2])) if pieces else []
             waiting = [p for p in new if not p.det.reason and not self._classify(p)]
             if waiting:
                 self._faces(waiting, img, diff, level)
@@ -207,15 +209,16 @@ class Locator(Segmenter):
                full: bool = True, holes: list[list[np.ndarray]] | None = None) -> list[Blob]:
         """The contours worth reporting, measured as far as every blob is (``find_blobs``);
         with ``all_features`` every feature of every blob, the rejected ones too."""
+        mapping = self._mapping(shape)
         blobs = find_blobs(contours, shape, self.calibration, self.recipe.min_area_mm2,
-                           full=full, holes=holes)
+                           full=full, holes=holes, mapping=mapping)
         if all_features:
             for b in blobs:
                 for name in FEATURES:
                     self._feature(b, name)
         if self.recipe.orientation == "principal_axis":
             for b in blobs:            # as before the cascade: the rejected ones' too
-                b.det.angle_deg = principal_angle(cv2.moments(contour_mm(b, self.calibration)))
+                b.det.angle_deg = principal_angle(cv2.moments(contour_mm(b, mapping)))
         return blobs
 
     def _feature(self, b: Blob, name: str) -> float:
@@ -238,37 +241,34 @@ class Locator(Segmenter):
         """Measure each blob's cut-corner signature (``Blob.face``) on its outline to a
         fraction of a pixel (``Segmenter._edge_points``), all of a frame's blobs at once."""
         pts, counts = self._edge_points([b.contour for b in blobs], img, diff, level)
+        # The signature reads only the outline's convex hull, and over a part the
+        # mapping is affine to a few hundredths of a mm: the hull of the mapped points is
+        # the mapped hull. So only the hull's vertices (a tenth of the edge points) go
+        # through the mapping.
+        pts = pts.astype(np.float32)
         ends = np.cumsum(counts).tolist()
-        xy = self._to_mm_near(pts, counts, [(b.det.u_px, b.det.v_px) for b in blobs])
-        sigs = _corner_signatures([xy[e - n:e] for e, n in zip(ends, counts, strict=True)])
+        hulls = [cv2.convexHull(pts[e - n:e]).reshape(-1, 2)
+                 for e, n in zip(ends, counts, strict=True)]
+        counts = [len(hl) for hl in hulls]
+        ends = np.cumsum(counts).tolist()
+        xy = self._mapping(img.shape[:2]).px_to_mm(
+            np.concatenate(hulls).astype(np.float64)).astype(np.float32)
+        sigs = _corner_signatures([xy[e - n:e] for e, n in zip(ends, counts, strict=True)],
+                                  hulled=True)
         for b, sig in zip(blobs, sigs, strict=True):
             b.face, b.faced = sig, True
 
-    def _to_mm_near(self, pts: np.ndarray, counts: list[int],
-                    centres: list[tuple[float, float]]) -> np.ndarray:
-        """``pts`` (px; ``counts`` of them per blob) to belt mm, float32. Through a lens
-        each blob's points go through the mapping's second-order expansion at the blob's
-        centroid (six points mapped per blob): over a part's few dozen pixels it is the
-        mapping to about 0.01 mm (tests/test_parts_model.py), and it spares undistorting
-        thousands of edge points one by one (the iterative inverse of the lens model was
-        the largest cost of a face, benchmarks/vision_bench.py)."""
+    def _mapping(self, shape: tuple[int, int]) -> Calibration | PixelGrid:
+        """Where this image size's pixels are mapped to mm: the calibration itself when it
+        is a similarity (a matrix product), else its ``PixelGrid`` for the size (built on
+        the first frame of that size; two threads may both build it, harmlessly)."""
         cal = self.calibration
         if cal.linear:
-            return cal.px_to_mm(pts).astype(np.float32)
-        c = np.asarray(centres, dtype=float).reshape(-1, 2)
-        h = 16.0                                         # central differences, +-h px
-        p = cal.px_to_mm(np.vstack([c, c + [h, 0.0], c - [h, 0.0], c + [0.0, h],
-                                    c - [0.0, h], c + [h, h]])).reshape(6, -1, 2)
-        ju, jv = (p[1] - p[2]) / (2 * h), (p[3] - p[4]) / (2 * h)   # first derivatives
-        huu = (p[1] - 2 * p[0] + p[2]) / (h * h)                     # and second
-        hvv = (p[3] - 2 * p[0] + p[4]) / (h * h)
-        huv = (p[5] - p[1] - p[3] + p[0]) / (h * h)
-        k = np.repeat(np.arange(len(counts)), counts)
-        d = pts - c[k]
-        du, dv = d[:, :1], d[:, 1:]
-        out = (p[0][k] + du * ju[k] + dv * jv[k]
-               + 0.5 * du * du * huu[k] + 0.5 * dv * dv * hvv[k] + du * dv * huv[k])
-        return out.astype(np.float32)
+            return cal
+        grid = self._grids.get(shape)
+        if grid is None:
+            grid = self._grids[shape] = PixelGrid(cal, tuple(shape))
+        return grid
 
     def _classify(self, b: Blob) -> bool:
         """First class whose ranges (and face, for chiral parts) fit; else a reason. False

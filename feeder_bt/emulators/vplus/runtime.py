@@ -197,9 +197,15 @@ class Runtime:
                 if z > GRIP_Z_MM:
                     world.counts["grip_empty"] += 1
                     return
+                # the tool stands at the part's angle plus the PICK's grip turn
+                # (motion_server.v2 ``pick.grip``): the world judges the footprint at
+                # the tool's turn and the held part's angle from the part's (as the
+                # simulated robot's PickTarget has them)
+                cell = self.globals.get("pick.grip")
+                grip = float(cell.v) if cell is not None and cell.v is not None else 0.0
                 try:
-                    world.grip(PickTarget(part_id=0, x_mm=x, y_mm=y, angle_deg=r, latch=0,
-                                          tracking=False), t)
+                    world.grip(PickTarget(part_id=0, x_mm=x, y_mm=y, angle_deg=r - grip,
+                                          latch=0, tracking=False, grip_deg=grip), t)
                 except HalError as e:
                     self.log(f"vacuum: {e}")
             elif world.gripper is not None:

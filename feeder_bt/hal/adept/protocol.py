@@ -63,7 +63,7 @@ class Message:
 COMMANDS: dict[str, tuple[Command, ...]] = {
     "motion": (
         Command("HELLO", (), ("version", "server")),
-        Command("PICK", ("id", "x", "y", "angle", "latch", "tracking", "ox", "oy", "oz"), ("id", "x_mm"), motion=True),
+        Command("PICK", ("id", "x", "y", "angle", "latch", "tracking", "ox", "oy", "oz", "grip"), ("id", "x_mm"), motion=True),
         Command("PLACE", ("x", "y", "z", "rz"), (), motion=True),
         Command("MOVE", ("x", "y", "z", "rz"), (), motion=True),
         Command("SAFE", (), (), motion=True),

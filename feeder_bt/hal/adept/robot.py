@@ -120,10 +120,13 @@ class AdeptRobot:
         def run() -> PickResult:
             latch = protocol.wrap_robot(int(target.latch) * self.belt_sign)  # its own count
             try:
+                # grip: the tool's turn from the part's angle at the grip
+                # (``PickTarget.grip_deg``); the controller keeps it for the PLACE
                 values = self._call("PICK", int(target.part_id), float(target.x_mm),
                                     float(target.y_mm), float(target.angle_deg),
                                     latch, bool(target.tracking),
-                                    float(ox), float(oy), float(oz))
+                                    float(ox), float(oy), float(oz),
+                                    float(target.grip_deg))
             except MissedGrab:
                 self._holding = False
                 raise

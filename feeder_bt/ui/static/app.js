@@ -167,6 +167,7 @@ function renderStatus(st) {
   $("st-up").textContent = fmtDuration(st.up_time_s);
   $("st-queue").textContent = String(st.queue);
   $("st-counts").textContent = `${st.located} / ${st.missed} / ${st.too_far}`;
+  $("st-misoriented").textContent = st.misoriented == null ? "-" : String(st.misoriented);
   const sp = st.speeds || {};
   $("st-speeds").textContent = `horizontal ${fmt(sp.horizontal_mm_s)} mm/s, inclined ` +
     `${fmt(sp.incline_pct)} %, robot ${fmt(sp.robot_speed_pct)} %`;
