@@ -221,7 +221,19 @@ def summary(report: dict) -> str:
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
             + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
                if p.get("recirculated_per_placed") is not None else "")
-            + _ceiling_line(report) + _robots_line(report) + "\n" + story_text(report))
+            + _ceiling_line(report) + _kits_line(report) + _robots_line(report) + "\n"
+            + story_text(report))
+
+
+def _kits_line(report: dict) -> str:
+    """Kits (retrieve.kit or sequence): how many, how fast, against the kit ceiling."""
+    k = report.get("kits")
+    if not k:
+        return ""
+    kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items())
+    of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"
+          if k.get("of_ceiling_pct") is not None else "")
+    return f"\n  kits {k['completed']} ({kit}): {k['per_minute']:.1f} kits/min{of}"
 
 
 def _robots_line(report: dict) -> str:

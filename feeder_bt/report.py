@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .cell import Cell
+from .kits import kits_report
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
 from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm
@@ -72,7 +73,8 @@ def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds
 
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
                  feed_seconds: float, wall_seconds: float, interrupted: bool = False,
-                 inflow: Inflow | None = None) -> dict[str, Any]:
+                 inflow: Inflow | None = None,
+                 inflow_by_type: dict[str, Inflow] | None = None) -> dict[str, Any]:
     s = cell.stats
     retrieved = {name: s.retrieved.get(name, 0) for name in (cell.scenario.parts if cell.scenario
                                                             else {})}
@@ -137,6 +139,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                    "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell),
                    "gripper_blocked": s.counts["gripper_blocked"]},
     }
+    if s.kit is not None:                 # kits (thesis 8.2.1.5): how many, how fast, bounds
+        report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
+                                     inflow_by_type, sim_seconds)
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
         report["robot_model"] = fit.summary()

@@ -463,7 +463,9 @@ class _Run:
                               feed_seconds=self.feed_seconds(),
                               wall_seconds=time.monotonic() - self.wall0,
                               interrupted=self.interrupted,
-                              inflow=self.supply.inflow() if self.supply is not None else None)
+                              inflow=self.supply.inflow() if self.supply is not None else None,
+                              inflow_by_type=(self.supply.inflow_by_type()
+                                              if self.supply is not None else None))
         report["speeds"] = final_speeds()
         if self.injector is not None:
             report["injected"] = dict(self.injector.injected)

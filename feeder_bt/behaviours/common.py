@@ -60,6 +60,10 @@ class Stats:
         self.drift: dict[str, Any] = {}
         #: picks that failed (missed, out of reach) since the last part placed, by type
         self.failed_picks_in_a_row: Counter[str] = Counter()
+        #: the kit being built (kits.py; None: no kit), and each type's located parts
+        #: whose path met the reach (the kit's supply bound)
+        self.kit: Any = None
+        self.in_reach_by_type: Counter[str] = Counter()
 
     def count(self, key: str, n: int = 1) -> None:
         self.counts[key] += n

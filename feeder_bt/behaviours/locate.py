@@ -147,6 +147,7 @@ class Enqueue(Leaf):
                 stats.count("located")
                 if self.reach.crosses(part.x_mm, part.y_mm, part.type):
                     stats.count("located_in_reach")
+                    stats.in_reach_by_type[part.type] += 1
                 new += 1
                 stats.emit(frame.t, "located", id=part.id, type=part.type,
                            x_mm=round(part.x_mm, 1), y_mm=round(part.y_mm, 1))

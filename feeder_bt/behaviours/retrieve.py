@@ -14,6 +14,7 @@ from ..errors import HalError, UnknownPart
 from ..geometry import wrap_deg
 from ..hal.interfaces import Held, PickTarget, Pose
 from ..jobs import Job
+from ..kits import KitTracker
 from ..parts import Part
 from ..robot_fit import Timing, robot_fit
 from .common import Ctx, JobLeaf, Leaf, client
@@ -35,8 +36,11 @@ class NextPart(Leaf):
         self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/robot_speed_pct"),
                          write=("/retrieve/part", "/retrieve/error"))
         self.policy = POLICIES[ctx.scenario.retrieve.policy](ctx)
-        self.seq = list(ctx.scenario.retrieve.sequence)
-        self.seq_i = 0
+        kit = KitTracker.of(ctx.scenario.retrieve)
+        stats = ctx.stats
+        if kit is None or stats.kit is None or stats.kit.counts != kit.counts \
+                or stats.kit.order != kit.order:
+            stats.kit = kit                 # kept across a restart: the kit half built
 
     def x_now(self, part: Part) -> float:
         return belt_x_now(self.ctx, part)
@@ -53,13 +57,14 @@ class NextPart(Leaf):
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:
             self.ctx.stats.count("too_far", len(gone))
-        wanted = self.seq[self.seq_i % len(self.seq)] if self.seq else None
-        parts = [p for p in queue.peek_all() if wanted is None or p.type == wanted]
+        kit = self.ctx.stats.kit
+        wanted = kit.wanted() if kit is not None else None
+        parts = [p for p in queue.peek_all() if wanted is None or p.type in wanted]
         part = self.policy.choose(parts, self.x_now)
         if part is None or not queue.remove(part.id):
-            self.feedback_message = f"waiting for a {wanted or 'part'}"
+            self.feedback_message = (f"waiting for a {' or '.join(sorted(wanted))}"
+                                     if wanted else "waiting for a part")
             return Status.RUNNING
-        self.seq_i += 1
         self.bb.set("/retrieve/part", part)
         self.bb.set("/retrieve/error", None)
         self.feedback_message = f"part {part.id} ({part.type})"
@@ -99,6 +104,9 @@ def count_retrieved(ctx: Ctx, part: Part, **data: object) -> None:
     stats.failed_picks_in_a_row[part.type] = 0
     stats.count("retrieved")
     stats.emit(ctx.now(), "retrieved", id=part.id, type=part.type, **data)
+    if stats.kit is not None and stats.kit.placed(part.type):
+        stats.count("kits")
+        stats.emit(ctx.now(), "kit", number=stats.kit.completed)
 
 
 class PartJob(JobLeaf):

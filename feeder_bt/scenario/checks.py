@@ -126,6 +126,15 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
         if name not in sc.parts:
             ctx.add_problem(f"retrieve.sequence[{i}]", f"unknown part {name!r}"
                                                        f"{_suggest(name, sc.parts)}")
+    for name, n in sc.retrieve.kit.items():
+        if name not in sc.parts:
+            ctx.add_problem(f"retrieve.kit.{name}", f"unknown part {name!r}"
+                                                    f"{_suggest(name, sc.parts)}")
+        elif not isinstance(n, int) or isinstance(n, bool) or n < 1:
+            ctx.add_problem(f"retrieve.kit.{name}", f"must be a whole number >= 1, got {n!r}")
+    if sc.retrieve.kit and sc.retrieve.sequence:
+        ctx.add_problem("retrieve.kit", "give a kit (any order) or a sequence (a kit in "
+                                        "order), not both")
     ctx.adjust_params = _check_adjust(sc.adjust, ctx)
 
 

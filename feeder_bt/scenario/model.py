@@ -178,7 +178,10 @@ class RetrieveParams:
     tracking: bool = True
     too_far_mm: float = 1190.0
     reach_time_s: float = 0.35           # expected time from decision to grip, for too_far
-    sequence: list[str] = field(default_factory=list)   # optional part-type order
+    sequence: list[str] = field(default_factory=list)   # optional part-type order (a kit in order)
+    # a kit (thesis 8.2.1.5): part types and how many of each, placed in any order; the
+    # retrieve tree takes what the kit lacks next and the report counts kits (kits.py)
+    kit: dict[str, int] = field(default_factory=dict)
     leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the pick step
     # price picks with the robot model fitted online from measured move times
     # (feeder_bt/robot_fit.py); false: with the cell's nominal model (the fit is still reported)

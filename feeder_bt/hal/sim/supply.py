@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
@@ -58,6 +59,9 @@ class SupplyDriver:
         self.totes = 0
         self.initial = world.total
         self.arrivals: list[tuple[float, int]] = []     # (s into the run, parts): each tote
+        # the same by part type (a kit's inflow bound, kits.py)
+        self.initial_by_type = dict(Counter(p.type for p in world.parts.values()))
+        self.arrivals_by_type: list[tuple[float, dict[str, int]]] = []
         self.t0 = world.now()
         world.ship_placed = plan.ship_placed
         if plan.totes is not None:
@@ -97,6 +101,7 @@ class SupplyDriver:
         self.world.add_parts(order)
         self.totes += 1
         self.arrivals.append((t - self.t0, len(order)))
+        self.arrivals_by_type.append((t - self.t0, counts))
         what = ", ".join(f"{n} {k}" for k, n in sorted(counts.items()) if n)
         self._note(t, "tote", f"tote {self.totes}: {what} into the hopper "
                               f"({len(self.world.hopper)} there now)")
@@ -131,6 +136,15 @@ class SupplyDriver:
         report's inflow bound (``feeder_bt.supply_bound``); ``None`` when they go back to
         the hopper (then nothing bounds what enters)."""
         return (self.initial, list(self.arrivals)) if self.plan.ship_placed else None
+
+    def inflow_by_type(self) -> dict[str, tuple[int, list[tuple[float, int]]]] | None:
+        """``inflow`` for each part type."""
+        if not self.plan.ship_placed:
+            return None
+        types = set(self.initial_by_type) | {t for _, c in self.arrivals_by_type for t in c}
+        return {t: (self.initial_by_type.get(t, 0),
+                    [(s, c[t]) for s, c in self.arrivals_by_type if c.get(t)])
+                for t in types}
 
     def report(self) -> dict[str, Any]:
         w = self.world

@@ -1,0 +1,91 @@
+"""Kits (thesis 8.2.1.5: "an assembly sequence might specify that first a washer be
+retrieved and then a nut"): the parts of one kit, by type and count, placed in any order
+(``retrieve.kit``) or in a fixed one (``retrieve.sequence``).
+
+The kit advances when a part is *placed*, not when it is chosen: a missed pick leaves the
+kit still wanting that part, so an assembly never goes without its washer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Sequence
+
+from .scenario.model import RetrieveParams
+from .supply_bound import inflow_bound_parts
+
+
+class KitTracker:
+    """What the kit being built still needs, from the parts placed so far."""
+
+    def __init__(self, counts: dict[str, int], order: Sequence[str] = ()) -> None:
+        self.counts = dict(counts)
+        self.order = list(order)
+        self.size = sum(self.counts.values())
+        self.have: Counter[str] = Counter()
+        self.completed = 0
+
+    @classmethod
+    def of(cls, retrieve: RetrieveParams) -> KitTracker | None:
+        """The scenario's kit (a ``sequence`` is a kit in order); None without one."""
+        if retrieve.sequence:
+            return cls(Counter(retrieve.sequence), retrieve.sequence)
+        if retrieve.kit:
+            return cls(retrieve.kit)
+        return None
+
+    def wanted(self) -> set[str]:
+        """The part types the kit takes next: in order, the next one; else any it lacks."""
+        if self.order:
+            return {self.order[sum(self.have.values())]}
+        return {t for t, n in self.counts.items() if self.have[t] < n}
+
+    def placed(self, ptype: str) -> bool:
+        """A part of ``ptype`` was placed; True when it completed a kit. A part the kit
+        did not want (one held from before a restart) is not counted into it."""
+        if ptype not in self.wanted():
+            return False
+        self.have[ptype] += 1
+        if sum(self.have.values()) < self.size:
+            return False
+        self.have.clear()
+        self.completed += 1
+        return True
+
+    def describe(self) -> str:
+        parts = " + ".join(f"{n} {t}" for t, n in self.counts.items())
+        return parts + (f" in order {', '.join(self.order)}" if self.order else "")
+
+
+def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: float,
+               robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
+               span_s: float) -> dict[str, float]:
+    """Kits per minute no feeder could beat: the robot's (``robot_ppm`` over the parts a
+    kit holds), the supply's (each type's parts that came within reach, over the kit's
+    count of it) and, when placed parts leave the cell, the inflow's (each type's arrival
+    curve met by the robot, over the kit's count)."""
+    if feed_seconds <= 0:
+        return {}
+    per_min = 60.0 / feed_seconds
+    out = {"robot_bound_kpm": robot_ppm / sum(counts.values()),
+           "supply_bound_kpm": min(in_reach.get(t, 0) * per_min / n for t, n in counts.items())}
+    if inflow is not None:
+        out["inflow_bound_kpm"] = min(
+            inflow_bound_parts(*inflow.get(t, (0, [])), robot_ppm, span_s) * per_min / n
+            for t, n in counts.items())
+    out = {k: round(v, 3) for k, v in out.items()}
+    out["ceiling_kpm"] = min(out.values())
+    return out
+
+
+def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: float,
+                robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
+                span_s: float) -> dict[str, object]:
+    """The report's ``kits``: the kit, how many were completed and how fast, its bounds."""
+    kpm = tracker.completed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
+    bounds = kit_bounds(tracker.counts, in_reach, feed_seconds, robot_ppm, inflow, span_s)
+    ceil = bounds.get("ceiling_kpm", math.inf)
+    return {"kit": tracker.counts, "order": tracker.order or "any",
+            "completed": tracker.completed, "per_minute": round(kpm, 3), **bounds,
+            "of_ceiling_pct": round(100.0 * kpm / ceil, 1) if 0 < ceil < math.inf else None}

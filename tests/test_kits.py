@@ -1,0 +1,91 @@
+"""Kits (issue 30, thesis 8.2.1.5): the retrieve tree takes the part types the kit being
+built still lacks; a kit advances when a part is placed, never when one is only chosen;
+the report counts kits and bounds them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from feeder_bt.cli import main, summary
+from feeder_bt.kits import KitTracker, kit_bounds
+from feeder_bt.run import RunOptions, run_job
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_kit_in_any_order_wants_what_it_lacks():
+    kit = KitTracker({"square": 1, "lens": 3})
+    assert kit.wanted() == {"square", "lens"}
+    assert kit.placed("lens") is False and kit.placed("lens") is False
+    assert kit.placed("lens") is False and kit.wanted() == {"square"}
+    assert kit.placed("lens") is False and kit.have["lens"] == 3    # not wanted: not counted
+    assert kit.placed("square") is True and kit.completed == 1
+    assert kit.wanted() == {"square", "lens"}                       # the next kit
+
+
+def test_a_sequence_is_a_kit_in_order_and_waits_for_its_part():
+    kit = KitTracker({"washer": 1, "nut": 1}, ["washer", "nut"])
+    assert kit.wanted() == {"washer"}
+    assert kit.placed("nut") is False and kit.wanted() == {"washer"}  # a nut out of turn
+    # a missed washer pick places nothing: the kit still wants the washer
+    assert kit.wanted() == {"washer"}
+    assert kit.placed("washer") is False and kit.wanted() == {"nut"}
+    assert kit.placed("nut") is True and kit.completed == 1
+
+
+def test_kit_bounds_are_the_lowest_of_robot_supply_and_inflow():
+    b = kit_bounds({"square": 1, "lens": 3}, {"square": 30, "lens": 300}, 60.0, 100.0,
+                   {"square": (10, [(30.0, 5)]), "lens": (100, [])}, 60.0)
+    assert b["robot_bound_kpm"] == 25.0                   # 100 parts/min over 4 a kit
+    assert b["supply_bound_kpm"] == 30.0                  # squares: 30 in reach, 1 a kit
+    assert b["inflow_bound_kpm"] == pytest.approx(15.0)   # 15 squares came in all
+    assert b["ceiling_kpm"] == min(b["robot_bound_kpm"], b["supply_bound_kpm"],
+                                   b["inflow_bound_kpm"])
+
+
+def kit_scenario(tmp_path: Path, kit: str) -> Path:
+    text = (ROOT / "scenarios" / "lenses_and_squares.yaml").read_text()
+    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
+    old = "  too_far_mm: 1190\n"
+    assert old in text
+    p = tmp_path / "kits.yaml"
+    p.write_text(text.replace(old, old + f"  kit: {kit}\n", 1))
+    return p
+
+
+def test_a_run_builds_kits_in_their_proportions(tmp_path):
+    r = run_job(RunOptions(scenario=str(kit_scenario(tmp_path, "{square: 1, lens: 3}")),
+                           duration=600.0, fast=True, seed=2, view="none", db=None,
+                           supply=str(ROOT / "supply" / "mix_drift.yaml")))
+    k, got = r["kits"], r["parts"]["retrieved"]
+    assert k["completed"] > 50 and r["parts"]["lost"] == 0
+    # every placed part went into a kit: the last one may be half built
+    assert k["completed"] <= got["square"] <= k["completed"] + 1
+    assert 3 * k["completed"] <= got["lens"] <= 3 * k["completed"] + 3
+    assert k["per_minute"] == pytest.approx(k["completed"] / 10.0, abs=1e-3)
+    assert 0 < k["per_minute"] <= k["ceiling_kpm"] and "inflow_bound_kpm" in k
+    assert f"kits {k['completed']} (1 square + 3 lens)" in summary(r)
+    free = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "lenses_and_squares.yaml"),
+                              duration=600.0, fast=True, seed=2, view="none", db=None,
+                              supply=str(ROOT / "supply" / "mix_drift.yaml")))
+    assert "kits" not in free and "kits " not in summary(free)
+    assert free["parts"]["retrieved"]["lens"] > 3 * free["parts"]["retrieved"]["square"]
+
+
+@pytest.mark.parametrize("kit, what", [
+    ("{square: 1, lense: 3}", "retrieve.kit.lense: unknown part 'lense'"),
+    ("{square: 0, lens: 3}", "retrieve.kit.square: must be a whole number >= 1"),
+])
+def test_a_bad_kit_is_one_line_and_exit_2(tmp_path, capsys, kit, what):
+    assert main(["check", str(kit_scenario(tmp_path, kit))]) == 2
+    err = capsys.readouterr().err.strip()
+    assert what in err and "Traceback" not in err
+
+
+def test_a_kit_and_a_sequence_together_are_refused(tmp_path, capsys):
+    p = kit_scenario(tmp_path, "{square: 1, lens: 3}")
+    p.write_text(p.read_text().replace("  kit:", "  sequence: [square, lens]\n  kit:"))
+    assert main(["check", str(p)]) == 2
+    assert "not both" in capsys.readouterr().err
