@@ -123,7 +123,8 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
-        camera = LatchedCamera(source if source is not None else open_source(cell.camera.source),
+        camera = LatchedCamera(source if source is not None
+                               else open_source(cell.camera.source, cell.camera),
                                clock, latch=conveyors[latch_name])
         closers.append(camera.close)
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
@@ -174,9 +175,17 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
                                   position_port=ports["position"], io_port=ports["io"],
                                   notify_port=ports["notify"]))
     clock = RealClock()
+    source = None
     try:
-        hal = connect_drivers(wired, clock, source=PlantCameraSource(plant), kind="emulated")
+        if cell.camera.source.startswith("pylon:"):    # through pylon's camera emulator
+            from ..emulators.pylon_camera import PylonPlantCamera
+            source = PylonPlantCamera(plant, cell.camera)
+        else:
+            source = PlantCameraSource(plant)
+        hal = connect_drivers(wired, clock, source=source, kind="emulated")
     except BaseException:
+        if source is not None:
+            source.close()
         galil.stop()
         adept.stop()
         plant.stop()

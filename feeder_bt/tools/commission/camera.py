@@ -44,13 +44,13 @@ def cell_target(cell: CellSpec) -> Target:
                   spec.marker_mm, spec.dictionary)
 
 
-def open_camera(spec: str) -> Any:
+def open_camera(spec: str, cell: CellSpec | None = None) -> Any:
     """``camera.source``; ``emulated-camera://HOST:PORT`` is ``feeder emulate cell``'s."""
     from ...emulators.camera_server import CameraClient
     if spec.startswith(CameraClient.SCHEME):
         return CameraClient(spec)
     from ...hal.camera import open_source
-    return open_source(spec)
+    return open_source(spec, cell.camera if cell is not None else None)
 
 
 def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse.Namespace
@@ -60,7 +60,7 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
 
     def grab() -> dict[str, Any]:
         nonlocal src
-        src = open_camera(cell.camera.source)
+        src = open_camera(cell.camera.source, cell)
         t0 = time.monotonic()
         img = src.capture()
         h, w = img.shape[:2]
