@@ -286,6 +286,10 @@ class PylonSpec:
     # frames need the NIC's MTU to match) and GevSCPD, the inter-packet delay in ticks
     packet_size: int | None = None
     inter_packet_delay: int | None = None
+    # an emulated camera only (PYLON_CAMEMU): a folder of images it serves in name order
+    # (ImageFilename, ImageFileMode On), relative to the cell file; recorded frames or a
+    # rendered target through the vendor SDK without a camera
+    emulator_images: str | None = None
 
 
 @dataclass

@@ -98,6 +98,7 @@ class PylonSource:
                               key="camera.source") from None
         self.serial = found[0].GetSerialNumber()
         self.model = found[0].GetModelName()
+        self.device_class = found[0].GetDeviceClass()
         return cam
 
     def _set(self, name: str, value: object) -> None:
@@ -133,6 +134,14 @@ class PylonSource:
         if self._has("GainAuto"):
             self._set("GainAuto", "Off")
         self._set("Gain", float(s.gain_db))
+        if s.emulator_images is not None:
+            if self.device_class != "BaslerCamEmu":
+                raise ConfigError(f"{self.spec}: emulator_images: only an emulated camera "
+                                  f"(PYLON_CAMEMU) serves files; this is a {self.device_class}",
+                                  key="camera.pylon")
+            self._set("TestImageSelector", "Off")
+            self._set("ImageFilename", s.emulator_images)
+            self._set("ImageFileMode", "On")
         if s.packet_size is not None:
             self._set("GevSCPSPacketSize", int(s.packet_size))
         if s.inter_packet_delay is not None:
