@@ -175,14 +175,22 @@ def test_a_camera_that_stays_gone_fails_every_grab_with_one_line(scene, monkeypa
 
 
 def test_a_frame_in_another_pixel_format_is_refused(scene):
-    def mono16(cam) -> None:         # the camera set otherwise behind the cell's back
+    calls = []
+
+    def mono16(cam) -> None:         # the camera set otherwise behind the cell's back, once
+        calls.append(1)
+        if len(calls) > 1:
+            return
         cam.ImageFileMode.Value = "Off"
         cam.TestImageSelector.Value = "Testimage1"
         cam.PixelFormat.Value = "Mono16"
     src = open_cam(scene, configure=mono16)
     try:
-        with pytest.raises(GrabFailed, match="pixel format Mono16, the cell expects Mono8"):
+        with pytest.raises(GrabFailed, match="pixel format Mono16, the cell expects Mono8: "
+                                             "settings sent again"):
             src.capture()
+        assert src.cam.PixelFormat.Value == "Mono8"
+        assert Scene.trigger_of(src.capture()) == scene.k       # and it grabs again
     finally:
         src.close()
 

@@ -77,3 +77,58 @@ def test_pylon_emulated_run_feeds_like_the_simulated_cell():
     got, want = emulated["parts_per_minute"], simulated["parts_per_minute"]
     assert want > 20
     assert abs(got - want) <= 0.25 * want, (got, want)
+
+
+def test_injected_camera_faults_are_one_line_each_and_never_mis_paired():
+    """Fault injection at the camera (emulators.faults, controller "camera"): it disappears,
+    a trigger brings no frame, a second pulse comes on the wire, the pixel format is
+    changed behind the cell's back. Each costs one grab with one line; every frame that
+    is delivered is the image of the very pulse whose count the Galil latched."""
+    from feeder_bt.emulators.faults import FaultPlan
+    from feeder_bt.hal.factory import start_emulated
+    plan = FaultPlan()
+    # a rule counts the triggers no earlier rule fired on: at triggers 2, 4, 6 and 8
+    for nth, kind in ((2, "drop"), (3, "no_frame"), (4, "extra_trigger"), (5, "wrong_format")):
+        plan.add(kind, "camera", "TRIGGER", nth=nth)
+    sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
+    hal, _clock = start_emulated(sc, cell, seed=3, faults=plan)
+    try:
+        bridge = hal.camera.source
+        galil = hal.extras["galil_emulator"]
+        pulses: list[tuple[int, np.ndarray | None]] = []     # (count at the pulse, image)
+        hal.extras["plant"].on_trigger(
+            lambda t: pulses.append((int(round(galil._measured("B", t))), None)))
+        write = bridge.files.write
+
+        def keep(img):
+            pulses[-1] = (pulses[-1][0], img.copy())
+            write(img)
+        bridge.files.write = keep
+        belt = hal.conveyors["horizontal"]
+        hal.motors_on()
+        assert wait_job(belt.set_speed(100.0), 30).ok
+        errors, frames = [], []
+        for _ in range(10):
+            was = belt.position()
+            assert wait_until(lambda was=was: belt.position() > was + 40, 30)
+            job = wait_job(hal.camera.grab(), 30)
+            assert job.done
+            if job.ok:
+                frames.append(job.result)
+            else:
+                errors.append(str(job.error))
+        assert len(errors) == 3, (errors, plan.log, bridge.counts())  # drop, no_frame, wrong_format
+        assert all("\n" not in e for e in errors)
+        assert "the camera is gone" in errors[0] and "reopened" in errors[0]
+        assert "lost: The buffer was incompletely grabbed" in errors[1]
+        assert "pixel format Mono16, the cell expects Mono8" in errors[2]
+        assert bridge.counts()["extra_triggers"] == 1
+        assert len(frames) == 7
+        for f in frames:                          # never mis-paired
+            match = [count for count, img in pulses
+                     if img is not None and np.array_equal(img, f.image)]
+            assert match == [f.latch], (f.latch, match)
+        assert [k for _, k, _ in plan.log] == ["drop", "no_frame", "extra_trigger",
+                                               "wrong_format"]
+    finally:
+        hal.close()

@@ -59,9 +59,11 @@ class ImageFiles:
 class PylonPlantCamera:
     """A ``FrameSource`` for ``--hal emulated`` when ``camera.source`` is ``pylon:...``."""
 
-    def __init__(self, plant: Plant, camera: CameraSpec) -> None:
+    def __init__(self, plant: Plant, camera: CameraSpec, faults=None) -> None:
         self.plant = plant
+        self.faults = faults              # emulators.faults.FaultPlan, rules for "camera"
         self.index = 0
+        self._skip_pulse = False
         self.files = ImageFiles((camera.width_px, camera.height_px))
         try:
             self.source = PylonSource(camera.source, camera.pylon, camera.exposure_ms,
@@ -74,6 +76,33 @@ class PylonPlantCamera:
 
     def _render(self) -> None:
         """The trigger pulse: the Galil latches it; the belt is drawn as it is now."""
+        rule = self.faults.check("camera", "TRIGGER") if self.faults is not None else None
+        if rule is not None:
+            self._inject(rule.kind)
+        self._pulse_plant()
+
+    def _inject(self, kind: str) -> None:
+        """A camera fault at this trigger (docs/real-cell.md, "An industrial camera")."""
+        cam = self.source.cam
+        if kind == "drop":                 # the camera disappears (closed, unplugged)
+            cam.Close()
+        elif kind == "no_frame":           # the trigger brings nothing: the buffer fails
+            cam.ForceFailedBufferCount.Value = 1
+            cam.ForceFailedBuffer.Execute()
+        elif kind == "extra_trigger":      # a second pulse on the wire: latched and exposed
+            self._pulse_plant()
+            ready = self.source.pylon.TimeoutHandling_Return
+            cam.WaitForFrameTriggerReady(5000, ready)
+            cam.ExecuteSoftwareTrigger()
+            cam.WaitForFrameTriggerReady(5000, ready)    # exposed: the next pulse is seen
+        elif kind == "wrong_format":       # someone set the camera otherwise
+            cam.StopGrabbing()
+            cam.ImageFileMode.Value = "Off"
+            cam.TestImageSelector.Value = "Testimage1"
+            cam.PixelFormat.Value = "Mono16"
+            cam.StartGrabbing(self.source.pylon.GrabStrategy_OneByOne)
+
+    def _pulse_plant(self) -> None:
         cam = self.plant.hal.camera
         with self.plant.lock:
             self.index += 1

@@ -179,7 +179,7 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     try:
         if cell.camera.source.startswith("pylon:"):    # through pylon's camera emulator
             from ..emulators.pylon_camera import PylonPlantCamera
-            source = PylonPlantCamera(plant, cell.camera)
+            source = PylonPlantCamera(plant, cell.camera, faults=faults)
         else:
             source = PlantCameraSource(plant)
         hal = connect_drivers(wired, clock, source=source, kind="emulated")

@@ -170,6 +170,12 @@ class PylonSource:
                 self.last_error = str(e)
                 raise
             except self.genicam.GenericException as e:
+                if self._gone():                   # it went away during this grab
+                    try:
+                        self._reopen()
+                    except GrabFailed as gone:
+                        self.last_error = str(gone)
+                        raise
                 self.lost_frames += 1
                 self.last_error = f"camera {self.spec}: {_one_line(e)}"
                 raise GrabFailed(self.last_error) from None
@@ -201,6 +207,12 @@ class PylonSource:
             self.extra_triggers += n
             return n
 
+    def _gone(self) -> bool:
+        try:
+            return not self.cam.IsOpen() or self.cam.IsCameraDeviceRemoved()
+        except self.genicam.GenericException:
+            return True
+
     def _reopen(self) -> None:
         """The camera went away (closed, unplugged, powered off): this grab fails with one
         line; the camera is opened again by serial if it is back, else the next grab
@@ -219,9 +231,17 @@ class PylonSource:
         self.reopened += 1
         raise GrabFailed(f"{gone}; reopened, the next grab uses it")
 
+    def _reapply(self) -> None:
+        """The camera was set otherwise behind the cell's back: the cell's settings again."""
+        try:
+            self.cam.StopGrabbing()
+            self._set_up()
+        except ConfigError as e:
+            raise GrabFailed(f"camera {self.spec}: setting it up again: {e.what}") from None
+
     def _capture(self) -> np.ndarray:
         cam, pylon = self.cam, self.pylon
-        if not cam.IsOpen() or cam.IsCameraDeviceRemoved():
+        if self._gone():
             self._reopen()
         if not self._prepared:
             self.prepare()
@@ -250,21 +270,23 @@ class PylonSource:
                 self.last_id = r.GetBlockID()
                 raise GrabFailed(f"camera {self.spec}: frame {r.GetBlockID()} lost: "
                                  f"{_one_line(r.GetErrorDescription())}")
-            block = r.GetBlockID()
-            expected = None if self.last_id is None else self.last_id + 1
-            self.last_id = block
-            if expected is not None and block != expected:
-                self.lost_frames += 1
-                raise GrabFailed(f"camera {self.spec}: frame counter {block}, expected "
-                                 f"{expected}: pair dropped, re-synced")
             fmt = self._pixel_format(r)
-            if fmt != self.settings.pixel_format:
-                self.lost_frames += 1
-                raise GrabFailed(f"camera {self.spec}: pixel format {fmt}, the cell "
-                                 f"expects {self.settings.pixel_format}")
-            img = r.GetArray().copy()
+            img = r.GetArray().copy() if fmt == self.settings.pixel_format else None
+            if img is not None:
+                block = r.GetBlockID()
+                expected = None if self.last_id is None else self.last_id + 1
+                self.last_id = block
+                if expected is not None and block != expected:
+                    self.lost_frames += 1
+                    raise GrabFailed(f"camera {self.spec}: frame counter {block}, expected "
+                                     f"{expected}: pair dropped, re-synced")
         finally:
             r.Release()
+        if img is None:
+            self.lost_frames += 1
+            self._reapply()
+            raise GrabFailed(f"camera {self.spec}: pixel format {fmt}, the cell expects "
+                             f"{self.settings.pixel_format}: settings sent again")
         self.frames += 1
         return as_frame(img)
 
