@@ -5,14 +5,13 @@ line, counted, and never paired with another trigger's image."""
 
 from __future__ import annotations
 
-import dataclasses
 import threading
 
 import numpy as np
 import pytest
 
 from feeder_bt.errors import ConfigError, GrabFailed
-from feeder_bt.scenario.model import CameraSpec, PylonSpec
+from feeder_bt.scenario.model import PylonSpec
 
 pytest.importorskip("pypylon", reason="pypylon is not installed (pip install -e '.[pylon]')")
 
@@ -212,21 +211,3 @@ def test_gige_transport_settings_reach_the_camera(scene):
         assert src.cam.Gain.Value == pytest.approx(6.0, abs=0.01)
     finally:
         src.close()
-
-
-def test_cell_file_keys_are_checked_with_file_and_line(tmp_path):
-    from feeder_bt.scenario.loader import load_cell
-    text = open("cells/sim.yaml").read().replace(
-        "camera:\n", "camera:\n  source: 'pylon:'\n  pylon: {trigger: Line9, gain_db: 60}\n", 1)
-    p = tmp_path / "cell.yaml"
-    p.write_text(text)
-    with pytest.raises(ConfigError) as e:
-        load_cell(p)
-    lines = e.value.lines()
-    assert any(f"{p}:" in ln and "camera.pylon.trigger" in ln and "Line1" in ln for ln in lines)
-    assert any("camera.pylon.gain_db" in ln and "[0, 48]" in ln for ln in lines)
-
-
-def test_camera_spec_carries_the_pylon_settings():
-    cam = dataclasses.replace(CameraSpec(), source="pylon:")
-    assert cam.pylon.trigger == "Software" and cam.pylon.frame_timeout_s > 0

@@ -106,6 +106,22 @@ def adept_estop(cell: CellSpec) -> int | None:
     return estop_signal(sig.bit, sig.active_low)
 
 
+def wire_line_trigger(cell: CellSpec, source: object, io: CellIO) -> None:
+    """A line-triggered pylon camera whose pulse the cell fires: ``camera.pylon.
+    trigger_signal`` set and cleared once per grab, on the camera's worker (the output is
+    wired to the camera's line and to the Galil latch input, docs/real-cell.md)."""
+    from .camera.latched import wait_job
+    signal = cell.camera.pylon.trigger_signal
+    if signal is None or not hasattr(source, "line_pulse") or source.line_pulse is not None:
+        return
+    timeout = cell.galil.timeout_s + 1.0
+
+    def pulse() -> None:
+        wait_job(io.set(signal, True), timeout, f"setting {signal}")
+        wait_job(io.set(signal, False), timeout, f"clearing {signal}")
+    source.line_pulse = pulse
+
+
 def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
     from .adept import AdeptController
@@ -128,6 +144,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
                                clock, latch=conveyors[latch_name])
         closers.append(camera.close)
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
+        wire_line_trigger(cell, camera.source, io)
     except BaseException:
         for close in reversed(closers):
             close()

@@ -282,6 +282,9 @@ class PylonSpec:
     gain_db: float = 0.0                 # Gain
     pixel_format: str = "Mono8"          # PixelFormat: Mono8 | Mono10 | Mono12 | Mono16
     frame_timeout_s: float = 1.0         # a trigger with no frame after this: a lost frame
+    # trigger Line1..3: the cell's I/O output (``io:``) pulsed once per grab, wired to the
+    # camera's line and to the Galil latch input; None: the pulse comes from elsewhere
+    trigger_signal: str | None = None
     # GigE only (left as the camera has them when None): GevSCPSPacketSize in bytes (jumbo
     # frames need the NIC's MTU to match) and GevSCPD, the inter-packet delay in ticks
     packet_size: int | None = None
