@@ -76,8 +76,10 @@ class PylonSource:
             if self.configure is not None:
                 self.configure(self.cam)           # the emulated cell's image files
             self._start()
-        except self.genicam.GenericException as e:
-            self.cam.Close()
+        except (self.genicam.GenericException, ConfigError) as e:
+            self.cam.Close()          # a camera left open would refuse the next opener
+            if isinstance(e, ConfigError):
+                raise
             raise ConfigError(f"{self.spec}: {_one_line(e)}", key="camera.pylon") from None
 
     # ---------------------------------------------------------------- set-up
