@@ -133,6 +133,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                    "p99_ms": _pct(s.vision_ms, 99), "no_match": _no_match(cell),
                    "gripper_blocked": s.counts["gripper_blocked"]},
     }
+    counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",
+                     None)
+    if callable(counts):                  # a camera counting its frames (hal/camera/pylon.py)
+        report["camera"] = counts()
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
         report["robot_model"] = fit.summary()

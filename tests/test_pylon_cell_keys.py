@@ -61,3 +61,13 @@ def test_a_line_trigger_pulses_the_named_output_once_per_grab():
     bridged = SimpleNamespace(line_pulse=print)          # the emulated cell's own bridge
     wire_line_trigger(cell, bridged, io)
     assert bridged.line_pulse is print
+
+
+def test_without_pypylon_a_pylon_camera_says_how_to_install_it(monkeypatch):
+    import sys
+
+    from feeder_bt.hal.camera import open_source
+    monkeypatch.setitem(sys.modules, "pypylon", None)          # as if not installed
+    with pytest.raises(ConfigError, match=r"camera.source: pylon: pypylon is not installed "
+                                          r".*pip install -e '.\[pylon\]'"):
+        open_source("pylon:", CameraSpec())

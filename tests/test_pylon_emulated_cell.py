@@ -74,6 +74,9 @@ def test_pylon_emulated_run_feeds_like_the_simulated_cell():
     simulated = run_job(RunOptions(hal="sim", fast=True, **opts))
     assert emulated["hal"] == "emulated" and emulated["state"] == "STOPPED"
     assert emulated["parts"]["lost"] == 0
+    cam = emulated["camera"]                      # every frame came through pylon, paired
+    assert cam["frames"] >= emulated["vision"]["frames"] > 50
+    assert cam["lost_frames"] == 0 and cam["extra_triggers"] == 0
     got, want = emulated["parts_per_minute"], simulated["parts_per_minute"]
     assert want > 20
     assert abs(got - want) <= 0.25 * want, (got, want)
