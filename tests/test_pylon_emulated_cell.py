@@ -135,3 +135,46 @@ def test_injected_camera_faults_are_one_line_each_and_never_mis_paired():
                                                "wrong_format"]
     finally:
         hal.close()
+
+
+def _run_with_camera_dropped(monkeypatch, unplugged: bool) -> dict:
+    """A 20 s emulated run whose camera is closed at the fifth trigger; ``unplugged``: and
+    no longer enumerated after that (PYLON_CAMEMU=0), so it cannot be opened again."""
+    from feeder_bt import run as run_mod
+    from feeder_bt.emulators import pylon_camera
+    from feeder_bt.emulators.faults import FaultPlan
+    from feeder_bt.hal.factory import start_emulated
+    from feeder_bt.run import RunOptions, run_job
+    inject = pylon_camera.PylonPlantCamera._inject
+
+    def inject_and_unplug(self, kind):
+        inject(self, kind)
+        if unplugged:
+            monkeypatch.setenv("PYLON_CAMEMU", "0")
+    monkeypatch.setattr(pylon_camera.PylonPlantCamera, "_inject", inject_and_unplug)
+    plan = FaultPlan()
+    plan.add("drop", "camera", "TRIGGER", nth=5)
+    monkeypatch.setattr(run_mod, "make_hal", lambda kind, scenario, cell, seed:
+                        start_emulated(scenario, cell, seed, faults=plan))
+    r = run_job(RunOptions(scenario="scenarios/lenses.yaml", hal="emulated", duration=20.0,
+                           seed=1, view="none", db=None, cell=CELL))
+    assert len(plan.log) == 1
+    return r
+
+
+@pytest.mark.soak          # real time: 20 s through the TCP drivers
+def test_a_camera_closed_mid_run_is_reopened_and_feeding_goes_on(monkeypatch):
+    r = _run_with_camera_dropped(monkeypatch, unplugged=False)
+    assert r["state"] == "STOPPED", r["fault"]
+    assert r["faults"] == {"grab_failed": 1} and r["recoveries"] == {"grab_failed": 1}
+    assert r["camera"]["lost_frames"] == 1 and r["camera"]["frames"] > 5
+    assert r["parts"]["lost"] == 0
+
+
+@pytest.mark.soak          # real time: up to 20 s through the TCP drivers
+def test_a_camera_unplugged_mid_run_faults_the_cell_with_one_line(monkeypatch):
+    r = _run_with_camera_dropped(monkeypatch, unplugged=True)
+    assert r["state"] == "FAULT"
+    assert r["fault"].startswith("camera or vision failed: camera pylon:: the camera is gone")
+    assert "no such pylon camera (cameras found: none" in r["fault"] and "\n" not in r["fault"]
+    assert r["parts"]["lost"] == 0
