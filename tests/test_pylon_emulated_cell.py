@@ -20,10 +20,12 @@ def camemu(monkeypatch):
     monkeypatch.setenv("PYLON_CAMEMU", "1")
 
 
-def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch():
+@pytest.mark.parametrize("trigger", ["Line1", "Software"])
+def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch(trigger):
     from feeder_bt.hal.factory import start_emulated
     sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
     assert cell.camera.source == "pylon:" and cell.camera.pylon.trigger == "Line1"
+    cell.camera.pylon.trigger = trigger      # Line1: bridged at the Galil pulse
     hal, _clock = start_emulated(sc, cell, seed=3)
     try:
         bridge = hal.camera.source
@@ -52,6 +54,7 @@ def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch():
         assert all(b > a for a, b in zip(latches, latches[1:], strict=False)), latches
         assert bridge.counts() == {"frames": 4, "lost_frames": 0, "extra_triggers": 0}
         assert bridge.index == 4                   # one plant trigger per frame
+        assert bridge.source.cam.TriggerSource.Value == trigger
     finally:
         hal.close()
 
