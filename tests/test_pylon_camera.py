@@ -61,6 +61,7 @@ def open_cam(scene: Scene, spec: str = "pylon:", line_pulse=None, configure=None
         scene.files.configure(cam)
         if configure is not None:
             configure(cam)
+    settings.setdefault("frame_timeout_s", 10.0)      # generous: a loaded machine
     return PylonSource(spec, PylonSpec(**settings), 2.0, (W, H),
                        before_trigger=scene.before_trigger, line_pulse=line_pulse,
                        configure=setup)

@@ -42,7 +42,7 @@ def pylon_cell(tmp_path: Path, exposure_ms: float) -> Path:
     text = (ROOT / "cells" / "sim.yaml").read_text().replace(
         "  exposure_ms: 2.0\n",
         f"  exposure_ms: {exposure_ms}\n  source: 'pylon:'\n"
-        f"  pylon: {{trigger: Software, emulator_images: '{images}'}}\n", 1)
+        f"  pylon: {{trigger: Software, frame_timeout_s: 10, emulator_images: '{images}'}}\n", 1)
     path = tmp_path / "cell.yaml"
     path.write_text(text)
     return path

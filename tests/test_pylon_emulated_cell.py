@@ -26,6 +26,7 @@ def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch(tri
     sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
     assert cell.camera.source == "pylon:" and cell.camera.pylon.trigger == "Line1"
     cell.camera.pylon.trigger = trigger      # Line1: bridged at the Galil pulse
+    cell.camera.pylon.frame_timeout_s = 10.0   # generous: a loaded machine
     hal, _clock = start_emulated(sc, cell, seed=3)
     try:
         bridge = hal.camera.source
@@ -97,6 +98,7 @@ def test_injected_camera_faults_are_one_line_each_and_never_mis_paired():
     for nth, kind in ((2, "drop"), (3, "no_frame"), (4, "extra_trigger"), (5, "wrong_format")):
         plan.add(kind, "camera", "TRIGGER", nth=nth)
     sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
+    cell.camera.pylon.frame_timeout_s = 10.0   # generous: a loaded machine
     hal, _clock = start_emulated(sc, cell, seed=3, faults=plan)
     try:
         bridge = hal.camera.source
