@@ -142,6 +142,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if s.kit is not None:                 # kits (thesis 8.2.1.5): how many, how fast, bounds
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
                                      inflow_by_type, sim_seconds)
+    counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",
+                     None)
+    if callable(counts):                  # a camera counting its frames (hal/camera/pylon.py)
+        report["camera"] = counts()
     fit = cell.ctx.extras.get("robot_fit") if cell.ctx is not None else None
     if fit is not None:                   # the model the pick policies learnt (robot_fit.py)
         report["robot_model"] = fit.summary()

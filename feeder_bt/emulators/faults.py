@@ -21,13 +21,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-FAULT_KINDS = ("reject", "drop", "drop_during", "drop_after", "stall", "servo_timeout")
+FAULT_KINDS = ("reject", "drop", "drop_during", "drop_after", "stall", "servo_timeout",
+               # the pylon camera (controller "camera", command "TRIGGER";
+               # emulators/pylon_camera.py): with "drop" (the camera disappears)
+               "no_frame", "extra_trigger", "wrong_format")
 
 
 @dataclass
 class FaultRule:
     kind: str                     # one of FAULT_KINDS
-    controller: str               # galil | adept
+    controller: str               # galil | adept | camera
     command: str = ""             # applies to commands starting with this (case-insensitive)
     nth: int | None = None        # fire on the n-th matching command only (1-based)
     every: int | None = None      # fire on every n-th matching command

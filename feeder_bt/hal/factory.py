@@ -106,6 +106,22 @@ def adept_estop(cell: CellSpec) -> int | None:
     return estop_signal(sig.bit, sig.active_low)
 
 
+def wire_line_trigger(cell: CellSpec, source: object, io: CellIO) -> None:
+    """A line-triggered pylon camera whose pulse the cell fires: ``camera.pylon.
+    trigger_signal`` set and cleared once per grab, on the camera's worker (the output is
+    wired to the camera's line and to the Galil latch input, docs/real-cell.md)."""
+    from .camera.latched import wait_job
+    signal = cell.camera.pylon.trigger_signal
+    if signal is None or not hasattr(source, "line_pulse") or source.line_pulse is not None:
+        return
+    timeout = cell.galil.timeout_s + 1.0
+
+    def pulse() -> None:
+        wait_job(io.set(signal, True), timeout, f"setting {signal}")
+        wait_job(io.set(signal, False), timeout, f"clearing {signal}")
+    source.line_pulse = pulse
+
+
 def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
     from .adept import AdeptController
@@ -123,10 +139,12 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
-        camera = LatchedCamera(source if source is not None else open_source(cell.camera.source),
+        camera = LatchedCamera(source if source is not None
+                               else open_source(cell.camera.source, cell.camera),
                                clock, latch=conveyors[latch_name])
         closers.append(camera.close)
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
+        wire_line_trigger(cell, camera.source, io)
     except BaseException:
         for close in reversed(closers):
             close()
@@ -174,9 +192,17 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
                                   position_port=ports["position"], io_port=ports["io"],
                                   notify_port=ports["notify"]))
     clock = RealClock()
+    source = None
     try:
-        hal = connect_drivers(wired, clock, source=PlantCameraSource(plant), kind="emulated")
+        if cell.camera.source.startswith("pylon:"):    # through pylon's camera emulator
+            from ..emulators.pylon_camera import PylonPlantCamera
+            source = PylonPlantCamera(plant, cell.camera, faults=faults)
+        else:
+            source = PlantCameraSource(plant)
+        hal = connect_drivers(wired, clock, source=source, kind="emulated")
     except BaseException:
+        if source is not None:
+            source.close()
         galil.stop()
         adept.stop()
         plant.stop()

@@ -34,6 +34,16 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
             ctx.add_problem("camera.target.marker_mm", f"must be < pitch_mm "
                                                        f"({_num(t.pitch_mm)}), got "
                                                        f"{_num(t.marker_mm)}")
+    p = cell.camera.pylon
+    if p.trigger_signal is not None:
+        sig = cell.io.get(p.trigger_signal)
+        if sig is None or sig.dir != "out":
+            outs = ", ".join(n for n, s in cell.io.items() if s.dir == "out") or "none"
+            ctx.add_problem("camera.pylon.trigger_signal",
+                            f"{p.trigger_signal!r} is not an output in io: (outputs: {outs})")
+        elif p.trigger == "Software":
+            ctx.add_problem("camera.pylon.trigger_signal",
+                            "pulses a line: set camera.pylon.trigger to Line1 (or Line2, Line3)")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
         ctx.add_problem("encoder.robot_start", f"must be < 2**robot_bits "

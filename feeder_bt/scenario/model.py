@@ -279,6 +279,29 @@ class TargetSpec:
 
 
 @dataclass
+class PylonSpec:
+    """A GenICam camera through Basler's pylon (``camera.source: pylon:SERIAL``), set with
+    the GenICam standard feature names (docs/real-cell.md, "An industrial camera"). The
+    exposure is ``camera.exposure_ms`` (ExposureTime), the size ``width_px`` x ``height_px``."""
+
+    trigger: str = "Software"            # TriggerSource of FrameStart: Software | Line1
+    gain_db: float = 0.0                 # Gain
+    pixel_format: str = "Mono8"          # PixelFormat: Mono8 | Mono10 | Mono12 | Mono16
+    frame_timeout_s: float = 1.0         # a trigger with no frame after this: a lost frame
+    # trigger Line1..3: the cell's I/O output (``io:``) pulsed once per grab, wired to the
+    # camera's line and to the Galil latch input; None: the pulse comes from elsewhere
+    trigger_signal: str | None = None
+    # GigE only (left as the camera has them when None): GevSCPSPacketSize in bytes (jumbo
+    # frames need the NIC's MTU to match) and GevSCPD, the inter-packet delay in ticks
+    packet_size: int | None = None
+    inter_packet_delay: int | None = None
+    # an emulated camera only (PYLON_CAMEMU): a folder of images it serves in name order
+    # (ImageFilename, ImageFileMode On), relative to the cell file; recorded frames or a
+    # rendered target through the vendor SDK without a camera
+    emulator_images: str | None = None
+
+
+@dataclass
 class CameraSpec:
     width_px: int = 640
     height_px: int = 484
@@ -291,6 +314,7 @@ class CameraSpec:
     calibration_file: str | None = None  # YAML replacing `calibration` (calibration.files)
     # real cell only: "0" (a device index), a stream URL, a folder of images or a video file
     source: str = "0"
+    pylon: PylonSpec = field(default_factory=PylonSpec)   # camera.source: pylon:SERIAL
     render: RenderSpec = field(default_factory=RenderSpec)
     target: TargetSpec | None = None     # the calibration target (None: --target's default)
 

@@ -26,6 +26,7 @@ from feeder_bt.scenario.model import (
     PartSpec,
     PickSpec,
     PresentParams,
+    PylonSpec,
     RenderSpec,
     RetrieveParams,
     RobotSpec,
@@ -49,6 +50,10 @@ TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
 ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner", "outline")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
+#: pylon cameras (feeder_bt.hal.camera.pylon): the FrameStart trigger's source, and the
+#: mono formats a frame is converted from (GenICam SFNC names)
+PYLON_TRIGGERS: tuple[str, ...] = ("Software", "Line1", "Line2", "Line3")
+PYLON_PIXEL_FORMATS: tuple[str, ...] = ("Mono8", "Mono10", "Mono12", "Mono16")
 
 #: Shape kinds and the ``Shape`` fields each one is written with (all required).
 SHAPE_KINDS: dict[str, tuple[str, ...]] = {
@@ -111,6 +116,8 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (GalilSpec, "latch_edge"): ("falling", "rising"),
     (IoSignal, "active"): ("high", "low"),
     (GalilSpec, "free_handles"): ("ours", "others", "none"),
+    (PylonSpec, "trigger"): PYLON_TRIGGERS,
+    (PylonSpec, "pixel_format"): PYLON_PIXEL_FORMATS,
 }
 
 #: Numeric fields: (dataclass, field) -> allowed interval. Cross-file limits (conveyor
@@ -161,6 +168,10 @@ RANGES: dict[tuple[type, str], Range] = {
     (CameraSpec, "exposure_ms"): POSITIVE,
     (CameraSpec, "grab_s"): NON_NEGATIVE,
     (CameraSpec, "vision_latency_s"): NON_NEGATIVE,
+    (PylonSpec, "gain_db"): Range(0, 48),
+    (PylonSpec, "frame_timeout_s"): Range(0.01, 60),
+    (PylonSpec, "packet_size"): Range(220, 16404),        # GevSCPSPacketSize, bytes
+    (PylonSpec, "inter_packet_delay"): NON_NEGATIVE,      # GevSCPD, ticks
     (CameraCalibration, "mm_per_px"): POSITIVE,
     (TargetSpec, "max_rms_px"): POSITIVE,
     (TargetSpec, "max_belt_mm"): POSITIVE,

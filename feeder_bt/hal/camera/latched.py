@@ -50,6 +50,9 @@ class LatchedCamera:
         self.exposure_ms: float | None = None
 
     def _grab(self, index: int) -> Frame:
+        prepare = getattr(self.source, "prepare", None)
+        if prepare is not None:       # a camera counting its frames drops strays before AL
+            prepare()
         if self.latch is not None:
             wait_job(self.latch.arm_latch(), self.timeout_s, "arming the encoder latch")
         t = self.clock.now()

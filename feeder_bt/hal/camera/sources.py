@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError, GrabFailed
+from ...scenario.model import CameraSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 
@@ -106,8 +107,13 @@ class ReplaySource:
             self.cap.release()
 
 
-def open_source(spec: str) -> FrameSource:
-    """The cell description's ``camera.source``: a device index, a URL, a folder or a file."""
+def open_source(spec: str, camera: CameraSpec | None = None) -> FrameSource:
+    """The cell description's ``camera.source``: a device index, a URL, a folder or a file,
+    or ``pylon:SERIAL`` (a GenICam camera set from ``camera.pylon``)."""
+    if spec.startswith("pylon:"):
+        from .pylon import PylonSource
+        cam = camera if camera is not None else CameraSpec()
+        return PylonSource(spec, cam.pylon, cam.exposure_ms, (cam.width_px, cam.height_px))
     if spec.isdigit() or "://" in spec:
         return VideoCaptureSource(spec)
     return ReplaySource(spec)

@@ -16,7 +16,9 @@ emulator's standard input (``feeder_bt.emulators.operator``). docs/real-cell.md,
   and drift, the robot<->cell frame from touch points (written to ``robot.frame_file``),
   the pick window's corners at low speed, each confirmed by the person.
 - ``camera`` (``commission.camera``): grab, calibration from the target with its residual,
-  trigger->latch->image timing with a marker riding the belt.
+  trigger->latch->image timing with a marker riding the belt; a pylon camera also: found
+  by enumeration, one frame per trigger, exposure x belt speed under half a pixel of
+  blur, calibration views grabbed to files (``commission.pylon_steps``).
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from typing import TextIO
 from ...argtypes import positive
 from ...scenario import load_cell
 from .adept import commission_adept, pick_window
-from .camera import commission_camera
+from .camera import CAMERA_STEPS, commission_camera
 from .common import Asker, CommissionError, Report, load_answers
 from .galil import commission_galil
 
@@ -59,8 +61,29 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="camera: largest calibration residual rms accepted (default 0.5)")
     p.add_argument("--timing-limit-ms", type=positive, default=3.0, metavar="MS",
                    help="camera: largest trigger->image delay accepted (default 3)")
+    p.add_argument("--steps", type=camera_steps, default=CAMERA_STEPS, metavar="A,B,...",
+                   help="camera: the steps to run, of " + ",".join(CAMERA_STEPS) +
+                        " (default all; enumerate, trigger, exposure and views are a pylon "
+                        "camera's; timing needs the Galil)")
+    p.add_argument("--belt-mm-s", type=positive, default=None, metavar="MM_S",
+                   help="camera: the fastest belt speed under the camera, for the blur "
+                        "check (default the latch conveyor's max_mm_s)")
+    p.add_argument("--views", type=int, default=3, metavar="N",
+                   help="camera (pylon): calibration views to grab to files (default 3)")
+    p.add_argument("--views-dir", metavar="DIR",
+                   help="camera (pylon): where the views go (default REPORT-views/)")
     p.set_defaults(handler=cmd_commission)
     return p
+
+
+def camera_steps(text: str) -> tuple[str, ...]:
+    """``--steps``: a comma list of camera steps, each one of ``CAMERA_STEPS``."""
+    steps = tuple(t.strip() for t in text.split(",") if t.strip())
+    bad = [t for t in steps if t not in CAMERA_STEPS]
+    if bad or not steps:
+        raise argparse.ArgumentTypeError(f"{', '.join(bad) or 'nothing'}: not a camera step; "
+                                         f"one or more of {','.join(CAMERA_STEPS)}")
+    return steps
 
 
 STEPS = {"galil": commission_galil, "adept": commission_adept, "camera": commission_camera}

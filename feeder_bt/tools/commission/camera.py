@@ -33,6 +33,7 @@ FRAME_GAP_S = 0.15           # between triggered frames while the marker crosses
 MAX_FRAMES = 12              # per pass
 MARKER_IN_MM = 60.0          # the marker goes this far inside the upstream edge of the view
 MARKER_AREA_MM2 = (150.0, 800.0)   # a 20 mm disc is 314 mm^2; other blobs are not the marker
+CAMERA_STEPS = ("enumerate", "grab", "trigger", "exposure", "views", "calibration", "timing")
 
 
 def cell_target(cell: CellSpec) -> Target:
@@ -44,13 +45,13 @@ def cell_target(cell: CellSpec) -> Target:
                   spec.marker_mm, spec.dictionary)
 
 
-def open_camera(spec: str) -> Any:
+def open_camera(spec: str, cell: CellSpec | None = None) -> Any:
     """``camera.source``; ``emulated-camera://HOST:PORT`` is ``feeder emulate cell``'s."""
     from ...emulators.camera_server import CameraClient
     if spec.startswith(CameraClient.SCHEME):
         return CameraClient(spec)
     from ...hal.camera import open_source
-    return open_source(spec)
+    return open_source(spec, cell.camera if cell is not None else None)
 
 
 def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse.Namespace
@@ -60,7 +61,7 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
 
     def grab() -> dict[str, Any]:
         nonlocal src
-        src = open_camera(cell.camera.source)
+        src = open_camera(cell.camera.source, cell)
         t0 = time.monotonic()
         img = src.capture()
         h, w = img.shape[:2]
@@ -88,11 +89,23 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
                                                        "rotation_deg")},
                 "hint": fit.hint or ""}
 
+    wanted = set(getattr(opts, "steps", CAMERA_STEPS))
+    pylon = cell.camera.source.startswith("pylon:")
     try:
+        if pylon and "enumerate" in wanted:
+            from .pylon_steps import enumerate_step
+            if not try_step(report, "camera.pylon.enumerate", lambda: enumerate_step(cell)):
+                return
         if not try_step(report, "camera.grab", grab):
             return
-        try_step(report, "camera.calibration", calibrate)
-        try_step(report, "camera.timing", lambda: _timing(cell, ask, src, cal["now"], opts))
+        if pylon:
+            from .pylon_steps import pylon_steps
+            pylon_steps(cell, ask, report, opts, src, wanted)
+        if "calibration" in wanted:
+            try_step(report, "camera.calibration", calibrate)
+        if "timing" in wanted:
+            try_step(report, "camera.timing",
+                     lambda: _timing(cell, ask, src, cal["now"], opts))
     finally:
         if src is not None:
             src.close()
