@@ -160,14 +160,22 @@ def test_motion_commands_and_position_mid_motion(rig):
     plant, emu, ctrl, faults, scenario = rig
     robot, pos = ctrl.robot, ctrl.position
     assert wait_job(robot.set_speed(50)).ok
-    job = robot.move_to(Pose(900.0, 400.0, 0.0, 30.0))
-    assert not job.done                               # returns at once, still moving
-    counts = set()
-    while not job.done:                               # the position socket answers meanwhile
-        counts.add(pos.belt_encoder())
-        time.sleep(0.01)
-    assert job.ok and job.result == Pose(900.0, 400.0, 0.0, 30.0)
-    assert len(counts) > 3
+    # the motion server holds the MOVE's reply until released, so the motion stays in
+    # flight for as long as the test needs, however slowly the machine runs the test
+    rule = faults.add("stall", "adept", "MOVE", nth=1, stall_s=3600.0)
+    try:
+        job = robot.move_to(Pose(900.0, 400.0, 0.0, 30.0))
+        assert not job.done                           # returns at once, still moving
+        counts = set()
+
+        def polled_on() -> bool:                      # the position socket answers meanwhile
+            counts.add(pos.belt_encoder())
+            return len(counts) > 3
+        wait_for(polled_on, what="fresh belt counts while the motion is in flight")
+        assert not job.done
+    finally:
+        rule.release()
+    assert wait_job(job).ok and job.result == Pose(900.0, 400.0, 0.0, 30.0)
     wait_for(lambda: pos.pose() == Pose(900.0, 400.0, 0.0, 30.0), what="new pose")
     assert wait_job(robot.set_speed(100)).ok
     assert wait_job(robot.move_safe()).ok

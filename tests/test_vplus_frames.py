@@ -200,7 +200,7 @@ def _stop_during_a_pick(programs, expect_stop: bool) -> list[str]:
     try:
         target = _part_at_rest_in_reach(plant)
         assert wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 60.0, 0.0))).ok   # up high
-        assert wait_job(ctrl.robot.set_speed(10)).ok          # a slow approach
+        assert wait_job(ctrl.robot.set_speed(4)).ok           # a slow approach (~5 s)
         job = ctrl.robot.pick(target)
         arm = emu.rt.arm
         wait_for(lambda: arm.motion is not None and arm.motion.kind == "appros"
