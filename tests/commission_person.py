@@ -117,9 +117,13 @@ def write_cell(tmp_path: Path, port: int) -> Path:
     data = yaml.safe_load((ROOT / "cells" / "sim.yaml").read_text())
     data["io"]["jam"] = {"controller": "galil", "bit": 3, "dir": "in"}
     data["io"]["grip"] = {"controller": "adept", "bit": 3, "dir": "in"}
-    data["galil"] = {"url": f"socket://127.0.0.1:{port}", "timeout_s": 1.0}
+    # generous reply time-outs (cell settings): the emulator is another process on a
+    # machine that may be loaded, and no step here is judged by how fast it answers
+    data["galil"] = {"url": f"socket://127.0.0.1:{port}", "timeout_s": 10.0,
+                     "watchdog_s": 10.0, "heartbeat_s": 10.0}
     data["adept"] = {"host": "127.0.0.1", "motion_port": port + 1, "position_port": port + 2,
-                     "io_port": port + 3, "notify_port": port + 4}
+                     "io_port": port + 3, "notify_port": port + 4, "timeout_s": 10.0,
+                     "motion_timeout_s": 30.0}
     data["camera"]["source"] = f"emulated-camera://127.0.0.1:{port + 5}"
     path = tmp_path / "cell.yaml"
     path.write_text(yaml.safe_dump(data))

@@ -25,8 +25,14 @@ from feeder_bt.scenario.model import CellSpec, IoSignal, SimImperfections
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "lenses.yaml"
 JAM_BIT = 3                  # a Galil input added to the cell for the tests
-TIMEOUT_S = 5.0              # the driver's reply time-out in the tests (a cell setting)
-WAIT_S = 15.0                # how long an event-driven wait may take on a loaded machine
+TIMEOUT_S = 10.0             # the driver's reply time-out in the tests (a cell setting)
+WAIT_S = 30.0                # how long an event-driven wait may take on a loaded machine
+# the card's host watchdog and the #INMON heartbeat (cell settings, 1 s each on a real cell)
+# are generous in the tests: a loaded machine that starves the driver's health poll (every
+# 0.2 s) or the emulated card's thread for a second must not stop the belts mid-test. A
+# test of the watchdog or the heartbeat sets its own (``rig(galil={...})``).
+WATCHDOG_S = 10.0
+HEARTBEAT_S = 10.0
 
 
 def wait_until(cond: Callable[[], object], timeout: float = WAIT_S, step: float = 0.005) -> bool:
@@ -45,13 +51,19 @@ def wait_job(job: Job, timeout: float = WAIT_S) -> Job:
     return job
 
 
-def make_cell() -> tuple[object, CellSpec]:
+def make_cell(galil: dict[str, object] | None = None) -> tuple[object, CellSpec]:
+    """The lenses cell with the test's Galil settings; ``galil`` overrides some of them."""
     sc, cell = load_scenario(SCENARIO)
     # the ideal cell: the tests compare the driver's mm with the emulated axis's, which a
     # simulated encoder scale error (docs/simulator.md) would set 0.1 % apart
     cell.sim = SimImperfections(ideal=True)
     cell.io["jam"] = IoSignal("galil", JAM_BIT, "in")
     cell.galil.timeout_s = TIMEOUT_S
+    cell.galil.watchdog_s = WATCHDOG_S
+    cell.galil.heartbeat_s = HEARTBEAT_S
+    for key, value in (galil or {}).items():
+        assert hasattr(cell.galil, key), key
+        setattr(cell.galil, key, value)
     return sc, cell
 
 
@@ -67,9 +79,10 @@ class Rig:
 
 
 @contextmanager
-def plant_and_emulator(faults: FaultPlan | None = None, pty: bool = False
+def plant_and_emulator(faults: FaultPlan | None = None, pty: bool = False,
+                       galil: dict[str, object] | None = None
                        ) -> Iterator[tuple[Plant, GalilEmulator, CellSpec]]:
-    sc, cell = make_cell()
+    sc, cell = make_cell(galil)
     plant = Plant(sc, cell, seed=1).start()
     emu = GalilEmulator(plant, "127.0.0.1", 0, faults, pty=pty).start()
     try:
@@ -82,11 +95,12 @@ def plant_and_emulator(faults: FaultPlan | None = None, pty: bool = False
 
 @contextmanager
 def rig(faults: FaultPlan | None = None, pty: bool = False,
-        programs_dir: Path = PROGRAMS_DIR, servo: bool = True) -> Iterator[Rig]:
+        programs_dir: Path = PROGRAMS_DIR, servo: bool = True,
+        galil: dict[str, object] | None = None) -> Iterator[Rig]:
     """Plant + emulator + connected driver (conveyors and I/O of the cell). ``servo``: then
     the person turns the motors on (``servo(True)``, as the operator's Start does); the
-    driver itself never does."""
-    with plant_and_emulator(faults, pty) as (plant, emu, cell):
+    driver itself never does. ``galil``: Galil settings to override (``make_cell``)."""
+    with plant_and_emulator(faults, pty, galil) as (plant, emu, cell):
         ctl, conveyors, io = make_galil(cell, RealClock(), programs_dir)
         try:
             assert ctl.ready.result(WAIT_S) is True

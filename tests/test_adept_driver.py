@@ -22,9 +22,15 @@ from feeder_bt.jobs import Job, JobState
 from feeder_bt.scenario import load_scenario
 
 BELT_COUNTS_S = 8000          # both belts at 400 mm/s (20 counts/mm): parts arrive fast
+# The driver's time-outs and the tests' waits only bound a hung test: a loaded machine may
+# answer slowly, and no test is judged by how fast it does. A test of a time-out makes the
+# controller truly silent (a stall released afterwards) and sets a short one for itself.
+TIMEOUT_S = 10.0              # spec.timeout_s: short commands
+MOTION_TIMEOUT_S = 30.0       # spec.motion_timeout_s: a pick, place or move
+WAIT_S = 30.0                 # an event-driven wait in a test
 
 
-def wait_job(job: Job, timeout: float = 10.0) -> Job:
+def wait_job(job: Job, timeout: float = 2 * WAIT_S) -> Job:
     deadline = time.monotonic() + timeout
     while not job.done:
         assert time.monotonic() < deadline, f"{job} still running after {timeout} s"
@@ -32,7 +38,7 @@ def wait_job(job: Job, timeout: float = 10.0) -> Job:
     return job
 
 
-def wait_for(cond, timeout: float = 5.0, what: str = "condition"):
+def wait_for(cond, timeout: float = WAIT_S, what: str = "condition"):
     deadline = time.monotonic() + timeout
     while True:
         value = cond()
@@ -51,8 +57,8 @@ def rig():
     ports = emu.ports
     spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=ports["motion"],
                                position_port=ports["position"], io_port=ports["io"],
-                               notify_port=ports["notify"], timeout_s=1.0,
-                               motion_timeout_s=10.0)
+                               notify_port=ports["notify"], timeout_s=TIMEOUT_S,
+                               motion_timeout_s=MOTION_TIMEOUT_S)
     inputs = [s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"]
     ctrl = AdeptController(spec, RealClock(), inputs=inputs, robot=cell.robot)
     plant.jog("A", BELT_COUNTS_S)
@@ -66,7 +72,7 @@ def rig():
     assert plant.error is None
 
 
-def pickable_target(plant: Plant, tool_offset=(0.0, 0.0, 0.0), timeout: float = 12.0
+def pickable_target(plant: Plant, tool_offset=(0.0, 0.0, 0.0), timeout: float = WAIT_S
                     ) -> PickTarget:
     """Aim (tests only: from the ground truth) at a singulated, pickable part coming into
     the robot's reach, with the robot's encoder count at the same instant as the latch."""
@@ -128,7 +134,7 @@ def test_position_cache_follows_the_belt_and_the_robot(rig):
     span = (after - before) % (1 << 24)
     assert (cached - before) % (1 << 24) <= span
     first = pos.belt_encoder()
-    wait_for(lambda: pos.belt_encoder() != first, 1.0, "belt count moving")
+    wait_for(lambda: pos.belt_encoder() != first, what="belt count moving")
     callers: list[int] = []
     real_call = pos.position.call
 
@@ -141,7 +147,7 @@ def test_position_cache_follows_the_belt_and_the_robot(rig):
         for _ in range(1000):                         # reads come from the cache
             pos.belt_encoder()
             pos.pose()
-        wait_for(lambda: callers, 1.0, "a poll")      # the poller goes on meanwhile
+        wait_for(lambda: callers, what="a poll")      # the poller goes on meanwhile
     finally:
         del pos.position.call
     assert threading.get_ident() not in callers       # no socket round trip per read
@@ -154,18 +160,26 @@ def test_motion_commands_and_position_mid_motion(rig):
     plant, emu, ctrl, faults, scenario = rig
     robot, pos = ctrl.robot, ctrl.position
     assert wait_job(robot.set_speed(50)).ok
-    job = robot.move_to(Pose(900.0, 400.0, 0.0, 30.0))
-    assert not job.done                               # returns at once, still moving
-    counts = set()
-    while not job.done:                               # the position socket answers meanwhile
-        counts.add(pos.belt_encoder())
-        time.sleep(0.01)
-    assert job.ok and job.result == Pose(900.0, 400.0, 0.0, 30.0)
-    assert len(counts) > 3
-    wait_for(lambda: pos.pose() == Pose(900.0, 400.0, 0.0, 30.0), 1.0, "new pose")
+    # the motion server holds the MOVE's reply until released, so the motion stays in
+    # flight for as long as the test needs, however slowly the machine runs the test
+    rule = faults.add("stall", "adept", "MOVE", nth=1, stall_s=3600.0)
+    try:
+        job = robot.move_to(Pose(900.0, 400.0, 0.0, 30.0))
+        assert not job.done                           # returns at once, still moving
+        counts = set()
+
+        def polled_on() -> bool:                      # the position socket answers meanwhile
+            counts.add(pos.belt_encoder())
+            return len(counts) > 3
+        wait_for(polled_on, what="fresh belt counts while the motion is in flight")
+        assert not job.done
+    finally:
+        rule.release()
+    assert wait_job(job).ok and job.result == Pose(900.0, 400.0, 0.0, 30.0)
+    wait_for(lambda: pos.pose() == Pose(900.0, 400.0, 0.0, 30.0), what="new pose")
     assert wait_job(robot.set_speed(100)).ok
     assert wait_job(robot.move_safe()).ok
-    wait_for(lambda: pos.pose() == Pose(*plant.cell.robot.safe_mm), 1.0, "safe pose")
+    wait_for(lambda: pos.pose() == Pose(*plant.cell.robot.safe_mm), what="safe pose")
     assert not robot.holding()
 
 
@@ -254,9 +268,9 @@ def test_dropped_socket_is_comms_lost_and_the_driver_reconnects(rig):
     counts = {k: emu.connections[k] for k in ("position", "io", "notify")}
     emu.drop_clients()
     wait_for(lambda: all(emu.connections[k] > counts[k] for k in ("position", "notify")),
-             5.0, "position and notify re-connected")
+             what="position and notify re-connected")
     t_drop = time.monotonic()
-    wait_for(lambda: ctrl.position.updated_at > t_drop, 5.0, "fresh position after the drop")
+    wait_for(lambda: ctrl.position.updated_at > t_drop, what="fresh position after the drop")
     # an idle link the server closed is noticed before the next request goes out
     assert wait_job(ctrl.io.set(2, False)).ok
     assert wait_job(ctrl.robot.set_speed(100)).ok
@@ -264,10 +278,17 @@ def test_dropped_socket_is_comms_lost_and_the_driver_reconnects(rig):
 
 def test_stalled_reply_times_out_then_the_link_recovers(rig):
     plant, emu, ctrl, faults, scenario = rig
-    faults.add("stall", "adept", "SPEED", nth=1, stall_s=1.5)
-    job = wait_job(ctrl.robot.set_speed(70))           # timeout_s = 1 s
+    # the controller holds the reply until released: only the time-out can end the wait,
+    # so a short one is safe (no slow machine answers it late, none trips it early)
+    rule = faults.add("stall", "adept", "SPEED", nth=1, stall_s=3600.0)
+    ctrl.robot.timeout_s = 0.5
+    try:
+        job = wait_job(ctrl.robot.set_speed(70))
+    finally:
+        ctrl.robot.timeout_s = TIMEOUT_S
+        rule.release()
     assert isinstance(job.error, CommsLost) and "time-out" in str(job.error)
-    assert wait_job(ctrl.robot.set_speed(100), 5.0).ok
+    assert wait_job(ctrl.robot.set_speed(100)).ok
 
 
 # ---------------------------------------------------------------------------- I/O
@@ -278,11 +299,11 @@ def test_input_change_reaches_changes_through_the_notify_socket(rig):
     connects = ctrl.notify_link.connects
     assert io.get(1) is False                          # estop: adept input bit 1
     plant.set_signal("estop", True)
-    got = wait_for(io.changes, 2.0, "input change")
+    got = wait_for(io.changes, what="input change")
     assert [(b, v) for b, v, _ in got] == [(1, True)]
     assert io.get(1) is True
     plant.set_signal("estop", False)
-    got = wait_for(io.changes, 2.0, "input change")
+    got = wait_for(io.changes, what="input change")
     assert [(b, v) for b, v, _ in got] == [(1, False)]
     assert got[0][2] <= ctrl.clock.now()
     assert ctrl.notify_link.connects == connects      # one connection carried both lines
@@ -306,7 +327,7 @@ def test_serve_picks_consecutive_ports_and_wrong_wiring_is_detected():
         assert len(set(p.values())) == 4
         swapped = dataclasses.replace(cell.adept, motion_port=p["position"],
                                       position_port=p["motion"], io_port=p["io"],
-                                      notify_port=p["notify"], timeout_s=1.0)
+                                      notify_port=p["notify"], timeout_s=TIMEOUT_S)
         with pytest.raises(CommsLost, match="answers as the 'position' server"):
             AdeptController(swapped, RealClock(), robot=cell.robot)
         right = dataclasses.replace(swapped, motion_port=p["motion"], position_port=p["position"])

@@ -16,6 +16,9 @@ from feeder_bt.hal.adept.client import Backoff, LineSocket, ServerClient
 from feeder_bt.hal.adept.protocol import ProtocolError, VplusError
 from feeder_bt.hal.interfaces import Held, Pose
 
+# the scripted servers answer at once: these only bound a hung test on a loaded machine
+TIMEOUT_S = 10.0
+WAIT_S = 30.0
 PICK = P.command("motion", "PICK")
 WHERE = P.command("position", "WHERE")
 HOLDING = P.command("motion", "HOLDING")
@@ -255,7 +258,7 @@ def server():
 
 def test_garbage_reply_raises_protocol_error_and_the_client_resyncs(server):
     srv = server([b"OK 17 871.25 extra\r\n", b"OK 18 900.5\r\n"])
-    link = LineSocket("motion", "127.0.0.1", srv.port, timeout_s=2.0)
+    link = LineSocket("motion", "127.0.0.1", srv.port, timeout_s=TIMEOUT_S)
     try:
         with pytest.raises(ProtocolError, match="expected 2 values"):
             link.request("motion", "PICK", 17, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0, 0.0)
@@ -269,7 +272,7 @@ def test_garbage_reply_raises_protocol_error_and_the_client_resyncs(server):
 
 def test_overlong_reply_is_a_protocol_error(server):
     srv = server([b"OK " + b"9" * 1000 + b"\r\n"])
-    link = LineSocket("position", "127.0.0.1", srv.port, timeout_s=2.0)
+    link = LineSocket("position", "127.0.0.1", srv.port, timeout_s=TIMEOUT_S)
     try:
         with pytest.raises(ProtocolError, match="longer than"):
             link.request("position", "BELT")
@@ -279,14 +282,14 @@ def test_overlong_reply_is_a_protocol_error(server):
 
 def test_dropped_socket_is_comms_lost_then_reconnects(server):
     srv = server([None, b"OK 1\r\n"])
-    client = ServerClient("motion", "127.0.0.1", srv.port, timeout_s=2.0)
+    client = ServerClient("motion", "127.0.0.1", srv.port, timeout_s=TIMEOUT_S)
     try:
         fut = client.submit("HOLDING")
         with pytest.raises(CommsLost, match="closed by the controller"):
-            fut.result(timeout=3)
+            fut.result(timeout=WAIT_S)
         backoff = client.link.backoff
         assert backoff.next_try > 0 and backoff.delay == 0.2   # the first back-off is armed
-        assert client.submit("HOLDING").result(timeout=3) == ["1"]
+        assert client.submit("HOLDING").result(timeout=WAIT_S) == ["1"]
         assert backoff.next_try == 0.0 and backoff.delay == 0.1   # connected: reset
         assert srv.connections == 2
     finally:

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
-from galil_fixtures import JAM_BIT, TIMEOUT_S, plant_and_emulator, rig, wait_job, wait_until
+from galil_fixtures import JAM_BIT, TIMEOUT_S, WAIT_S, plant_and_emulator, rig, wait_job, wait_until
 
 from feeder_bt.clock import RealClock
 from feeder_bt.emulators.faults import FaultPlan
@@ -51,7 +51,7 @@ def test_connect_downloads_and_starts_the_programs():
         # ER 5 mm at 20 counts/mm, TL 5 V with no peak above it, OE 1, limit switches and
         # latch active low, inputs 5-8 general, the abort input leaves our programs running
         assert cmds[12:dl] == ["ER 100,100", "TL 5,5", "TK 0,0", "OE 1,1", "CN -1,-1,-1,0,1"]
-        assert {"DSTEP=100", "~a=1", "WDMS=1000", "WDAXES=3", "INBANKS=1", "ERSEEN=0",
+        assert {"DSTEP=100", "~a=1", f"WDMS={r.cell.galil.watchdog_s * 1000:.0f}", "WDAXES=3", "INBANKS=1", "ERSEEN=0",
                 "XQ #INMON,0", "XQ #DIST,1", "XQ #WDOG,2"} <= set(cmds)
         assert not any(c.startswith("SH") for c in cmds)     # no SH without the person
         assert "MG _TI1" not in cmds                          # an 8-input card
@@ -100,7 +100,9 @@ def test_jog_change_speed_stop_and_position():
         ok(belt.set_speed(100.0))
         assert belt.speed() == 100.0
         assert axis.commanded == pytest.approx(100.0)
-        assert r.emu.commands[-2:] == ["JG ,2000", "BGB"]
+        # JG then BG (the health poll's queries may come between or after them)
+        sent = [c for c in r.emu.commands if c.startswith(("JG", "BG"))]
+        assert sent[-2:] == ["JG ,2000", "BGB"]
         n = len(r.emu.commands)
         ok(belt.set_speed(150.0))                  # jogging: JG changes speed, no new BG
         assert "JG ,3000" in r.emu.commands[n:] and "BGB" not in r.emu.commands[n:]
@@ -271,11 +273,11 @@ def test_outputs_and_input_changes():
 
 def test_rejected_command_raises_galil_error_from_tc1():
     with rig() as r:
-        err = r.ctl.command("XX").exception(10)
+        err = r.ctl.command("XX").exception(WAIT_S)
         assert isinstance(err, GalilError)
         assert (err.code, err.text, err.command) == (1, "Unrecognized command", "XX")
         assert r.emu.commands[-2:] == ["XX", "TC1"]
-        err = r.ctl.command("bg").exception(10)     # lower case is not a command
+        err = r.ctl.command("bg").exception(WAIT_S)     # lower case is not a command
         assert isinstance(err, GalilError) and err.code == 1
         assert r.ctl.command("TPB").result(3).strip() == "0"
         with pytest.raises(HalError):
@@ -311,9 +313,9 @@ def test_drop_fault_surfaces_as_comms_lost_and_the_driver_reconnects():
     faults.add("drop", "galil", "TPB", nth=2)
     with rig(faults) as r:
         belt = r.conveyors["horizontal"]
-        err = r.ctl.command("TPB").exception(10)
+        err = r.ctl.command("TPB").exception(WAIT_S)
         assert isinstance(err, CommsLost) and not isinstance(err, GalilError)
-        assert wait_until(lambda: r.ctl.command("TPB").exception(10) is None, )
+        assert wait_until(lambda: r.ctl.command("TPB").exception(WAIT_S) is None)
         assert r.ctl.connects == 2
         assert r.emu.commands.count("DL") == 2 and r.emu.interp.running() == [0, 1, 2]
         assert "IHA=>-2" in r.emu.commands           # the stale handle freed (finding 5)
@@ -324,30 +326,47 @@ def test_drop_fault_surfaces_as_comms_lost_and_the_driver_reconnects():
 def test_server_side_socket_kill_and_stall():
     faults = FaultPlan()
     with rig(faults) as r:
-        faults.add("stall", "galil", "TPA", nth=1, stall_s=4.0)
+        faults.add("stall", "galil", "TPA", nth=1, stall_s=3600.0)   # until the drop
         # in flight when the server closes the socket: CommsLost at once
         n = r.emu.commands.count("TPA")
         fut = r.ctl.command("TPA")
         assert wait_until(lambda: r.emu.commands.count("TPA") > n)   # in flight, held back
         r.emu.drop_clients()
-        err = fut.exception(10)
+        err = fut.exception(WAIT_S)
         assert isinstance(err, CommsLost) and "lost" in str(err)
-        assert wait_until(lambda: r.ctl.command("TPA").exception(10) is None)
+        assert wait_until(lambda: r.ctl.command("TPA").exception(WAIT_S) is None)
         assert r.ctl.connects == 2
         # killed while idle: the next command reconnects on its own
         r.emu.drop_clients()
         assert wait_until(lambda: not r.ctl.connected)
-        assert r.ctl.command("TPA").exception(10) is None and r.ctl.connects == 3
-        # a reply held back past timeout_s is a lost link too
+        assert r.ctl.command("TPA").exception(WAIT_S) is None and r.ctl.connects == 3
+        # a reply held back past timeout_s is a lost link too: the card stays silent (an
+        # hour, or until the link closes), so only the time-out can end the wait, and a
+        # short one cannot be tripped by a slow machine
         r.ctl.spec.timeout_s = 1.0
-        faults.add("stall", "galil", "TPB", nth=1, stall_s=4.0)
-        err = r.ctl.command("TPB").exception(10)
+        faults.add("stall", "galil", "TPB", nth=1, stall_s=3600.0)
+        err = r.ctl.command("TPB").exception(WAIT_S)
         assert isinstance(err, CommsLost) and "no reply" in str(err)
         r.ctl.spec.timeout_s = TIMEOUT_S
-        assert wait_until(lambda: r.ctl.command("TPB").exception(10) is None)
+        assert wait_until(lambda: r.ctl.command("TPB").exception(WAIT_S) is None)
 
 
-def test_reconnect_back_off_until_the_controller_is_there():
+class _TestMonotonic:
+    """The driver's ``time.monotonic``, moved only by the test: the back-off is judged on
+    it, so a slow machine cannot let a back-off run out between two of the test's lines."""
+
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def monotonic(self) -> float:
+        return self.t
+
+
+def test_reconnect_back_off_until_the_controller_is_there(monkeypatch):
+    import feeder_bt.hal.galil.driver as driver_module
+
+    clock = _TestMonotonic()
+    monkeypatch.setattr(driver_module, "time", clock)
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -356,14 +375,20 @@ def test_reconnect_back_off_until_the_controller_is_there():
         ctl = GalilController(cell.galil, RealClock(), PROGRAMS_DIR, counts_per_mm=CPM)
         late = None
         try:
-            assert isinstance(ctl.ready.exception(10), CommsLost)
-            err = ctl.command("TPB").exception(10)      # within the back-off: refused at once
-            assert isinstance(err, CommsLost) and "next attempt" in str(err)
-            time.sleep(0.15)
-            assert isinstance(ctl.command("TPB").exception(10), CommsLost)   # tried, failed
+            assert isinstance(ctl.ready.exception(WAIT_S), CommsLost)
+            assert ctl._backoff == pytest.approx(0.2)    # failed once: 0.1 s, then 0.2 s
+            clock.t += 0.05
+            err = ctl.command("TPB").exception(WAIT_S)  # within the back-off: refused at once
+            assert isinstance(err, CommsLost) and "next attempt in 0.05 s" in str(err)
+            assert ctl._backoff == pytest.approx(0.2)    # not tried: no further back-off
+            clock.t += 0.1
+            assert isinstance(ctl.command("TPB").exception(WAIT_S), CommsLost)  # tried, failed
             assert ctl._backoff == pytest.approx(0.4)
             late = serve(plant, "127.0.0.1", port)
-            assert wait_until(lambda: ctl.command("TPB").exception(10) is None)
+            err = ctl.command("TPB").exception(WAIT_S)   # there now, but 0.2 s to wait
+            assert isinstance(err, CommsLost) and "next attempt" in str(err)
+            clock.t += 0.25
+            assert ctl.command("TPB").exception(WAIT_S) is None
             assert ctl.connects == 1 and late.interp.running() == [0, 1, 2]
         finally:
             ctl.close()
@@ -394,14 +419,19 @@ def test_the_same_driver_over_a_pty_serial_port():
         assert any(isinstance(e, DistanceEvent) for e in drain(q))
         r.plant.set_signal("jam", True)
         assert wait_until(lambda: r.io.get("jam"))
-        err = r.ctl.command("XX").exception(10)
+        err = r.ctl.command("XX").exception(WAIT_S)
         assert isinstance(err, GalilError) and err.code == 1
         assert belt.position() == r.plant.position_counts("B")
         assert InputsEvent(1 << (JAM_BIT - 1)) in [e for e in drain(q)] or r.io.get("jam")
         # a lost reply on the serial line: CommsLost, then the port is reopened
+        # (the line stays silent: only the time-out ends the wait, so a short one is safe)
         faults.add("drop", "galil", "TPA", nth=1)
-        assert isinstance(r.ctl.command("TPA").exception(10), CommsLost)
-        assert wait_until(lambda: r.ctl.command("TPA").exception(10) is None, )
+        r.ctl.spec.timeout_s = 1.0
+        try:
+            assert isinstance(r.ctl.command("TPA").exception(WAIT_S), CommsLost)
+        finally:
+            r.ctl.spec.timeout_s = TIMEOUT_S
+        assert wait_until(lambda: r.ctl.command("TPA").exception(WAIT_S) is None)
         assert r.ctl.connects == 2
         ok(belt.set_speed(20.0))
 
@@ -418,13 +448,13 @@ class RawClient:
     """A bare socket to the emulator, to check the wire format itself."""
 
     def __init__(self, emu: GalilEmulator) -> None:
-        self.sock = socket.create_connection(("127.0.0.1", emu.port), timeout=2.0)
+        self.sock = socket.create_connection(("127.0.0.1", emu.port), timeout=WAIT_S)
 
     def send(self, data: bytes, replies: int = 1, lines: int = 0) -> bytes:
         """Send, then read until ``replies`` replies and ``lines`` unsolicited lines came."""
         self.sock.sendall(data)
         buf = b""
-        end = time.monotonic() + 2.0
+        end = time.monotonic() + WAIT_S                 # bounds a hung test only
         while time.monotonic() < end:
             solicited, unsolicited = split(buf)
             if (solicited.count(b":") + solicited.count(b"?") >= replies
@@ -512,14 +542,12 @@ def test_handles_run_out_and_ih_frees_them():
         a, b = RawClient(emu), RawClient(emu)
         assert a.send(b"WH\r") == b"IHA\r\n:" and b.send(b"WH\r") == b"IHB\r\n:"
         c = RawClient(emu)
-        c.sock.settimeout(1.0)
         c.sock.sendall(b"TPB\r")
         assert c.sock.recv(10) == b""              # every handle taken: refused
         c.close()
         emu.drop_clients()                          # cable pulled: both handles stale
         assert wait_until(lambda: emu.handles() == {"A": "stale", "B": "stale"})
         d = RawClient(emu)
-        d.sock.settimeout(1.0)
         d.sock.sendall(b"TPB\r")
         assert d.sock.recv(10) == b""              # still refused: nobody freed them
         d.close()
@@ -545,7 +573,7 @@ def test_program_messages_only_to_the_handle_cf_names():
             c.sock.settimeout(0.3)
             with pytest.raises(TimeoutError):
                 c.sock.recv(10)                     # lost: CF names no handle of ours
-            c.sock.settimeout(2.0)
+            c.sock.settimeout(WAIT_S)
             assert c.send(b"CF A\r") == b":"
             got = c.send(b"XQ #A\r", lines=1)
             assert split(got) == (b":", b"hi\r\n")

@@ -22,7 +22,15 @@ from feeder_bt.errors import EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.hal.adept import AdeptController, VplusError
 from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.scenario import load_scenario
-from tests.test_adept_driver import BELT_COUNTS_S, pickable_target, wait_for, wait_job
+from tests.test_adept_driver import (
+    BELT_COUNTS_S,
+    MOTION_TIMEOUT_S,
+    TIMEOUT_S,
+    WAIT_S,
+    pickable_target,
+    wait_for,
+    wait_job,
+)
 
 MOVED = {"base_mm": (1400.0, 330.0), "base_deg": 90.0}   # moved and turned 90 degrees
 
@@ -36,7 +44,8 @@ def _rig(robot: dict | None = None, true_base=None, seed: int = 4, programs=VPLU
     p = emu.ports
     spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
                                position_port=p["position"], io_port=p["io"],
-                               notify_port=p["notify"], timeout_s=2.0, motion_timeout_s=15.0)
+                               notify_port=p["notify"], timeout_s=TIMEOUT_S,
+                               motion_timeout_s=MOTION_TIMEOUT_S)
     ctrl = AdeptController(spec, RealClock(), robot=cell.robot,
                            counts_per_mm=cell.encoder.counts_per_mm)
     plant.jog("A", BELT_COUNTS_S)
@@ -52,7 +61,7 @@ def _close(plant, emu, ctrl) -> None:
 
 
 def _ask(port: int, line: str) -> str:
-    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+    with socket.create_connection(("127.0.0.1", port), timeout=WAIT_S) as s:
         s.sendall((line + "\n").encode())
         return s.makefile("rb").readline().decode().strip()
 
@@ -88,19 +97,19 @@ def test_picks_land_on_parts_with_the_base_moved_and_turned(moved):
     plant, emu, ctrl, scenario = moved
     place = scenario.parts["lens"].place
     for _ in range(3):
-        target = pickable_target(plant, timeout=20.0)
-        job = wait_job(ctrl.robot.pick(target), 15.0)
+        target = pickable_target(plant)
+        job = wait_job(ctrl.robot.pick(target))
         assert job.ok, job.error
         with plant.lock:
             assert plant.world.gripper == target.part_id       # the part aimed at
-        job = wait_job(ctrl.robot.place(Pose(place.x, place.y, place.z, 0.0)), 15.0)
+        job = wait_job(ctrl.robot.place(Pose(place.x, place.y, place.z, 0.0)))
         assert job.ok, job.error
         with plant.lock:
             assert plant.world.parts[target.part_id].where == "placed"
             assert not plant.world.misplaced_by_type       # released at the place pose
     # WHERE answers in the cell frame, HERE in the robot's own (turned) frame
     assert wait_job(ctrl.robot.move_safe()).ok
-    wait_for(lambda: ctrl.position.pose() == Pose(*plant.cell.robot.safe_mm), 2.0, "safe")
+    wait_for(lambda: ctrl.position.pose() == Pose(*plant.cell.robot.safe_mm), what="safe")
     here = ctrl.clients["position"].call("HERE")
     bx, by = MOVED["base_mm"]
     sx, sy = plant.cell.robot.safe_mm            # Rot(-90) (safe - base)
@@ -125,8 +134,8 @@ def test_a_wrong_frame_misses_or_is_refused_never_feeds_silently():
     try:
         failures = []
         for _ in range(3):
-            target = pickable_target(plant, timeout=20.0)
-            job = wait_job(ctrl.robot.pick(target), 15.0)
+            target = pickable_target(plant)
+            job = wait_job(ctrl.robot.pick(target))
             assert not job.ok
             assert isinstance(job.error, (MissedGrab, EnvelopeError)), job.error
             failures.append(type(job.error).__name__)
@@ -157,8 +166,8 @@ def _part_at_rest_in_reach(plant: Plant) -> PickTarget:
     wait_for(find, 30.0, "a part in reach")
     plant.jog("A", 0)
     plant.jog("B", 0)
-    wait_for(lambda: not plant.in_motion("B"), 10.0, "the belt at rest")
-    r = wait_for(find, 5.0, "the part at rest")
+    wait_for(lambda: not plant.in_motion("B"), what="the belt at rest")
+    r = wait_for(find, what="the part at rest")
     return PickTarget(part_id=r["id"], x_mm=r["x_mm"], y_mm=r["y_mm"],
                       angle_deg=r["angle_deg"], latch=0, tracking=False)
 
@@ -191,13 +200,13 @@ def _stop_during_a_pick(programs, expect_stop: bool) -> list[str]:
     try:
         target = _part_at_rest_in_reach(plant)
         assert wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 60.0, 0.0))).ok   # up high
-        assert wait_job(ctrl.robot.set_speed(10)).ok          # a slow approach
+        assert wait_job(ctrl.robot.set_speed(4)).ok           # a slow approach (~5 s)
         job = ctrl.robot.pick(target)
         arm = emu.rt.arm
         wait_for(lambda: arm.motion is not None and arm.motion.kind == "appros"
-                 and arm.busy(), 10.0, "the approach under way")
+                 and arm.busy(), what="the approach under way")
         assert wait_job(ctrl.robot.stop()).ok
-        wait_job(job, 15.0)
+        wait_job(job)
         kinds = [k for k, _ in arm.log]
         if not expect_stop:
             return kinds
@@ -233,7 +242,7 @@ def test_the_estop_polarity_comes_from_the_cell_file(active_low):
     p = emu.ports
     spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
                                position_port=p["position"], io_port=p["io"],
-                               notify_port=p["notify"], timeout_s=2.0)
+                               notify_port=p["notify"], timeout_s=TIMEOUT_S)
     ctrl = AdeptController(spec, RealClock(), robot=cell.robot, estop=adept_estop(cell))
     try:
         assert ("motion", f"ESTOP {adept_estop(cell)}") in emu.requests
@@ -261,7 +270,7 @@ def test_without_the_polarity_an_active_low_estop_blocks_every_motion():
     p = emu.ports
     spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
                                position_port=p["position"], io_port=p["io"],
-                               notify_port=p["notify"], timeout_s=2.0)
+                               notify_port=p["notify"], timeout_s=TIMEOUT_S)
     ctrl = AdeptController(spec, RealClock(), robot=cell.robot)      # no ESTOP
     try:
         job = wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 0.0, 0.0)))

@@ -35,14 +35,23 @@ class FaultRule:
     nth: int | None = None        # fire on the n-th matching command only (1-based)
     every: int | None = None      # fire on every n-th matching command
     rate: float | None = None     # fire with this probability per matching command
-    stall_s: float = 5.0          # for ``stall``: how long the reply is held back
+    stall_s: float = 5.0          # for ``stall``: how long the reply is held back at most
     after_s: float = 0.2          # for ``drop_during``: when the link goes, into the motion
     seen: int = 0
     fired: int = 0
+    # for ``stall``: set by ``release()``, ends the hold early (the Adept emulator). A test
+    # of a time-out holds the reply "for ever" and releases it once the time-out was seen,
+    # so the device is truly silent and no machine speed can trip or miss the time-out
+    released: threading.Event = field(default_factory=threading.Event, repr=False,
+                                      compare=False)
 
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
             raise ValueError(f"unknown fault kind {self.kind!r}; one of {', '.join(FAULT_KINDS)}")
+
+    def release(self) -> None:
+        """End a ``stall``'s hold now: the held reply goes out."""
+        self.released.set()
 
 
 @dataclass

@@ -22,6 +22,7 @@ import re
 import select
 import socket
 import threading
+import time
 from typing import TYPE_CHECKING
 
 from ...hal.adept import protocol as P
@@ -56,6 +57,7 @@ class TcpLun:
         self.status = 0
         self.drop_reply = False
         self.stall_s = 0.0
+        self.stall_release: threading.Event | None = None
 
     def fopen(self, spec: str) -> None:
         m = _PORT.search(spec)
@@ -156,7 +158,7 @@ class TcpLun:
         elif rule.kind == "drop_after":
             self.drop_reply = True
         elif rule.kind == "stall":
-            self.stall_s = rule.stall_s
+            self.stall_s, self.stall_release = rule.stall_s, rule.released
         elif rule.kind == "servo_timeout" and line.split()[0] in MOTIONS:
             self.rt.arm.fault_armed = True
         return None
@@ -171,6 +173,15 @@ class TcpLun:
         except OSError:
             return False
 
+    def _hold(self, stall_s: float, release: threading.Event | None) -> None:
+        """A ``stall``: the reply waits ``stall_s``, or until the rule is released (the
+        emulator's stop still ends it: ``rt.sleep`` raises ``Killed``)."""
+        end = time.monotonic() + stall_s
+        while (left := end - time.monotonic()) > 0:
+            if release is not None and release.is_set():
+                return
+            self.rt.sleep(min(left, 0.02))
+
     def write(self, handle: int, text: str) -> None:
         if self.drop_reply:
             self.drop_reply = False
@@ -180,5 +191,5 @@ class TcpLun:
             return
         if self.stall_s:
             stall, self.stall_s = self.stall_s, 0.0
-            self.rt.sleep(stall)
+            self._hold(stall, self.stall_release)
         self.status = 0 if self._send_raw(text) else ST_BROKEN
