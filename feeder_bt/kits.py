@@ -35,11 +35,15 @@ class KitTracker:
             return cls(retrieve.kit)
         return None
 
-    def wanted(self) -> set[str]:
-        """The part types the kit takes next: in order, the next one; else any it lacks."""
+    def wanted(self, in_flight: Counter[str] | None = None) -> set[str]:
+        """The part types the kit takes next: in order, the next one; else any it lacks.
+        ``in_flight``: parts handed out and not yet placed (robots of the part server),
+        already promised to the kit; empty when all it lacks are on their way."""
+        going = in_flight or Counter()
         if self.order:
-            return {self.order[sum(self.have.values())]}
-        return {t for t, n in self.counts.items() if self.have[t] < n}
+            i = sum(self.have.values()) + sum(going.values())
+            return {self.order[i]} if i < self.size else set()
+        return {t for t, n in self.counts.items() if self.have[t] + going[t] < n}
 
     def placed(self, ptype: str) -> bool:
         """A part of ``ptype`` was placed; True when it completed a kit. A part the kit

@@ -4,6 +4,7 @@ the report counts kits and bounds them."""
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -33,6 +34,17 @@ def test_a_sequence_is_a_kit_in_order_and_waits_for_its_part():
     assert kit.wanted() == {"washer"}
     assert kit.placed("washer") is False and kit.wanted() == {"nut"}
     assert kit.placed("nut") is True and kit.completed == 1
+
+
+def test_parts_on_their_way_are_promised_to_the_kit():
+    """Robots of the part server hold parts not yet placed: the kit does not ask for
+    them again."""
+    kit = KitTracker({"square": 1, "lens": 3})
+    assert kit.wanted(Counter(square=1, lens=2)) == {"lens"}
+    assert kit.wanted(Counter(square=1, lens=3)) == set()         # all on their way
+    seq = KitTracker({"washer": 1, "nut": 1}, ["washer", "nut"])
+    assert seq.wanted(Counter(washer=1)) == {"nut"}
+    assert seq.wanted(Counter(washer=1, nut=1)) == set()
 
 
 def test_kit_bounds_are_the_lowest_of_robot_supply_and_inflow():

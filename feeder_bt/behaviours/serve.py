@@ -472,11 +472,11 @@ class ServeRobots(NextPart):
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:
             self.ctx.stats.count("too_far", len(gone))
-        wanted = ptype
-        in_sequence = ptype is None and bool(self.seq)
-        if in_sequence:
-            wanted = self.seq[self.seq_i % len(self.seq)]
-        parts = [p for p in queue.peek_all() if wanted is None or p.type == wanted]
+        wanted = None if ptype is None else {ptype}
+        kit = self.ctx.stats.kit
+        if ptype is None and kit is not None:   # what the kit lacks, less what robots hold
+            wanted = kit.wanted(Counter(h.part.type for h in self.desk.handed.values()))
+        parts = [p for p in queue.peek_all() if wanted is None or p.type in wanted]
         if within_s is not None:
             enter = {p.id: self.enter_s(p) for p in parts}
             later = [t - within_s for t in enter.values() if within_s < t < math.inf]
@@ -486,8 +486,6 @@ class ServeRobots(NextPart):
         part = self.policy.choose(parts, self.x_now)
         if part is None or not queue.remove(part.id):
             return None
-        if in_sequence:
-            self.seq_i += 1
         spec = self.ctx.scenario.parts[part.type]
         ox, oy, oz = spec.tool_offset
         ox, oy = ox + part.grip_dx_mm, oy + part.grip_dy_mm      # the grip offered

@@ -379,19 +379,28 @@ class GalilIO:
                         if s.controller == "galil" and s.dir != "in"}
         self._lock = threading.Lock()
         self._changes: list[IoChange] = []
-        self._last: int | None = None
+        self._last: int | None = controller.inputs_mask
         self._out: dict[str, bool] = {}
         controller.subscribe(self._on_event)
+        # the inputs read at every connect are a sample too: a change between the connect
+        # and the input monitor's first message, or during an outage, is not lost
+        controller.on_connect(lambda: self._observe(self.ctl.inputs_mask, self.clock.now()))
 
     def _on_event(self, ev: Event, t: float) -> None:
-        if not isinstance(ev, InputsEvent):
+        if isinstance(ev, InputsEvent):
+            self._observe(ev.mask, t)
+
+    def _observe(self, mask: int | None, t: float) -> None:
+        """A sample of the inputs: each named input whose level changed since the last
+        sample is a change (``changes``)."""
+        if mask is None:
             return
         with self._lock:
-            last, self._last = self._last, ev.mask
+            last, self._last = self._last, mask
             if last is None:
                 return
             for name, bit in self.inputs.items():
-                was, now = bool(last >> (bit - 1) & 1), bool(ev.mask >> (bit - 1) & 1)
+                was, now = bool(last >> (bit - 1) & 1), bool(mask >> (bit - 1) & 1)
                 if was != now:
                     self._changes.append(IoChange(name, now != (name in self.active_low), t))
 
