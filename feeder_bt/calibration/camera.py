@@ -94,15 +94,7 @@ class CameraFit:
     similarity_rms_mm: float | None = None   # a belt-plane fit: what a similarity leaves
 
     def as_dict(self) -> dict:
-        c = self.calibration
-        d = {"origin_mm": [round(float(c.origin_mm[0]), 4), round(float(c.origin_mm[1]), 4)],
-             "mm_per_px": round(float(c.mm_per_px), 7),
-             "rotation_deg": round(float(c.rotation_deg), 5)}
-        if c.intrinsics is not None:
-            d["intrinsics"] = [round(float(v), 5) for v in c.intrinsics]
-            d["dist"] = [float(f"{v:.9g}") for v in c.dist]
-        if c.homography is not None:
-            d["homography"] = [float(f"{v:.12g}") for v in c.homography]
+        d = calibration_values(self.calibration)
         d.update({
              "residual_mm": {"rms": round(self.rms_mm, 4), "max": round(self.max_mm, 4)},
              "points": self.n_points,
@@ -113,6 +105,19 @@ class CameraFit:
         if self.hint:
             d["hint"] = self.hint
         return d
+
+
+def calibration_values(c: CameraCalibration) -> dict:
+    """A ``CameraCalibration`` as the calibration file's keys (``calibration.files``)."""
+    d: dict = {"origin_mm": [round(float(c.origin_mm[0]), 5), round(float(c.origin_mm[1]), 5)],
+               "mm_per_px": round(float(c.mm_per_px), 8),
+               "rotation_deg": round(float(c.rotation_deg), 6)}
+    if c.intrinsics is not None:
+        d["intrinsics"] = [round(float(v), 5) for v in c.intrinsics]
+        d["dist"] = [float(f"{v:.9g}") for v in c.dist]
+    if c.homography is not None:
+        d["homography"] = [float(f"{v:.12g}") for v in c.homography]
+    return d
 
 
 def _check_points(px: np.ndarray, mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

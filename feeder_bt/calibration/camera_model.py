@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..scenario.model import CameraCalibration
-from .camera import correspondences
+from .camera import calibration_values, correspondences
 from .common import CalibrationError
 from .intrinsics import (
     MIN_VIEWS,
@@ -87,17 +87,6 @@ class CameraResult:
         return d
 
 
-def calibration_values(c: CameraCalibration) -> dict:
-    """A ``CameraCalibration`` as the calibration file's keys (``calibration.files``)."""
-    d: dict = {"origin_mm": [round(float(c.origin_mm[0]), 5), round(float(c.origin_mm[1]), 5)],
-               "mm_per_px": round(float(c.mm_per_px), 8),
-               "rotation_deg": round(float(c.rotation_deg), 6)}
-    if c.intrinsics is not None:
-        d["intrinsics"] = [round(float(v), 5) for v in c.intrinsics]
-        d["dist"] = [float(f"{v:.9g}") for v in c.dist]
-    if c.homography is not None:
-        d["homography"] = [float(f"{v:.12g}") for v in c.homography]
-    return d
 
 
 def calibrate_camera_views(images: Sequence[tuple[str, np.ndarray]], target: Target,

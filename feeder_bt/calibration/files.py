@@ -45,13 +45,17 @@ def write_calibration_file(path: str | Path, values: dict[str, Any], header: str
     return path
 
 
-def calibration_path(cell: CellSpec) -> Path | None:
-    """The camera calibration file a cell names, resolved against the cell file's folder."""
-    name = getattr(cell.camera, "calibration_file", None)
+def _beside_cell(cell: CellSpec, name: str | None) -> Path | None:
+    """A file a cell names, resolved against the cell file's folder."""
     if not name:
         return None
     p = Path(name)
     return p if p.is_absolute() else Path(os.path.normpath(Path(cell.path).parent / p))
+
+
+def calibration_path(cell: CellSpec) -> Path | None:
+    """The camera calibration file a cell names."""
+    return _beside_cell(cell, getattr(cell.camera, "calibration_file", None))
 
 
 def _read_mapping(path: str | Path, required: tuple[str, ...], command: str
@@ -193,12 +197,8 @@ FRAME_REQUIRED = ("base_mm", "base_deg")
 
 
 def robot_frame_path(cell: CellSpec) -> Path | None:
-    """The robot frame file a cell names, resolved against the cell file's folder."""
-    name = getattr(cell.robot, "frame_file", None)
-    if not name:
-        return None
-    p = Path(name)
-    return p if p.is_absolute() else Path(os.path.normpath(Path(cell.path).parent / p))
+    """The robot frame file a cell names."""
+    return _beside_cell(cell, getattr(cell.robot, "frame_file", None))
 
 
 def read_robot_frame(path: str | Path) -> tuple[tuple[float, float], float]:

@@ -42,13 +42,12 @@ from ..calibration import (
     tool_procedure,
     window_error_mm,
 )
-from ..calibration.camera import Target, TargetPose, centred_pose
+from ..calibration.camera import Target, TargetPose, calibration_values, centred_pose
 from ..calibration.camera_model import (
     DEFAULT_MAX_BELT_MM,
     DEFAULT_MAX_RMS_PX,
     CameraResult,
     calibrate_camera_views,
-    calibration_values,
 )
 from ..calibration.common import CalibrationError
 from ..calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
@@ -469,16 +468,25 @@ def format_camera(fit: CameraFit, cell: CellSpec, truth: CameraCalibration | Non
              f"  residual over {fit.n_points} points: rms {fit.rms_mm:.3f} mm, max "
              f"{fit.max_mm:.3f} mm (affine {fit.affine_rms_mm:.3f}, homography "
              f"{fit.homography_rms_mm:.3f} mm rms)"]
+    lines += _window_lines(c, cell, truth)
+    if fit.hint:
+        lines.append(f"  hint: {fit.hint}")
+    return "\n".join(lines)
+
+
+def _window_lines(c: CameraCalibration, cell: CellSpec, truth: CameraCalibration | None
+                  ) -> list[str]:
+    """How far a new calibration moves the camera window from the cell's present one, and
+    (simulated cell) from the simulated camera's truth."""
     cam = cell.camera
-    lines.append(f"  moves the window by up to {window_error_mm(c, cam.calibration, cam.width_px, cam.height_px):.2f} mm "
-                 "from the cell's present calibration")
+    lines = [f"  moves the window by up to "
+             f"{window_error_mm(c, cam.calibration, cam.width_px, cam.height_px):.2f} mm "
+             "from the cell's present calibration"]
     if truth is not None:
         err = window_error_mm(c, truth, cam.width_px, cam.height_px)
         lines.append(f"  simulator check: up to {err:.3f} mm from the simulated camera's truth "
                      "over the window")
-    if fit.hint:
-        lines.append(f"  hint: {fit.hint}")
-    return "\n".join(lines)
+    return lines
 
 
 def format_result(r: CameraResult, cell: CellSpec, truth: CameraCalibration | None) -> str:
@@ -504,14 +512,7 @@ def format_result(r: CameraResult, cell: CellSpec, truth: CameraCalibration | No
     lines.append(f"  near the centre: mm_per_px {c.mm_per_px:.6f}, rotation_deg "
                  f"{c.rotation_deg:.4f}, origin_mm [{c.origin_mm[0]:.3f}, "
                  f"{c.origin_mm[1]:.3f}]")
-    cam = cell.camera
-    lines.append(f"  moves the window by up to "
-                 f"{window_error_mm(c, cam.calibration, cam.width_px, cam.height_px):.2f} mm "
-                 "from the cell's present calibration")
-    if truth is not None:
-        err = window_error_mm(c, truth, cam.width_px, cam.height_px)
-        lines.append(f"  simulator check: up to {err:.3f} mm from the simulated camera's truth "
-                     "over the window")
+    lines += _window_lines(c, cell, truth)
     if r.note:
         lines.append(f"  note: {r.note}")
     return "\n".join(lines)

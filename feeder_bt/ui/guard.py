@@ -177,3 +177,15 @@ def _bound(d: dict) -> None:
     event loop under a flood of names)."""
     while len(d) > MAX_KEYS:
         del d[next(iter(d))]
+
+
+def set_login_cookies(resp, request, session_cookie: str, token: str, name: str,
+                      known: str) -> None:
+    """A login's two cookies: the session (the whole site) and the known-browser token
+    ``LoginGuard.issue`` made (only ``/api/login`` reads it); both strict same-site,
+    invisible to scripts, and over HTTPS only when the page came that way."""
+    secure = request.url.scheme == "https"
+    resp.set_cookie(session_cookie, token, httponly=True, samesite="strict", path="/",
+                    secure=secure)
+    resp.set_cookie(KNOWN_COOKIE + name, known, max_age=KNOWN_MAX_AGE_S, httponly=True,
+                    samesite="strict", path="/api/login", secure=secure)

@@ -20,7 +20,7 @@ from starlette.routing import Route
 
 from .access import Settings
 from .control import Session, Sessions, retry_after
-from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
+from .guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
 from .responses import client_ip, json_body, json_response, refuse, same_origin
 from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
 
@@ -98,11 +98,7 @@ class ReplayLogin:
         self.guard.success(attempt, verdict.trusted)
         s = self.sessions.create(name, attempt.ip, str(entry["hash"]))
         resp = json_response({"ok": True, "user": name})
-        secure = request.url.scheme == "https"
-        resp.set_cookie(COOKIE, s.token, httponly=True, samesite="strict", path="/",
-                        secure=secure)
-        resp.set_cookie(KNOWN_COOKIE + name, self.guard.issue(name), max_age=KNOWN_MAX_AGE_S,
-                        httponly=True, samesite="strict", path="/api/login", secure=secure)
+        set_login_cookies(resp, request, COOKIE, s.token, name, self.guard.issue(name))
         return resp
 
     async def logout(self, request: Request) -> Response:

@@ -46,7 +46,7 @@ from .access import (
 from .bridge import Bridge, Outcome
 from .camera import CameraFeed, CameraView
 from .control import Control, Session, Sessions, retry_after
-from .guard import KNOWN_COOKIE, KNOWN_MAX_AGE_S, Attempt, LoginGuard
+from .guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
 from .openapi import spec as openapi_spec
 from .operate import COMMANDS
 from .responses import (
@@ -308,11 +308,7 @@ class UiApp:
         self.note(name, "logged in")
         self.wake_all()
         resp = json_response({"ok": True, **self.session_info(s)})
-        secure = request.url.scheme == "https"
-        resp.set_cookie(COOKIE, s.token, httponly=True, samesite="strict", path="/",
-                        secure=secure)
-        resp.set_cookie(KNOWN_COOKIE + name, self.guard.issue(name), max_age=KNOWN_MAX_AGE_S,
-                        httponly=True, samesite="strict", path="/api/login", secure=secure)
+        set_login_cookies(resp, request, COOKIE, s.token, name, self.guard.issue(name))
         return resp
 
     async def logout(self, request: Request) -> Response:
