@@ -52,12 +52,15 @@ def test_the_status_payload_counts_the_misoriented_parts_of_the_simulated_cell(t
 
 def test_a_cell_without_a_simulated_world_shows_no_count():
     panel = SimpleNamespace(cell=SimpleNamespace(hal=SimpleNamespace()))
-    assert CellPanel._misoriented(panel) is None
+    assert CellPanel._world_count(panel, "misoriented") is None
+    assert CellPanel._world_count(panel, "scrapped") is None
 
 
 def test_the_page_shows_the_count_beside_located_and_missed():
     html = (ROOT / "feeder_bt/ui/static/index.html").read_text()
     rows = re.findall(r'<td id="(st-[\w-]+)">', html)
-    assert rows[rows.index("st-counts") + 1] == "st-misoriented"
+    assert rows[rows.index("st-counts") + 1: rows.index("st-counts") + 3] == [
+        "st-misoriented", "st-scrapped"]
     js = (ROOT / "feeder_bt/ui/static/app.js").read_text()
     assert re.search(r'\$\("st-misoriented"\)\.textContent = st\.misoriented == null \? "-"', js)
+    assert re.search(r'\$\("st-scrapped"\)\.textContent = st\.scrapped == null \? "-"', js)

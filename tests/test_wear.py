@@ -62,3 +62,18 @@ def test_max_passes_must_be_a_count(tmp_path, capsys):
     assert main(["check", str(lenses(tmp_path, "often"))]) == 2
     err = capsys.readouterr().err
     assert "max_passes" in err and "Traceback" not in err
+
+
+def test_feeder_report_gives_the_scrapped_parts(tmp_path, capsys):
+    import json
+    db = tmp_path / "e.db"
+    r = run_job(RunOptions(scenario=str(lenses(tmp_path, 1)), duration=300.0, fast=True,
+                           seed=3, view="none", db=str(db)))
+    assert r["parts"]["scrapped"] > 10
+    capsys.readouterr()
+    assert main(["report", str(db), "--json"]) == 0
+    row = json.loads(capsys.readouterr().out)             # one run: its summary
+    assert row["scrapped"] == r["parts"]["scrapped"]
+    assert main(["report", str(db)]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert "scrapped" in table[0].split()

@@ -12,7 +12,7 @@ from ..eventlog import ACCESS_KINDS, EventLogError, open_readonly
 from .runs_db import run_ids, summary
 
 COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
-           "located", "missed", "lost", "misoriented", "faults", "misses")
+           "located", "missed", "lost", "misoriented", "scrapped", "faults", "misses")
 
 
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
@@ -136,7 +136,7 @@ def format_table(rows: list[dict[str, Any]]) -> str:
     cells = [COLUMNS] + [tuple(_cell(k, r) for k in COLUMNS) for r in rows]
     widths = [max(len(c[i]) for c in cells) for i in range(len(COLUMNS))]
     right = {"run", "seed", "duration_s", "parts/min", "located", "missed", "lost",
-             "misoriented", "faults", "misses"}
+             "misoriented", "scrapped", "faults", "misses"}
     return "\n".join("  ".join(c.rjust(w) if k in right else c.ljust(w)
                                for k, c, w in zip(COLUMNS, line, widths, strict=True)).rstrip()
                      for line in cells)

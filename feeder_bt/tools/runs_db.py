@@ -60,7 +60,8 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
             out.update(state=report["state"], duration_s=report["feed_seconds"],
                        parts_per_minute=report["parts_per_minute"], retrieved=p["retrieved"],
                        located=p["located"], missed=p["missed"], lost=p["lost"],
-                       misoriented=p.get("misoriented"), faults=split(report["faults"])[0],
+                       misoriented=p.get("misoriented"), scrapped=p.get("scrapped"),
+                       faults=split(report["faults"])[0],
                        misses={**split(report["faults"])[1], **(report.get("misses") or {})},
                        story=story(report))
             return out
@@ -80,7 +81,8 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
     out.update(state="incomplete", duration_s=round(duration, 3),
                parts_per_minute=round(total * 60.0 / duration, 3) if duration > 0 else 0.0,
                retrieved=by_type, located=int(located or 0), missed=None, lost=None,
-               misoriented=None, faults=split(faults)[0], misses=split(faults)[1],
+               misoriented=None, scrapped=None, faults=split(faults)[0],
+               misses=split(faults)[1],
                story=story({"faults": faults}))
     return out
 

@@ -143,7 +143,9 @@ class CellPanel:
             "too_far": s.counts["too_far"],
             # parts placed turned or face-down: only a simulated cell can know (its world's
             # count, as in ``feeder report``); None on a real cell
-            "misoriented": self._misoriented(),
+            "misoriented": self._world_count("misoriented"),
+            # parts worn past their max_passes (issue 30): the simulated world's count too
+            "scrapped": self._world_count("scrapped"),
             # faults (recovered so far) and misses apart: vocabulary.py
             "faults": sum(split(s.faults)[0].values()),
             "recovered": sum(s.recoveries.values()),
@@ -160,11 +162,12 @@ class CellPanel:
         }
         return status, tuple(self._history), tuple(self._messages)
 
-    def _misoriented(self) -> int | None:
-        """The simulated world's count of parts placed misoriented (``report.parts``)."""
+    def _world_count(self, key: str) -> int | None:
+        """A count only the simulated world can know (as ``report.parts`` has it); None
+        on a real cell."""
         world = getattr(self.cell.hal, "world", None)
         counts = getattr(world, "counts", None)
-        return int(counts["misoriented"]) if counts is not None else None
+        return int(counts[key]) if counts is not None else None
 
     def _hal_speeds(self) -> dict[str, float | None]:
         """What the conveyors' controller reports (mm/s), not what the trees asked for."""

@@ -258,6 +258,12 @@ class Locator(Segmenter):
         for b, sig in zip(blobs, sigs, strict=True):
             b.face, b.faced = sig, True
 
+    def set_golden(self, image: np.ndarray) -> None:
+        """The cleared belt; and the pixel table for frames of its size, made now so that
+        no frame's vision time pays for it."""
+        super().set_golden(image)
+        self._mapping(np.asarray(image).shape[:2])
+
     def _mapping(self, shape: tuple[int, int]) -> Calibration | PixelGrid:
         """Where this image size's pixels are mapped to mm: the calibration itself when it
         is a similarity (a matrix product), else its ``PixelGrid`` for the size (built on

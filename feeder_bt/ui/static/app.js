@@ -168,6 +168,7 @@ function renderStatus(st) {
   $("st-queue").textContent = String(st.queue);
   $("st-counts").textContent = `${st.located} / ${st.missed} / ${st.too_far}`;
   $("st-misoriented").textContent = st.misoriented == null ? "-" : String(st.misoriented);
+  $("st-scrapped").textContent = st.scrapped == null ? "-" : String(st.scrapped);
   const sp = st.speeds || {};
   $("st-speeds").textContent = `horizontal ${fmt(sp.horizontal_mm_s)} mm/s, inclined ` +
     `${fmt(sp.incline_pct)} %, robot ${fmt(sp.robot_speed_pct)} %`;
