@@ -3,7 +3,8 @@ same budget, each against the report's ceiling; JSON and a markdown table out.
 
     python benchmarks/honest_bench.py [--supply supply/batch_refill.yaml] [--trials 20]
         [--duration 600] [--tune-seeds 2] [--eval-seeds 5] [--eval-duration 600]
-        [--workers 2] [--study FILE.db] [--only thesis|tuned] [--max-recirc R] [--out PATH]
+        [--workers 2] [--study FILE.db] [--only thesis|tuned] [--max-recirc R]
+        [--scenario scenarios/X.yaml] [--out PATH]
 
 (a) The thesis table: the original feeder (scenarios/original_cwru_lenses.yaml) against
     the new feeder with the thesis's water marks (scenarios/lenses.yaml as shipped), seeds
@@ -22,6 +23,10 @@ same budget, each against the report's ceiling; JSON and a markdown table out.
     the setting; the robot and inflow bounds do not, so the lower of those two is what no
     setting can beat, and that over the tuned water marks (``best_possible_vs_watermarks``)
     is the largest ratio any controller could reach under the plan.
+(d) A scenario that builds kits (``retrieve.kit``, e.g. ``--scenario
+    scenarios/kits_lenses_squares.yaml``) is tuned for kits/min, and every setting's kits/min
+    is given against the report's kit ceiling (``kits.ceiling_kpm``: robot, supply and
+    inflow bounds in kits per minute).
 """
 
 from __future__ import annotations
@@ -70,6 +75,15 @@ def stats(rows: list[dict]) -> dict:
              for r in rows if r.get("robot_bound_ppm")]
     if len(fixed) == len(rows):
         out["best_possible_ppm"] = round(statistics.mean(fixed), 2)
+    kpm = [r.get("kpm") for r in rows]
+    if rows and None not in kpm:              # a kit scenario: kits/min and the kit ceiling
+        kc = [r.get("kit_ceiling_kpm") for r in rows]
+        out["kits"] = {"per_min": kpm, "mean": round(statistics.mean(kpm), 3),
+                       "min": min(kpm), "max": max(kpm),
+                       "stdev": round(statistics.stdev(kpm), 3) if len(kpm) > 1 else 0.0}
+        if all(kc):
+            out["kits"]["ceiling_kpm"] = round(statistics.mean(kc), 3)
+            out["kits"]["of_ceiling"] = round(out["kits"]["mean"] / out["kits"]["ceiling_kpm"], 3)
     busy = [r.get("robot_busy_pct") for r in rows]
     if all(b is not None for b in busy):      # near 100 %: the robot limits, not control
         out["robot_busy_pct"] = round(statistics.mean(busy), 1)
@@ -105,7 +119,8 @@ def thesis(pool: cf.Executor, args: argparse.Namespace) -> dict:
 
 def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
     supply = str(Path(args.supply).resolve()) if args.supply else None
-    out: dict = {"budget": {"trials": args.trials, "duration_s": args.duration,
+    scenario = Path(args.scenario).resolve()
+    out: dict = {"scenario": args.scenario, "budget": {"trials": args.trials, "duration_s": args.duration,
                             "seeds": args.tune_seeds, "max_recirc": args.max_recirc},
                  "supply": args.supply}
     for space in SPACES:
@@ -113,7 +128,7 @@ def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
         found = []
         grids = (False, True) if space == "fixed" and args.trials >= GRID_MIN_TRIALS else (False,)
         for grid in grids:
-            cfg = TuneConfig(scenario=str(LENSES), trials=args.trials, duration=args.duration,
+            cfg = TuneConfig(scenario=str(scenario), trials=args.trials, duration=args.duration,
                              seeds=args.tune_seeds, space=space, study=study, supply=supply,
                              max_recirc=args.max_recirc, grid=grid)
             name = space + (" grid" if grid else "")
@@ -125,15 +140,21 @@ def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
             found.append((*best_overlay(s, args.max_recirc), name))
         overlay, best, searched = max(found, key=lambda f: f[1].value)
         seeds = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
-        rows = run_all(pool, [Job(str(LENSES), overlay, sd, args.eval_duration, None, supply)
+        rows = run_all(pool, [Job(str(scenario), overlay, sd, args.eval_duration, None, supply)
                               for sd in seeds])
         out[space] = {"tuned_ppm": round(best.value, 2), "trial": best.number,
                       "searched": searched, "setting": describe(overlay), "overlay": overlay,
                       "tune_wall_s": round(time.monotonic() - t0, 1), **stats(rows)}
+        kits = out[space].get("kits")
         print(f"{space}: tuned {best.value:.2f}, fresh seeds {out[space]['mean']:.2f} "
-              f"parts/min ({describe(overlay)})", flush=True)
+              f"parts/min" + (f", {kits['mean']:.3f} kits/min" if kits else "")
+              + f" ({describe(overlay)})", flush=True)
     out["ours_vs_watermarks"] = ratio(out["ours"], out["watermarks"])
     out["ours_vs_fixed"] = ratio(out["ours"], out["fixed"])
+    if "kits" in out["ours"]:
+        k = {sp: out[sp]["kits"] for sp in SPACES}
+        out["kits_ours_vs_watermarks"] = round(k["ours"]["mean"] / k["watermarks"]["mean"], 3)
+        out["kits_ours_vs_fixed"] = round(k["ours"]["mean"] / k["fixed"]["mean"], 3)
     best = out["ours"].get("best_possible_ppm")
     if best:
         out["best_possible_vs_watermarks"] = round(best / out["watermarks"]["mean"], 3)
@@ -174,6 +195,17 @@ def markdown(result: dict) -> str:
         if "best_possible_vs_watermarks" in tu:
             lines.append(f"| best possible ({tu['ours']['best_possible_ppm']:.1f}) / tuned "
                          f"water marks | | {_x(tu['best_possible_vs_watermarks'])} | |")
+        if "kits_ours_vs_watermarks" in tu:
+            lines += ["", "| setting (same budget) | kits/min mean (min–max, sd) | "
+                      "of the kit ceiling |", "|---|---|---|"]
+            for space, label in SPACES.items():
+                k = tu[space]["kits"]
+                of = (f"{100 * k['of_ceiling']:.1f} % of {k['ceiling_kpm']:.2f}"
+                      if "of_ceiling" in k else "-")
+                lines.append(f"| {label} | {k['mean']:.3f} ({k['min']:.3f}–{k['max']:.3f}, "
+                             f"sd {k['stdev']:.3f}) | {of} |")
+            lines += [f"| ours / tuned water marks | {_x(tu['kits_ours_vs_watermarks'])} | |",
+                      f"| ours / best fixed | {_x(tu['kits_ours_vs_fixed'])} | |"]
     return "\n".join(lines)
 
 
@@ -190,6 +222,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--only", choices=["thesis", "tuned"])
     ap.add_argument("--max-recirc", type=float, default=None, metavar="R",
                     help="wear budget of every search: recirculations per placed part")
+    ap.add_argument("--scenario", default=str(LENSES),
+                    help="the scenario part (b) tunes (default scenarios/lenses.yaml)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "honest.json"))
     args = ap.parse_args(argv)
     t0 = time.monotonic()

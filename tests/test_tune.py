@@ -308,3 +308,30 @@ def test_a_grid_over_the_fixed_speeds_runs_each_point_once(tmp_path, capsys):
     assert "--grid searches the fixed space" in capsys.readouterr().err
     assert main([*run, "--trials", "8", "--study", str(tmp_path / "y.db")]) == 2
     assert "--grid needs --trials 16 at least" in capsys.readouterr().err
+
+
+def test_a_kit_scenario_is_tuned_for_kits_per_minute(tmp_path, capsys):
+    """A part that completes no kit is worth nothing to an assembly: a scenario with
+    ``retrieve.kit`` is searched for kits/min (the report's kits.per_minute), and says so."""
+    import optuna
+    db = tmp_path / "k.db"
+    kits = str(ROOT / "scenarios" / "kits_lenses_squares.yaml")
+    assert main(["tune", kits, "--trials", "2", "--duration", "120", "--seeds", "1",
+                 "--workers", "1", "--study", str(db)]) == 0
+    said = capsys.readouterr().out
+    assert "kits/min" in said and "parts/min" not in said.split("best:")[1]
+    study = optuna.load_study(study_name="kits_lenses_squares:ours", storage=f"sqlite:///{db}")
+    assert study.user_attrs["unit"] == "kits/min"
+    from feeder_bt.scenario.overlay import write_overlay
+    best = study.best_trial
+    write_overlay(tmp_path / "o.yaml", best.user_attrs["overlay"])
+    r = run_job(RunOptions(scenario=kits, duration=120.0, fast=True, seed=1, view="none",
+                           db=None, overlay=str(tmp_path / "o.yaml")))
+    assert best.value == pytest.approx(r["kits"]["per_minute"])
+    assert best.value < r["parts_per_minute"] / 3        # four parts a kit, not one
+    # a study of parts/min is not continued as one of kits/min
+    search_cfg = ["tune", kits, "--trials", "3", "--duration", "120", "--seeds", "1",
+                  "--workers", "1", "--study", str(db)]
+    study.set_user_attr("unit", "parts/min")
+    assert main(search_cfg) == 2
+    assert "unit" in capsys.readouterr().err

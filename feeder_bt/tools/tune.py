@@ -95,7 +95,7 @@ def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, 
 
 def cmd_tune(args: argparse.Namespace) -> int:
     from ..tuning.progress import TrialProgress
-    from ..tuning.search import TuneConfig, best_overlay, describe, run_search
+    from ..tuning.search import TuneConfig, best_overlay, describe, run_search, unit_of
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
                      supply=args.supply, sampler_seed=args.sampler_seed,
@@ -110,14 +110,15 @@ def cmd_tune(args: argparse.Namespace) -> int:
     per_seed = ", ".join(f"{v:.2f}" for v in best.user_attrs.get("per_seed_ppm", []))
     recirc = best.user_attrs.get("recirc_per_placed")
     wear = f", recirculated {recirc:.2f} per placed" if recirc is not None else ""
-    print(f"best: trial {best.number}, {best.value:.2f} parts/min (seeds {per_seed}{wear}): "
+    unit = unit_of(study)
+    print(f"best: trial {best.number}, {best.value:.2f} {unit} (seeds {per_seed}{wear}): "
           f"{describe(overlay)}")
     print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
           f"{time.monotonic() - wall0:.0f} s wall)")
     if args.out:
         from ..scenario.overlay import write_overlay
         header = (f"feeder tune {args.scenario}: best of study {study.study_name!r} in "
-                  f"{args.study}\ntrial {best.number}: {best.value:.2f} parts/min, the mean "
+                  f"{args.study}\ntrial {best.number}: {best.value:.2f} {unit}, the mean "
                   f"of seeds 1-{args.seeds} ({per_seed}), {args.duration:g} s each"
                   + (f", supply plan {args.supply}" if args.supply else "")
                   + f"\nuse: feeder run {args.scenario} --overlay {args.out}")

@@ -73,6 +73,11 @@ def evaluate(job: Job) -> dict[str, Any]:
            "lost": parts.get("lost") or 0, "missed": parts.get("missed") or 0,
            "recirc_per_placed": parts.get("recirculated_per_placed"),
            "fault": report.get("fault")}
+    kits = report.get("kits")
+    if kits:                    # a kit scenario's objective (search.objective_unit)
+        out["kpm"] = float(kits["per_minute"])
+        out["kit_ceiling_kpm"] = kits.get("ceiling_kpm")
+        out["kits"] = kits.get("completed")
     if report.get("fault"):
         out["error"] = f"the run faulted: {report['fault']}"
     return out

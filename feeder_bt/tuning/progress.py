@@ -66,16 +66,16 @@ class TrialProgress:
         if (r.value is not None and r.feasible
                 and (self.best is None or r.value > self.best[0])):
             self.best = (r.value, r.number)
-        best = (f"best {self.best[0]:.2f} parts/min (trial {self.best[1]})"
+        best = (f"best {self.best[0]:.2f} {r.unit} (trial {self.best[1]})"
                 if self.best else "no trial completed yet")
         if self._bar is not None:
             self._bar.update(self._task, completed=self.done, best=best)
-            what = (f"{r.value:.2f} parts/min" if r.value is not None
+            what = (f"{r.value:.2f} {r.unit}" if r.value is not None
                     else f"failed: {r.error}")
             self._bar.console.print(f"trial {r.number}: {what}  {name}",
                                     highlight=False, markup=False)
             return
-        what = (f"{r.value:.2f} parts/min (seeds {', '.join(f'{v:.2f}' for v in r.per_seed)})"
+        what = (f"{r.value:.2f} {r.unit} (seeds {', '.join(f'{v:.2f}' for v in r.per_seed)})"
                 if r.value is not None else f"failed: {r.error}")
         print(f"trial {r.number} [{self.done}/{self.total}]: {what}  {name}; "
               f"{best}", file=self.out, flush=True)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import FeederError
+from .search import unit_of
 
 
 class StudyError(FeederError):
@@ -72,7 +73,7 @@ def summary_lines(study: Any) -> list[str]:
     if not done:
         return [head]
     best = study.best_trial
-    lines = [head, f"  best: trial {best.number}, {best.value:.2f} parts/min: "
+    lines = [head, f"  best: trial {best.number}, {best.value:.2f} {unit_of(study)}: "
                    f"{describe(best.user_attrs.get('overlay', {}))}"]
     imp = importances(study)
     if imp:
@@ -102,10 +103,10 @@ def plot_studies(studies: list[Any]) -> Any:
         if ceilings and all(ceilings):
             ax_t.axhline(max(ceilings), color="grey", linestyle="--", linewidth=1,
                          label=f"ceiling ({max(ceilings):.1f})")
-        ax_t.set_title(f"{study.study_name}: parts/min per trial")
+        ax_t.set_title(f"{study.study_name}: {unit_of(study)} per trial")
         ax_t.set_xlabel("trial")
         ax_t.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax_t.set_ylabel("parts/min")
+        ax_t.set_ylabel(unit_of(study))
         ax_t.grid(True, alpha=0.3)
         ax_t.legend(loc="best", fontsize="small")
         imp = importances(study)

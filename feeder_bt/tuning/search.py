@@ -3,8 +3,9 @@
 The study lives only in this process (its SQLite file is written by nobody else), and the
 workers get plain jobs (one scenario run per seed) through any ``concurrent.futures``
 executor: a process pool on this machine, a Dask cluster's executor, or this process
-itself for one worker. A trial's value is the mean parts/min over its seeds; every trial
-runs the same seeds 1..K, so trials differ only by their settings.
+itself for one worker. A trial's value is the mean parts/min over its seeds (kits/min for a
+scenario that builds kits: a part that completes no kit is worth nothing to an assembly);
+every trial runs the same seeds 1..K, so trials differ only by their settings.
 """
 
 from __future__ import annotations
@@ -52,13 +53,25 @@ class TrialResult:
     """One finished trial, as the progress display and the tests see it."""
 
     number: int
-    value: float | None                 # mean parts/min; None: failed
+    value: float | None                 # mean parts/min (kits/min for kits); None: failed
     per_seed: list[float] = field(default_factory=list)
     overlay: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
     start: bool = False                 # the scenario as written (a new study's first trial)
     recirc: float | None = None         # recirculations per placed part, mean of the seeds
     feasible: bool = True               # within --max-recirc
+    unit: str = "parts/min"             # what value counts (objective_unit)
+
+
+def objective_unit(scenario: Any) -> str:
+    """What a trial's value counts: kits/min when the scenario builds kits, else parts/min."""
+    r = scenario.retrieve
+    return "kits/min" if (r.kit or r.sequence) else "parts/min"
+
+
+def unit_of(study: Any) -> str:
+    """The unit a study's values are in (studies made before kits counted parts)."""
+    return study.user_attrs.get("unit", "parts/min")
 
 
 def recirc_over(trial: Any, budget: float | None) -> float:
@@ -88,7 +101,7 @@ def study_name(cfg: TuneConfig) -> str:
     return name + (f":{Path(cfg.supply).stem}" if cfg.supply else "")
 
 
-def open_study(cfg: TuneConfig, read_only: bool = False) -> Any:
+def open_study(cfg: TuneConfig, read_only: bool = False, unit: str = "parts/min") -> Any:
     """Create the study, or load it to continue; refuses to mix durations or seeds."""
     import optuna
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -103,14 +116,14 @@ def open_study(cfg: TuneConfig, read_only: bool = False) -> Any:
     except Exception as e:      # sqlalchemy / sqlite: a file that is not a study
         raise TuneError(f"{cfg.study}: cannot open as an Optuna study ({e})") from None
     want = {"duration_s": cfg.duration, "seeds": cfg.seeds, "space": cfg.space,
-            "scenario": str(cfg.scenario), "supply": cfg.supply}
+            "scenario": str(cfg.scenario), "supply": cfg.supply, "unit": unit}
     have = study.user_attrs
     if not have:
         for k, v in want.items():
             study.set_user_attr(k, v)
     else:
-        for k in ("duration_s", "seeds"):
-            if have.get(k) != want[k]:
+        for k in ("duration_s", "seeds", "unit"):
+            if have.get(k, "parts/min" if k == "unit" else None) != want[k]:
                 raise TuneError(f"{cfg.study}: study {name!r} was run with {k} "
                                 f"{have.get(k)}, not {want[k]}: its values would not compare "
                                 f"(give the same, or another --study file)")
@@ -152,7 +165,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
                         f"by two incline speeds by every pick policy), got {cfg.trials}")
     scenario, cell = load_scenario(cfg.scenario, cfg.cell)      # a bad scenario: one line
     limits = Limits.of(scenario, cell)
-    study = open_study(cfg)
+    study = open_study(cfg, unit=objective_unit(scenario))
     for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,)):
         study.tell(t.number, state=TrialState.FAIL)              # left by an interrupted run
     done = len(finished(study))
@@ -233,7 +246,8 @@ def _tell(study: Any, trial: Any, overlay: dict[str, Any],
         trial.set_user_attr("error", errors[0])
         study.tell(trial, state=TrialState.FAIL)
         return TrialResult(trial.number, None, overlay=overlay, error=errors[0], start=start)
-    per_seed = [r["ppm"] for r in results]
+    unit = unit_of(study)
+    per_seed = [r["kpm"] if unit == "kits/min" else r["ppm"] for r in results]
     trial.set_user_attr("per_seed_ppm", per_seed)
     ceiling = [r.get("ceiling_ppm") or r.get("robot_bound_ppm") for r in results]
     if all(ceiling):
@@ -246,7 +260,7 @@ def _tell(study: Any, trial: Any, overlay: dict[str, Any],
     value = statistics.mean(per_seed)
     study.tell(trial, value)
     return TrialResult(trial.number, value, per_seed, overlay, start=start, recirc=mean_recirc,
-                       feasible=recirc_over(trial, budget) <= 0)
+                       feasible=recirc_over(trial, budget) <= 0, unit=unit)
 
 
 def best_overlay(study: Any, max_recirc: float | None = None) -> tuple[dict[str, Any], Any]:
