@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures as cf
 import json
+import math
 import multiprocessing
 import platform
 import statistics
@@ -46,7 +47,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from feeder_bt.tuning.objective import Job, evaluate  # noqa: E402
-from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search  # noqa: E402
+from feeder_bt.tuning.search import (  # noqa: E402
+    TuneConfig,
+    TuneError,
+    best_overlay,
+    describe,
+    run_search,
+)
 from feeder_bt.tuning.space import GRID_MIN_TRIALS  # noqa: E402
 
 LENSES = ROOT / "scenarios" / "lenses.yaml"
@@ -137,13 +144,21 @@ def tuned(pool: cf.Executor, args: argparse.Namespace, study: str) -> dict:
                                f"tune {sp} trial {r.number}: "
                                f"{'failed' if r.value is None else f'{r.value:.2f}'}",
                                flush=True))
-            found.append((*best_overlay(s, args.max_recirc), name))
-        overlay, best, searched = max(found, key=lambda f: f[1].value)
+            try:
+                found.append((*best_overlay(s, args.max_recirc), name, True))
+            except TuneError as e:      # no setting of this space keeps to the budget
+                print(f"{name}: {e}", flush=True)
+                least = min((t for t in s.trials if t.value is not None),
+                            key=lambda t: t.user_attrs.get("recirc_per_placed") or math.inf)
+                found.append((least.user_attrs["overlay"], least, name, False))
+        within = [f for f in found if f[3]] or found
+        overlay, best, searched, kept = max(within, key=lambda f: f[1].value)
         seeds = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
         rows = run_all(pool, [Job(str(scenario), overlay, sd, args.eval_duration, None, supply)
                               for sd in seeds])
         out[space] = {"tuned_ppm": round(best.value, 2), "trial": best.number,
                       "searched": searched, "setting": describe(overlay), "overlay": overlay,
+                      "within_budget": kept,
                       "tune_wall_s": round(time.monotonic() - t0, 1), **stats(rows)}
         kits = out[space].get("kits")
         print(f"{space}: tuned {best.value:.2f}, fresh seeds {out[space]['mean']:.2f} "
@@ -188,7 +203,9 @@ def markdown(result: dict) -> str:
                   "of ceiling |", "|---|---|---|---|"]
         for space, label in SPACES.items():
             s = tu[space]
-            lines.append(f"| {label}: {s['setting']} | {s['tuned_ppm']:.2f} | {_cell(s)} | "
+            over = "" if s.get("within_budget", True) else " (none within the wear budget: " \
+                "the least-recirculating trial)"
+            lines.append(f"| {label}: {s['setting']}{over} | {s['tuned_ppm']:.2f} | {_cell(s)} | "
                          f"{_of(s)} |")
         lines += [f"| ours / tuned water marks | | {_x(tu['ours_vs_watermarks'])} | |",
                   f"| ours / best fixed | | {_x(tu['ours_vs_fixed'])} | |"]
