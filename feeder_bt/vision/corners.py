@@ -51,7 +51,9 @@ _CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints
 def _corner_signatures(outlines: list[np.ndarray], hulled: bool = False
                        ) -> list[_CornerSignature | None]:
     """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
-    (at least one point each); ``hulled``: each is already its convex hull's vertices.
+    (at least one point each); ``hulled``: each is already its convex hull's vertices, or
+    points close around them (``Locator._faces``: where the edge crosses the level next to
+    each pixel of the hull), nothing else inside.
 
     The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
     from the outline is the cut one; the cut is longer along one side than the other,
