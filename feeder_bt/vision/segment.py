@@ -301,13 +301,15 @@ class Segmenter:
         pts: np.ndarray = uv
         if level is not None:
             w = img.shape[1]
-            at = uv[:, 1] * w + uv[:, 0]          # inside the image: touching blobs are out
-            near = at[:, None] + np.array([1, -1, w, -w])        # the 4-neighbours, a row each
-            inside, around = self._diff_at(img, diff, at), self._diff_at(img, diff, near)
+            # each boundary pixel and its 4-neighbours (inside the image: touching blobs
+            # are out), a row each, read in one gather
+            at = (uv[:, 1] * w + uv[:, 0])[:, None] + np.array([0, 1, -1, w, -w])
+            vals = self._diff_at(img, diff, at)
+            inside, around = vals[:, 0], vals[:, 1:]
             cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
             i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
-            found = np.bincount(np.repeat(np.arange(len(contours)), counts)[i],
-                                minlength=len(contours))
+            ends = np.cumsum(counts)
+            found = np.diff(np.searchsorted(i, ends), prepend=0)   # crossings per contour
             if found.min() >= 3:
                 a = inside[i].astype(np.float64)
                 t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
