@@ -102,9 +102,12 @@ class Locator(Segmenter):
             for cls in recipe.classes]
         # The smoothed perimeter reads every boundary pixel of the contour; without it only
         # the chain's corners are kept (the same polygon: the same moments, hull and
-        # rectangle, fewer points to trace and sum; the face reads only the hull)
+        # rectangle, fewer points to trace and sum). The face reads only the hull, but
+        # counting a corner chain's boundary pixels costs more than tracing them all.
         self._full_chain = any(GROUP_OF[n] == GROUP_OF["perimeter_mm"]
-                               for cls in recipe.classes for n in cls.ranges)
+                               for cls in recipe.classes for n in cls.ranges) or (
+            recipe.orientation == "cut_corner"
+            and any(cls.mirrored is not None for cls in recipe.classes))
         # hole contours are searched for only when a class ranges over them
         self._want_holes = any(GROUP_OF[n] == GROUP_OF["holes"]
                                for cls in recipe.classes for n in cls.ranges)

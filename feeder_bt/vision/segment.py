@@ -308,8 +308,9 @@ class Segmenter:
             inside, around = vals[:, 0], vals[:, 1:]
             cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
             i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
-            ends = np.cumsum(counts)
-            found = np.diff(np.searchsorted(i, ends), prepend=0)   # crossings per contour
+            last = np.searchsorted(i, np.cumsum(counts))     # crossings per contour
+            found = last.copy()
+            found[1:] -= last[:-1]
             if found.min() >= 3:
                 a = inside[i].astype(np.float64)
                 t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
