@@ -126,9 +126,9 @@ class Segmenter:
         if th.method == "otsu" and self.recipe.golden_image and small is not None \
                 and self._golden.shape == img.shape:
             # Otsu's level from the subsamples' difference (the difference's subsample),
-            # then the mask in one pass against
-            # the golden image moved by the level (a few recent levels kept): no
-            # frame-sized difference image is made; the edge points read it where needed
+            # then the mask in one pass against the golden image moved by the level (the
+            # last few levels' kept: the level moves by a few grey steps frame to frame).
+            # No frame-sized difference image is made: the edge points read it where needed
             sub = _subsample(img)
             level = max(_otsu(cv2.subtract(sub, small) if self._light
                               else cv2.subtract(small, sub)), float(th.value))
@@ -136,11 +136,13 @@ class Segmenter:
             if cut >= 255:
                 mask[:] = 0
                 return mask, None, level
-            below = self._belows.get(cut)
+            belows = self._belows
+            below = belows.get(cut)
             if below is None:
-                if len(self._belows) >= 16:       # the least recently made goes
-                    self._belows.pop(next(iter(self._belows)), None)
-                below = self._belows[cut] = self._bound(cut)
+                below = self._bound(cut)
+                if len(belows) >= 16:      # a new table (threads may read the old one)
+                    belows = self._belows = {}
+                belows[cut] = below
             return (cv2.compare(img, below, cv2.CMP_GT if self._light else cv2.CMP_LT,
                                 dst=mask), None, level)
         diff = self._diff(img, self._buffer("diff", img.shape))
