@@ -262,8 +262,6 @@ class Segmenter:
                 if right:
                     packed[:, x0 + sw - right:x0 + sw] = 0
             cs, hier = cv2.findContours(packed, mode, chain)
-            if not holes and not out:
-                return _unpack(cs, starts, shifts, w), None
             for c, hs in _with_holes(cs, hier, holes):
                 shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
                 for k in (c, *hs):               # a blob's holes lie in its rectangle
@@ -323,26 +321,6 @@ class Segmenter:
                 pts[:, 1] = uv[i, 1] + t * _DV[k]
                 counts = found.tolist()
         return pts, counts
-
-
-def _unpack(contours: tuple[np.ndarray, ...], starts: list[int], shifts: list[int],
-            w: int) -> list[np.ndarray]:
-    """The packed image's contours moved back to the frame (each by its rectangle's
-    shift, ``Segmenter._contours_holes``) and in the whole frame's order (by first point,
-    last found first), all in one set of array operations: views of one array."""
-    if not contours:
-        return []
-    sizes = [len(c) for c in contours]
-    pts = np.concatenate(contours)                              # (n, 1, 2) int32
-    firsts = np.cumsum([0] + sizes[:-1])
-    rect = np.searchsorted(starts, pts[firsts, 0, 0], side="right") - 1
-    flat = pts.view(np.int64).ravel()                           # u + (v << 32) a point
-    flat += np.repeat(np.array(shifts, dtype=np.int64)[rect], sizes)
-    first = pts[firsts, 0]
-    order = np.argsort(first[:, 1].astype(np.int64) * w + first[:, 0])[::-1].tolist()
-    ends = (firsts + sizes).tolist()
-    firsts = firsts.tolist()
-    return [pts[firsts[i]:ends[i]] for i in order]
 
 
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
