@@ -514,37 +514,3 @@ def test_one_locator_serves_several_threads():
     with ThreadPoolExecutor(4) as pool:
         for _ in range(3):
             assert list(pool.map(answers, frames)) == alone
-
-
-@pytest.mark.parametrize("foreground", ["dark", "light"])
-def test_otsu_mask_in_one_pass_is_the_difference_images(foreground):
-    # The Otsu recipe's mask is cut in one pass against the golden image moved by the level
-    # (a table per recent level): the same mask, level and pixels as thresholding the
-    # difference image, over more levels than the tables kept.
-    from feeder_bt.vision.segment import Segmenter, otsu_level
-
-    _, recipe = load("squares")
-    recipe = dataclasses.replace(recipe, foreground=foreground,
-                                 threshold=Threshold("otsu", value=12))
-    seg = Segmenter(recipe)
-    rng = np.random.default_rng(31)
-    golden = rng.integers(70, 190, (484, 640)).astype(np.uint8)
-    seg.set_golden(golden)
-    levels = set()
-    for i in range(40):
-        # the belt's noise moves Otsu's level (to just above it: every level between the
-        # two modes parts them alike), a new level every frame or two
-        noise = rng.normal(0, 1.0 + 0.6 * i, golden.shape).round().astype(np.int16)
-        img = golden.astype(np.int16) + noise
-        step = 90
-        for _ in range(12):
-            u, v = rng.integers(0, 540), rng.integers(0, 384)
-            img[v:v + 100, u:u + 100] += step if foreground == "light" else -step
-        img = np.clip(img, 0, 255).astype(np.uint8)
-        mask, diff, level = seg._threshold(img)
-        ref = cv2.subtract(img, golden) if foreground == "light" else cv2.subtract(golden, img)
-        want = max(otsu_level(ref), 12.0)
-        assert diff is None and level == want
-        assert np.array_equal(mask, np.where(ref > math.floor(want), 255, 0).astype(np.uint8))
-        levels.add(math.floor(level))
-    assert len(levels) > 16                     # the tables were made afresh on the way

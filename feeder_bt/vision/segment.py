@@ -52,8 +52,6 @@ class Segmenter:
                            and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
                            for k in (self._open, self._close) if k is not None)
         self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
-        self._belows: dict[int, np.ndarray] = {}  # the same for Otsu's recent levels
-        self._small_golden: np.ndarray | None = None    # its Otsu subsample (``otsu_level``)
         self._scratch = threading.local()         # per-thread frame-sized images, reused
 
     # -------------------------------------------------------------- images
@@ -63,22 +61,13 @@ class Segmenter:
         self._golden = to_grey(image).copy()
         th = self.recipe.threshold
         self._below = None
-        self._belows = {}
-        self._small_golden = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
-            self._below = self._bound(math.floor(th.value))
-        elif th.method == "otsu":
-            self._small_golden = _subsample(self._golden)
-
-    def _bound(self, cut: int) -> np.ndarray:
-        """The golden image moved by the level ``cut`` (0 <= cut < 255): a frame's pixel is
-        foreground where it is beyond it, the same mask as the difference image's
-        threshold, in one pass over the frame."""
-        if self._light:
-            # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
-            return cv2.add(self._golden, cut)
-        # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
-        return cv2.subtract(self._golden, cut)
+            if self._light:
+                # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
+                self._below = cv2.add(self._golden, math.floor(th.value))
+            else:
+                # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
+                self._below = cv2.subtract(self._golden, math.floor(th.value))
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
@@ -122,29 +111,6 @@ class Segmenter:
             # the same mask as subtract-then-threshold, in one pass over the frame
             return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
                                 dst=mask), None, float(th.value))
-        small = self._small_golden
-        if th.method == "otsu" and self.recipe.golden_image and small is not None \
-                and self._golden.shape == img.shape:
-            # Otsu's level from the subsamples' difference (the difference's subsample),
-            # then the mask in one pass against the golden image moved by the level (the
-            # last few levels' kept: the level moves by a few grey steps frame to frame).
-            # No frame-sized difference image is made: the edge points read it where needed
-            sub = _subsample(img)
-            level = max(_otsu(cv2.subtract(sub, small) if self._light
-                              else cv2.subtract(small, sub)), float(th.value))
-            cut = math.floor(level)
-            if cut >= 255:
-                mask[:] = 0
-                return mask, None, level
-            belows = self._belows
-            below = belows.get(cut)
-            if below is None:
-                below = self._bound(cut)
-                if len(belows) >= 16:      # a new table (threads may read the old one)
-                    belows = self._belows = {}
-                belows[cut] = below
-            return (cv2.compare(img, below, cv2.CMP_GT if self._light else cv2.CMP_LT,
-                                dst=mask), None, level)
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
@@ -336,18 +302,8 @@ def otsu_level(diff: np.ndarray) -> float:
     on a frame of squares (benchmarks/vision_bench.py). The mask is still cut from every
     pixel, at this level.
     """
-    return _otsu(_subsample(diff))
-
-
-def _subsample(image: np.ndarray) -> np.ndarray:
-    """``otsu_level``'s subsample of an image (the image itself if it is small)."""
-    h, w = image.shape[:2]
-    if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP:
-        return image
-    return image[::OTSU_STEP, ::OTSU_STEP]
-
-
-def _otsu(small: np.ndarray) -> float:
+    h, w = diff.shape[:2]
+    small = diff if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else diff[::OTSU_STEP, ::OTSU_STEP]
     level, _ = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     return float(level)
 
