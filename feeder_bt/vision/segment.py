@@ -257,12 +257,13 @@ class Segmenter:
         (in order).
 
         A binary contour moves in whole pixels, which limits the angle of a near-axis edge
-        to about 1°. The grey levels say where the edge is: between each boundary pixel of
-        the contour (a recipe with faces keeps them all) and each of its 4-neighbours
-        outside the level, the difference image (interpolated linearly, as a bilinear image
-        is along that line) crosses the level at one point. Only the blob's own boundary is
-        read, so a neighbour in its box is no trouble. Without a level (adaptive threshold),
-        or if a contour has too few such points, the contours' pixels are returned.
+        to about 1°. The grey levels say where the edge is: between each given boundary
+        pixel (the locator's faces give the vertices of each blob's pixel hull) and each of
+        its 4-neighbours outside the level, the difference image (interpolated linearly, as
+        a bilinear image is along that line) crosses the level at one point. Only the
+        blob's own boundary is read, so a neighbour in its box is no trouble. Without a
+        level (adaptive threshold), or if a contour has too few such points, the contours'
+        pixels are returned.
         """
         uv = np.concatenate(contours).reshape(-1, 2)
         counts = [len(c) for c in contours]
