@@ -248,8 +248,9 @@ class Locator(Segmenter):
         are moved to where the edge crosses the level. On the bench's frames of squares
         (benchmarks/vision_bench.py, 441 parts) the angle's error against the truth is the
         same as from every boundary pixel (mean 0.13°, 95 % under 0.30°; max 0.52° against
-        0.41°), every face the same, at a third of the time. Over a part the mapping is
-        affine to a few hundredths of a mm, so the mapped points' hull is the mapped hull.
+        0.41°), every face the same, in two thirds of the time (docs/performance.md). Over
+        a part the mapping is affine to a few hundredths of a mm, so the mapped points'
+        hull is the mapped hull.
         """
         pts, counts = self._edge_points([hull(b) for b in blobs], img, diff, level)
         xy = self._mapping(img.shape[:2]).px_to_mm(pts).astype(np.float32)
