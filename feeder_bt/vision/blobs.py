@@ -81,30 +81,49 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     """
     h, w = shape
     s2 = calibration.mm2_per_px2
-    min_px = min_area_mm2 / s2
+    min_px = 0.5 * min_area_mm2 / s2
     blobs: list[Blob] = []
     centres = []
     for i, c in enumerate(contours):
         box = cv2.boundingRect(c)
-        if box[2] * box[3] < min_px * 0.5:
-            continue
         bu, bv, bw, bh = box
+        if bw * bh < min_px:
+            continue
         mom = cv2.moments(c)
         m00 = mom["m00"]
-        # The contour runs through the centres of the boundary pixels; by Pick's theorem
-        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
-        area_px = abs(m00) + 1.0                # + boundary pixels / 2, below
         if m00 != 0:
             cu, cv = mom["m10"] / m00, mom["m01"] / m00
         else:
             cu, cv = (float(v) for v in c.reshape(-1, 2).mean(axis=0))
         centres.append((cu, cv))
-        touches = bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
         det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
-                        "touches border" if touches else "")
-        blobs.append(Blob(c, box, mom, area_px, det, full, None if holes is None else holes[i]))
+                        "touches border" if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
+                        else "")
+        # The contour runs through the centres of the boundary pixels; by Pick's theorem
+        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1 (the
+        # boundary pixels below).
+        blobs.append(Blob(c, box, mom, abs(m00) + 1.0, det, full,
+                          None if holes is None else holes[i]))
     if not blobs:
         return blobs
+    steps = _boundary_steps([b.contour for b in blobs], full)
+    xy, scales = (mapping or calibration).px_to_mm_scale(np.array(centres))
+    # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
+    # calibration's mm_per_px over the window), for areas and lengths
+    local = not calibration.linear
+    for b, n, (x, y), sc in zip(blobs, steps, xy.tolist(), scales.tolist(), strict=True):
+        b.area_px += 0.5 * n
+        det = b.det
+        det.x_mm, det.y_mm = x, y
+        if local:
+            b.scale = sc
+            area = b.area_px * sc * sc
+        else:
+            area = b.area_px * s2
+        det.features["area_mm2"] = area
+        if not det.reason and area < min_area_mm2:
+            det.reason = "too small"
+    return blobs
     steps = _boundary_steps([b.contour for b in blobs], full)
     for b, n in zip(blobs, steps, strict=True):
         b.area_px += 0.5 * n

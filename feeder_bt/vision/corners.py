@@ -51,40 +51,45 @@ _CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints
 def _corner_signatures(outlines: list[np.ndarray], hulled: bool = False
                        ) -> list[_CornerSignature | None]:
     """Cut-corner signatures of closed outlines, each given as (n, 2) float32 points in mm
-    (at least one point each); ``hulled``: each is already its convex hull's vertices.
+    (at least one point each); ``hulled``: each is already its convex hull's vertices, or
+    points close around them (``Locator._faces``: where the edge crosses the level next to
+    each pixel of the hull), nothing else inside.
 
     The minimum-area rectangle gives the angle (mod 90°); the rectangle corner farthest
     from the outline is the cut one; the cut is longer along one side than the other,
     which tells the faces apart. All of it reads only the outline's convex hull (the
     rectangle, the points nearest the rectangle's corners and at the ends of its sides),
-    and all the hulls go through one set of array operations on complex numbers (numpy's
-    per-call cost dominates when done one by one).
+    and all the hulls go through one set of array operations (numpy's per-call cost
+    dominates when done one by one; each point gathers its outline's row once).
     """
     hulls = outlines if hulled else [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
-    rects = [cv2.minAreaRect(hl) for hl in hulls]
     n = len(hulls)
     counts = [len(hl) for hl in hulls]
+    # per outline: centre, angle, half-sides
+    par = np.array([(cx, cy, a, w, h) for (cx, cy), (w, h), a in map(cv2.minAreaRect, hulls)]
+                   ).reshape(n, 5)
+    par[:, 2] = np.radians(par[:, 2])
+    par[:, 3:] *= 0.5
     seg = np.repeat(np.arange(n), counts)                       # each point's outline
     starts = np.cumsum([0] + counts[:-1])
+    ps = par[seg]                                               # its outline's, a row each
     z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
-    # per outline: centre, angle, half-sides
-    par = np.array([(cx, cy, math.radians(a), w / 2.0, h / 2.0)
-                    for (cx, cy), (w, h), a in rects]).reshape(n, 5)
-    half = par[:, 3:]
-    centre = par[:, 0] + 1j * par[:, 1]
-    q = (z - centre[seg]) * np.exp(-1j * par[:, 2])[seg]     # in the rectangle's frame
-    # distance of the nearest hull point to each rectangle corner (a column each)
-    corners = half[:, :1] * _CORNER_X + 1j * (half[:, 1:] * _CORNER_Y)       # (n, 4)
-    k = np.minimum.reduceat(np.abs(q[:, None] - corners[seg]), starts).argmax(axis=1)
-    sx = np.sign(half[:, 0] * _CORNER_X[k])
-    sy = np.sign(half[:, 1] * _CORNER_Y[k])
-    fx, fy = q.real * sx[seg], q.imag * sy[seg]           # cut corner now at (+, +)
+    q = (z - (ps[:, 0] + 1j * ps[:, 1])) * np.exp(-1j * ps[:, 2])   # in the rectangle's frame
+    hx, hy = ps[:, 3], ps[:, 4]
+    qx, qy = q.real, q.imag
+    # squared distance of each point to each rectangle corner (a column each, in
+    # _CORNER_X / _CORNER_Y's turn), the nearest point's per outline, the farthest corner
+    xp, xm, yp, ym = (qx - hx) ** 2, (qx + hx) ** 2, (qy - hy) ** 2, (qy + hy) ** 2
+    k = np.minimum.reduceat(np.stack([xp + yp, xm + yp, xm + ym, xp + ym], axis=1),
+                            starts).argmax(axis=1)
+    sx = np.sign(par[:, 3] * _CORNER_X[k])
+    sy = np.sign(par[:, 4] * _CORNER_Y[k])
+    fx, fy = qx * sx[seg], qy * sy[seg]                   # cut corner now at (+, +)
     tol = 1.5
     # the far end of the side parallel to x (y) short of the cut: the top (right) side's
     # points within tol of it, their largest x (y); -inf if it has none
-    top = np.maximum.reduceat(np.where(np.abs(fy - half[seg, 1]) < tol, fx, -np.inf), starts)
-    right = np.maximum.reduceat(np.where(np.abs(fx - half[seg, 0]) < tol, fy, -np.inf),
-                                starts)
+    top = np.maximum.reduceat(np.where(np.abs(fy - hy) < tol, fx, -np.inf), starts)
+    right = np.maximum.reduceat(np.where(np.abs(fx - hx) < tol, fy, -np.inf), starts)
     out: list[_CornerSignature | None] = []
     for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
                                                       top.tolist(), right.tolist(),

@@ -55,6 +55,7 @@ from .blobs import (
     Detection,
     contour_mm,
     find_blobs,
+    hull,
     measure_feature,
     principal_angle,
 )
@@ -99,9 +100,10 @@ class Locator(Segmenter):
             (cls, sorted(((n, lo, hi) for n, (lo, hi) in cls.ranges.items()),
                          key=lambda r: GROUP_OF[r[0]]))
             for cls in recipe.classes]
-        # The smoothed perimeter and the face's outline read every boundary pixel of the
-        # contour; without them only the chain's corners are kept (the same polygon: the
-        # same moments, hull and rectangle, fewer points to trace and sum).
+        # The smoothed perimeter reads every boundary pixel of the contour; without it only
+        # the chain's corners are kept (the same polygon: the same moments, hull and
+        # rectangle, fewer points to trace and sum). The face reads only the hull, but
+        # counting a corner chain's boundary pixels costs more than tracing them all.
         self._full_chain = any(GROUP_OF[n] == GROUP_OF["perimeter_mm"]
                                for cls in recipe.classes for n in cls.ranges) or (
             recipe.orientation == "cut_corner"
@@ -239,20 +241,20 @@ class Locator(Segmenter):
     def _faces(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
                level: float | None) -> None:
         """Measure each blob's cut-corner signature (``Blob.face``) on its outline to a
-        fraction of a pixel (``Segmenter._edge_points``), all of a frame's blobs at once."""
-        pts, counts = self._edge_points([b.contour for b in blobs], img, diff, level)
-        # The signature reads only the outline's convex hull, and over a part the
-        # mapping is affine to a few hundredths of a mm: the hull of the mapped points is
-        # the mapped hull. So only the hull's vertices (a tenth of the edge points) go
-        # through the mapping.
-        pts = pts.astype(np.float32)
+        fraction of a pixel (``Segmenter._edge_points``), all of a frame's blobs at once.
+
+        The signature reads only the outline's convex hull, so only the pixel hull's
+        vertices (the rectangularity's, ``blobs.hull``: a sixth of the boundary pixels)
+        are moved to where the edge crosses the level. On the bench's frames of squares
+        (benchmarks/vision_bench.py, 441 parts) the angle's error against the truth is the
+        same as from every boundary pixel (mean 0.13°, 95 % under 0.30°; max 0.52° against
+        0.41°), every face the same, in two thirds of the time (docs/performance.md). Over
+        a part the mapping is affine to a few hundredths of a mm, so the mapped points'
+        hull is the mapped hull.
+        """
+        pts, counts = self._edge_points([hull(b) for b in blobs], img, diff, level)
+        xy = self._mapping(img.shape[:2]).px_to_mm(pts).astype(np.float32)
         ends = np.cumsum(counts).tolist()
-        hulls = [cv2.convexHull(pts[e - n:e]).reshape(-1, 2)
-                 for e, n in zip(ends, counts, strict=True)]
-        counts = [len(hl) for hl in hulls]
-        ends = np.cumsum(counts).tolist()
-        xy = self._mapping(img.shape[:2]).px_to_mm(
-            np.concatenate(hulls).astype(np.float64)).astype(np.float32)
         sigs = _corner_signatures([xy[e - n:e] for e, n in zip(ends, counts, strict=True)],
                                   hulled=True)
         for b, sig in zip(blobs, sigs, strict=True):

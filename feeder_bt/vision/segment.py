@@ -257,25 +257,29 @@ class Segmenter:
         (in order).
 
         A binary contour moves in whole pixels, which limits the angle of a near-axis edge
-        to about 1°. The grey levels say where the edge is: between each boundary pixel of
-        the contour (a recipe with faces keeps them all) and each of its 4-neighbours
-        outside the level, the difference image (interpolated linearly, as a bilinear image
-        is along that line) crosses the level at one point. Only the blob's own boundary is
-        read, so a neighbour in its box is no trouble. Without a level (adaptive threshold),
-        or if a contour has too few such points, the contours' pixels are returned.
+        to about 1°. The grey levels say where the edge is: between each given boundary
+        pixel (the locator's faces give the vertices of each blob's pixel hull) and each of
+        its 4-neighbours outside the level, the difference image (interpolated linearly, as
+        a bilinear image is along that line) crosses the level at one point. Only the
+        blob's own boundary is read, so a neighbour in its box is no trouble. Without a
+        level (adaptive threshold), or if a contour has too few such points, the contours'
+        pixels are returned.
         """
         uv = np.concatenate(contours).reshape(-1, 2)
         counts = [len(c) for c in contours]
         pts: np.ndarray = uv
         if level is not None:
             w = img.shape[1]
-            at = uv[:, 1] * w + uv[:, 0]          # inside the image: touching blobs are out
-            near = at[:, None] + np.array([1, -1, w, -w])        # the 4-neighbours, a row each
-            inside, around = self._diff_at(img, diff, at), self._diff_at(img, diff, near)
+            # each boundary pixel and its 4-neighbours (inside the image: touching blobs
+            # are out), a row each, read in one gather
+            at = (uv[:, 1] * w + uv[:, 0])[:, None] + np.array([0, 1, -1, w, -w])
+            vals = self._diff_at(img, diff, at)
+            inside, around = vals[:, 0], vals[:, 1:]
             cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
             i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
-            found = np.bincount(np.repeat(np.arange(len(contours)), counts)[i],
-                                minlength=len(contours))
+            last = np.searchsorted(i, np.cumsum(counts))     # crossings per contour
+            found = last.copy()
+            found[1:] -= last[:-1]
             if found.min() >= 3:
                 a = inside[i].astype(np.float64)
                 t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
@@ -291,7 +295,7 @@ OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
 
 def otsu_level(diff: np.ndarray) -> float:
     """Otsu's level of ``diff`` from a regular subsample (every ``OTSU_STEP``-th pixel of
-    every ``OTSU_STEP``-th row, picked by a nearest-neighbour resize).
+    every ``OTSU_STEP``-th row).
 
     The level is a property of the histogram's two modes, belt and parts, which a 1/16
     sample of a frame shows as well as the whole frame (the parts' smallest blobs still
@@ -300,11 +304,7 @@ def otsu_level(diff: np.ndarray) -> float:
     pixel, at this level.
     """
     h, w = diff.shape[:2]
-    if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP:
-        small = diff
-    else:
-        small = cv2.resize(diff, (w // OTSU_STEP, h // OTSU_STEP),
-                           interpolation=cv2.INTER_NEAREST)
+    small = diff if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else diff[::OTSU_STEP, ::OTSU_STEP]
     level, _ = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     return float(level)
 
