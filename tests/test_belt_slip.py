@@ -221,3 +221,16 @@ def test_nothing_lost_with_slip_and_loading_clumps(tmp_path):
     assert world["slips"] > 0 and world["slid_mm"] > 0
     assert world["landed_clumped"] > 0
     assert sum(p["retrieved"].values()) > 300
+
+
+def test_kinetic_friction_above_static_is_refused(tmp_path):
+    from feeder_bt.errors import ConfigError
+    from feeder_bt.scenario import load_cell
+    f = tmp_path / "c.yaml"
+    f.write_text(open("cells/sim.yaml").read()
+                 + "\nsim: {belt_mu_static: 0.2, belt_mu_kinetic: 0.3}\n")
+    with pytest.raises(ConfigError, match=r"sim.belt_mu_kinetic: must be <= sim.belt_mu_static"):
+        load_cell(f)
+    f.write_text(open("cells/sim.yaml").read() + "\nsim: {belt_mu_static: 3}\n")
+    with pytest.raises(ConfigError, match=r"sim.belt_mu_static"):
+        load_cell(f)

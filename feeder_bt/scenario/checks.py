@@ -52,6 +52,12 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         ctx.add_problem("encoder.drift_warn_mm",
                         f"must be <= drift_limit_mm ({_num(e.drift_limit_mm)}), "
                         f"got {_num(e.drift_warn_mm)}")
+    s = cell.sim
+    if s.belt_mu_kinetic > s.belt_mu_static:
+        ctx.add_problem("sim.belt_mu_kinetic",
+                        f"must be <= sim.belt_mu_static ({_num(s.belt_mu_static)}): sliding "
+                        f"friction is never more than sticking friction, got "
+                        f"{_num(s.belt_mu_kinetic)}")
     _check_galil(cell, ctx)
 
 
