@@ -170,7 +170,7 @@ def test_a_shake_moves_parts_on_the_belt(lenses):
 
 
 def test_clump_probability_rises_with_cover():
-    spec = SimImperfections(clump_prob=0.05, clump_cover_scale=0.5)
+    spec = SimImperfections(clump_prob=0.05, clump_cover_scale=0.5)   # not the defaults
     imp = Imperfections(spec, 20.0, 4.0, seed=1)
     ps = [imp.clump_probability(c) for c in (0.0, 0.05, 0.2, 0.5, 1.0)]
     assert ps[0] == 0.05 and all(b > a for a, b in zip(ps, ps[1:], strict=False))
@@ -198,10 +198,10 @@ def test_clumping_rises_with_loading(lenses):
     assert n_slow > 100 and n_fast > 100
     assert ws.zone_cover(ws.t) > wf.zone_cover(wf.t)
     assert slow > fast + 0.05
-    assert fast >= 0.02                               # the empty-belt chance stays
+    assert fast > 0.02                                # a fast belt still clumps a little
     slow0, _, _ = clumped_share(lenses, 40.0, clump_cover_scale=0.0)
     fast0, _, _ = clumped_share(lenses, 300.0, clump_cover_scale=0.0)
-    assert abs(slow0 - fast0) < 0.04 and slow > slow0 + 0.05
+    assert abs(slow0 - fast0) < 0.02 and slow > slow0 + 0.1 and fast > fast0
 
 
 # ------------------------------------------------------------------ a whole run

@@ -453,10 +453,10 @@ class SimImperfections:
     land_turn_deg: float = 3.0           # sigma of the turn while settling
     drop_slide_mm: float = 4.0           # the same for a part the robot drops
     settle_s: float = 0.25               # the slide's duration
-    clump_prob: float = 0.05             # a part lands against or on the one before it
+    clump_prob: float = 0.01             # a part lands against or on the one before it
     # ... more often the more of the landing zone (the belt's first clump_zone_mm) parts
     # already cover: p = clump_prob + (1 - clump_prob) (1 - exp(-cover / scale))
-    clump_cover_scale: float = 0.5       # 0: the chance stays clump_prob
+    clump_cover_scale: float = 0.8       # 0: the chance stays clump_prob
     clump_zone_mm: float = 150.0
     # belt friction (slip.py): parts slide when the belt speeds up or brakes harder than
     # belt_mu_static * g; kinetic friction brings them back to the belt's speed
