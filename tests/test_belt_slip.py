@@ -5,6 +5,7 @@ where parts land. Seeded, on virtual time; the slides are checked against hand s
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -234,3 +235,45 @@ def test_kinetic_friction_above_static_is_refused(tmp_path):
     f.write_text(open("cells/sim.yaml").read() + "\nsim: {belt_mu_static: 3}\n")
     with pytest.raises(ConfigError, match=r"sim.belt_mu_static"):
         load_cell(f)
+
+
+def test_friction_per_part_type():
+    """lenses_and_squares with the squares on a slicker footing (mu_s 0.1, its own) and the
+    lenses on the cell's (0.3): braking at 2000 mm/s2 (0.2 g) slides the squares only."""
+    scenario, cell = load_scenario("scenarios/lenses_and_squares.yaml")
+    sq = dataclasses.replace(scenario.parts["square"], belt_mu_static=0.1, belt_mu_kinetic=0.08)
+    scenario = dataclasses.replace(scenario, parts={**scenario.parts, "square": sq})
+    cell = dataclasses.replace(cell, sim=dataclasses.replace(
+        cell.sim, belt_mu_static=MU_S, belt_mu_kinetic=MU_K))
+    clock = SimClock()
+    w = World(scenario, cell, clock, 4)
+    w.horizontal.jog(0.0, 200.0)
+    w.incline.jog(0.0, 100.0)
+    run_to(w, clock, 25.0)
+    w.incline.jog(clock.now(), 0.0)
+    run_to(w, clock, 26.0)
+    before = offsets(w)
+    types = {p.type for p in w.on_horizontal.values()}
+    assert types == {"lens", "square"}
+    w.horizontal.accel = 2000.0
+    w.horizontal.jog(clock.now(), 0.0)
+    run_to(w, clock, 28.0)
+    v, a = 200.0, 2000.0
+    for p in w.on_horizontal.values():
+        moved = p.x0 - before[p.id]
+        if p.type == "square":
+            assert moved == pytest.approx(v * v / (2 * 0.08 * G_MM_S2) - v * v / (2 * a))
+        else:
+            assert moved == 0.0
+
+
+def test_a_parts_kinetic_friction_above_its_static_is_refused(tmp_path):
+    from feeder_bt.errors import ConfigError
+    text = open("scenarios/lenses.yaml").read().replace(
+        "cell: ../cells/sim.yaml", f"cell: {os.path.abspath('cells/sim.yaml')}")
+    text = text.replace("    tool_offset: [0, 0, 0]\n",
+                        "    tool_offset: [0, 0, 0]\n    belt_mu_kinetic: 0.5\n", 1)
+    f = tmp_path / "s.yaml"
+    f.write_text(text)
+    with pytest.raises(ConfigError, match=r"s.yaml:\d+: parts.lens.belt_mu_kinetic: 0.5 is above"):
+        load_scenario(f)

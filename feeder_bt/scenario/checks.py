@@ -246,6 +246,13 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
 
     if not sc.parts:
         return                                # listed by _check_scenario
+    for name, part in sc.parts.items():       # friction on the belt: a part's, or the cell's
+        mus, muk = part.belt_friction(cell.sim)
+        if muk > mus:
+            ctx.add_problem(f"parts.{name}.belt_mu_kinetic",
+                            f"{_num(muk)} is above its belt_mu_static {_num(mus)} (0 takes "
+                            f"the cell's sim.belt_mu_*, {cfile}): sliding friction is never "
+                            f"more than sticking friction")
     check_class_areas(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),

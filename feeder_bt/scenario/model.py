@@ -94,6 +94,16 @@ class PartSpec:
     # wear (issue 30): the most times a part may travel the belt; one that falls off the end
     # on its last pass goes to scrap (parts.scrapped) instead of back to the hopper; 0: no limit
     max_passes: int = 0
+    # the simulated cell only (hal/sim/slip.py): this part's friction on the belt; 0: the
+    # cell's sim.belt_mu_static / sim.belt_mu_kinetic
+    belt_mu_static: float = 0.0
+    belt_mu_kinetic: float = 0.0
+
+    def belt_friction(self, sim: SimImperfections) -> tuple[float, float]:
+        """Static and kinetic friction of this part on the simulated belt: its own
+        ``belt_mu_*``, or (0) the cell's ``sim.belt_mu_*``."""
+        return (self.belt_mu_static or sim.belt_mu_static,
+                self.belt_mu_kinetic or sim.belt_mu_kinetic)
 
     @property
     def period_deg(self) -> float:

@@ -128,6 +128,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (PartSpec, "orientation_tolerance_deg"): Range(0, 180, lo_open=True),
     (PartSpec, "symmetry"): Range(1, 360),
     (PartSpec, "max_passes"): Range(0, 10_000),
+    (PartSpec, "belt_mu_static"): Range(0, 2),
+    (PartSpec, "belt_mu_kinetic"): Range(0, 2),
     (PickSpec, "cup_radius_mm"): NON_NEGATIVE,
     (PickSpec, "clearance_mm"): NON_NEGATIVE,
     (Threshold, "value"): GREY,

@@ -68,15 +68,17 @@ class BeltSlip:
     on_horizontal: dict[int, SimPart]
     counts: Counter[str]
 
-    def _start_slip(self, t: float, mu_static: float, mu_kinetic: float) -> None:
-        """Friction between the parts and the belt; a zero ``mu_static`` turns slip off."""
+    def _start_slip(self, t: float, mu: dict[str, tuple[float, float]]) -> None:
+        """Friction between the parts and the belt: (static, kinetic) per part type; a
+        static zero turns slip off for that type."""
         self._slip_t = t
         self._sliding = False
         self.slid_mm = 0.0              # how far parts slid on the belt in all (mm)
-        self._mus_g = mu_static * G_MM_S2
-        self._muk_g = min(mu_kinetic, mu_static) * G_MM_S2
+        # per type: mu_s g (inf: never slides) and mu_k g (never above mu_s g)
+        self._mu_g = {k: (s * G_MM_S2 if s > 0 else math.inf, min(kk, s) * G_MM_S2)
+                      for k, (s, kk) in mu.items()}
         # below this acceleration no part starts to slide
-        self._slip_threshold = self._mus_g if mu_static > 0 else math.inf
+        self._slip_threshold = min((m[0] for m in self._mu_g.values()), default=math.inf)
 
     def _slip_to(self, t: float) -> None:
         """Bring the parts' slides up to ``t`` (called before every event and at the end
@@ -94,8 +96,9 @@ class BeltSlip:
         parts = list(self.on_horizontal.values())
         u = np.fromiter((p.slip_v for p in parts), float, len(parts))
         moved = np.zeros_like(u)
-        mus = np.full_like(u, self._mus_g)
-        muk = np.full_like(u, self._muk_g)
+        mu = self._mu_g
+        mus = np.fromiter((mu[p.type][0] for p in parts), float, len(parts))
+        muk = np.fromiter((mu[p.type][1] for p in parts), float, len(parts))
         for seg in segs:
             lo, hi = max(seg.t0, t0), min(seg.t1, t)
             if hi <= lo:

@@ -130,9 +130,9 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.misplaced_by_type: Counter[str] = Counter()
 
         self._start_accounting()     # accounting by identity (accounting.py)
-        ideal = cell.sim.ideal       # parts sliding on the belt (slip.py)
-        self._start_slip(self.t, 0.0 if ideal else cell.sim.belt_mu_static,
-                         0.0 if ideal else cell.sim.belt_mu_kinetic)
+        # parts sliding on the belt (slip.py): each type's friction, none on an ideal cell
+        self._start_slip(self.t, {k: (0.0, 0.0) if cell.sim.ideal else p.belt_friction(cell.sim)
+                                  for k, p in scenario.parts.items()})
 
     # ------------------------------------------------------------------ time
     def schedule(self, t: float, fn: Callable[[float], None]) -> int:
