@@ -53,7 +53,7 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
                         f"must be <= drift_limit_mm ({_num(e.drift_limit_mm)}), "
                         f"got {_num(e.drift_warn_mm)}")
     s = cell.sim
-    if s.belt_mu_kinetic > s.belt_mu_static:
+    if 0 < s.belt_mu_static < s.belt_mu_kinetic:      # a static 0 turns slip off
         ctx.add_problem("sim.belt_mu_kinetic",
                         f"must be <= sim.belt_mu_static ({_num(s.belt_mu_static)}): sliding "
                         f"friction is never more than sticking friction, got "
@@ -248,7 +248,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         return                                # listed by _check_scenario
     for name, part in sc.parts.items():       # friction on the belt: a part's, or the cell's
         mus, muk = part.belt_friction(cell.sim)
-        if muk > mus:
+        if 0 < mus < muk:
             ctx.add_problem(f"parts.{name}.belt_mu_kinetic",
                             f"{_num(muk)} is above its belt_mu_static {_num(mus)} (0 takes "
                             f"the cell's sim.belt_mu_*, {cfile}): sliding friction is never "
