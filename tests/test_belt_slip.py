@@ -237,6 +237,9 @@ def test_kinetic_friction_above_static_is_refused(tmp_path):
         load_cell(f)
     f.write_text(open("cells/sim.yaml").read() + "\nsim: {belt_mu_static: 0}\n")
     assert load_cell(f).sim.belt_mu_static == 0.0      # slip off, whatever the kinetic
+    f.write_text(open("cells/sim.yaml").read() + "\nsim: {belt_mu_kinetic: 0}\n")
+    with pytest.raises(ConfigError, match=r"sim.belt_mu_kinetic: must be > 0"):
+        load_cell(f)
 
 
 def test_friction_per_part_type():

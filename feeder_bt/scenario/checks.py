@@ -53,6 +53,9 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
                         f"must be <= drift_limit_mm ({_num(e.drift_limit_mm)}), "
                         f"got {_num(e.drift_warn_mm)}")
     s = cell.sim
+    if s.belt_mu_static > 0 and s.belt_mu_kinetic <= 0:
+        ctx.add_problem("sim.belt_mu_kinetic", "must be > 0 while sim.belt_mu_static is: a "
+                                               "part sliding without friction never stops")
     if 0 < s.belt_mu_static < s.belt_mu_kinetic:      # a static 0 turns slip off
         ctx.add_problem("sim.belt_mu_kinetic",
                         f"must be <= sim.belt_mu_static ({_num(s.belt_mu_static)}): sliding "
