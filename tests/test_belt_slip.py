@@ -282,3 +282,21 @@ def test_a_parts_kinetic_friction_above_its_static_is_refused(tmp_path):
     f.write_text(text)
     with pytest.raises(ConfigError, match=r"s.yaml:\d+: parts.lens.belt_mu_kinetic: 0.5 is above"):
         load_scenario(f)
+
+
+def test_a_part_sliding_back_stops_at_the_belts_start(lenses):
+    """A very hard start on a slick belt: parts near the ramp slide back to the belt's
+    start and no further (the ramp's foot), then ride on; nothing lost."""
+    w, clock = world_of(lenses, belt_mu_static=0.05, belt_mu_kinetic=0.02)
+    w.incline.jog(0.0, 100.0)
+    run_to(w, clock, 20.0)                  # the belt stands: parts lie where they land
+    w.incline.jog(clock.now(), 0.0)
+    run_to(w, clock, 21.0)
+    assert w.on_horizontal
+    w.horizontal.accel = 8000.0
+    w.horizontal.jog(clock.now(), 400.0)
+    for _ in range(40):
+        run_to(w, clock, clock.now() + 0.025)
+        belt = w.horizontal.pos(clock.now())
+        assert min(p.x0 + belt for p in w.on_horizontal.values()) >= -1e-9
+    assert w.counts["slips"] > 0 and w.lost() == 0

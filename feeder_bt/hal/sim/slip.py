@@ -107,9 +107,12 @@ class BeltSlip:
             u, dx = slide(u, seg.a, hi - lo, mus, muk)
             moved += dx
             self.counts["slips"] += int(np.count_nonzero((u != 0.0) & ~before))
+        start = -self.horizontal.pos(t)         # x0 of a part at the belt's start
         for p, v, dx in zip(parts, u.tolist(), moved.tolist(), strict=True):
             p.slip_v = v
             p.x0 += dx
+            if p.x0 < start:                    # slid back against the ramp's foot:
+                p.x0, p.slip_v = start, max(v, 0.0)     # it rides on from there
         self.slid_mm += float(np.abs(moved).sum())
         self._sliding = bool(np.any(u != 0.0))
 
