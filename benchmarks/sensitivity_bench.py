@@ -43,7 +43,7 @@ VARIANTS: list[tuple[str, str | None, Any]] = [
     ("ideal cell (every imperfection off)", "sim.ideal", True),
     ("grip curve twice as wide (1.0 mm)", "sim.grip_width_mm", 1.0),
     ("grip tolerance 3 mm (not 4)", "robot.grip_tolerance_mm", 3.0),
-    ("clumps twice as often (0.10)", "sim.clump_prob", 0.10),
+    ("clumping twice as steep with loading (0.4)", "sim.clump_cover_scale", 0.4),
     ("landing slide doubled (4 mm)", "sim.land_slide_mm", 4.0),
     ("calibration residual doubled", "sim.calib_offset_mm", [1.0, -0.8]),
     ("robot time cv 5 % (not 2 %)", "sim.robot_time_cv", 0.05),

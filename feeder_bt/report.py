@@ -164,6 +164,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                            # the simulator's imperfections at work (docs/simulator.md)
                            "landed_clumped": world.counts["landed_clumped"],
                            "grip_slipped": world.counts["grip_slipped"],
+                           # parts that slid on the belt (a hard speed change), and how far
+                           "slips": world.counts["slips"],
+                           "slid_mm": round(world.slid_mm, 1),
                            "placed": dict(world.placed_by_type),
                            # commands a belt ran slower than asked (0: the HAL refuses them)
                            "axis_clamped": {"horizontal": world.horizontal.clamped,

@@ -83,7 +83,11 @@ def test_a_run_builds_kits_in_their_proportions(tmp_path):
                               duration=600.0, fast=True, seed=2, view="none", db=None,
                               supply=str(ROOT / "supply" / "mix_drift.yaml")))
     assert "kits" not in free and "kits " not in summary(free)
-    assert free["parts"]["retrieved"]["lens"] > 3 * free["parts"]["retrieved"]["square"]
+    # without a kit nothing is held back: more of each type, more in all (seed 2: 417
+    # lenses and 141 squares against the kit run's 271 and 90); its lens:square ratio is
+    # the supply's (close to 3:1 here by chance, so not asserted)
+    fr = free["parts"]["retrieved"]
+    assert fr["square"] > got["square"] + 20 and fr["lens"] > got["lens"] + 60
 
 
 @pytest.mark.parametrize("kit, what", [

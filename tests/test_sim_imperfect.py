@@ -155,7 +155,7 @@ def test_a_dropped_part_slides_and_settles(lenses):
 
 def test_clumps_land_touching_and_render_as_one_blob(lenses):
     scenario, _ = lenses
-    calm, c1 = world_of(lenses, seed=5, clump_prob=0.0)
+    calm, c1 = world_of(lenses, seed=5, clump_prob=0.0, clump_cover_scale=0.0)
     clumpy, c2 = world_of(lenses, seed=5, clump_prob=0.5)
     for w, c in ((calm, c1), (clumpy, c2)):
         run_belts(w, c, 90.0)

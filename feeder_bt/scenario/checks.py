@@ -52,6 +52,15 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         ctx.add_problem("encoder.drift_warn_mm",
                         f"must be <= drift_limit_mm ({_num(e.drift_limit_mm)}), "
                         f"got {_num(e.drift_warn_mm)}")
+    s = cell.sim
+    if s.belt_mu_static > 0 and s.belt_mu_kinetic <= 0:
+        ctx.add_problem("sim.belt_mu_kinetic", "must be > 0 while sim.belt_mu_static is: a "
+                                               "part sliding without friction never stops")
+    if 0 < s.belt_mu_static < s.belt_mu_kinetic:      # a static 0 turns slip off
+        ctx.add_problem("sim.belt_mu_kinetic",
+                        f"must be <= sim.belt_mu_static ({_num(s.belt_mu_static)}): sliding "
+                        f"friction is never more than sticking friction, got "
+                        f"{_num(s.belt_mu_kinetic)}")
     _check_galil(cell, ctx)
 
 
@@ -240,6 +249,13 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
 
     if not sc.parts:
         return                                # listed by _check_scenario
+    for name, part in sc.parts.items():       # friction on the belt: a part's, or the cell's
+        mus, muk = part.belt_friction(cell.sim)
+        if 0 < mus < muk:
+            ctx.add_problem(f"parts.{name}.belt_mu_kinetic",
+                            f"{_num(muk)} is above its belt_mu_static {_num(mus)} (0 takes "
+                            f"the cell's sim.belt_mu_*, {cfile}): sliding friction is never "
+                            f"more than sticking friction")
     check_class_areas(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),

@@ -94,6 +94,16 @@ class PartSpec:
     # wear (issue 30): the most times a part may travel the belt; one that falls off the end
     # on its last pass goes to scrap (parts.scrapped) instead of back to the hopper; 0: no limit
     max_passes: int = 0
+    # the simulated cell only (hal/sim/slip.py): this part's friction on the belt; 0: the
+    # cell's sim.belt_mu_static / sim.belt_mu_kinetic
+    belt_mu_static: float = 0.0
+    belt_mu_kinetic: float = 0.0
+
+    def belt_friction(self, sim: SimImperfections) -> tuple[float, float]:
+        """Static and kinetic friction of this part on the simulated belt: its own
+        ``belt_mu_*``, or (0) the cell's ``sim.belt_mu_*``."""
+        return (self.belt_mu_static or sim.belt_mu_static,
+                self.belt_mu_kinetic or sim.belt_mu_kinetic)
 
     @property
     def period_deg(self) -> float:
@@ -453,7 +463,15 @@ class SimImperfections:
     land_turn_deg: float = 3.0           # sigma of the turn while settling
     drop_slide_mm: float = 4.0           # the same for a part the robot drops
     settle_s: float = 0.25               # the slide's duration
-    clump_prob: float = 0.05             # a part lands against or on the one before it
+    clump_prob: float = 0.01             # a part lands against or on the one before it
+    # ... more often the more of the landing zone (the belt's first clump_zone_mm) parts
+    # already cover: p = clump_prob + (1 - clump_prob) (1 - exp(-cover / scale))
+    clump_cover_scale: float = 0.8       # 0: the chance stays clump_prob
+    clump_zone_mm: float = 150.0
+    # belt friction (slip.py): parts slide when the belt speeds up or brakes harder than
+    # belt_mu_static * g; kinetic friction brings them back to the belt's speed
+    belt_mu_static: float = 0.30
+    belt_mu_kinetic: float = 0.22
     # grip: P(success) = grip_p_centre / (1 + exp((d - d50) / width)), d50 = the cell's
     # robot.grip_tolerance_mm
     grip_p_centre: float = 0.995

@@ -51,6 +51,7 @@ class SimPart:
     settle_t0: float = 0.0
     settle_end: float = -math.inf
     passes: int = 0             # times it has fallen off the belt's end (wear, issue 30)
+    slip_v: float = 0.0         # sliding on the belt: its speed less the belt's (slip.py)
 
     @property
     def singulated(self) -> bool:

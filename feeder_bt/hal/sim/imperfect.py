@@ -173,12 +173,27 @@ class Imperfections:
         turn = float(self.rng_land.normal(0.0, s.land_turn_deg)) if s.land_turn_deg > 0 else 0.0
         return dx, dy, turn, s.settle_s
 
-    def clump(self) -> tuple[float, float] | None:
-        """Whether a part lands against or on the part that landed before it: None, or
-        (direction in radians, centre distance as a fraction of the two radii's sum)."""
-        if self.ideal or self.spec.clump_prob <= 0:
+    def clump_probability(self, cover: float) -> float:
+        """The chance a landing part comes down against or on the one before it, with
+        ``cover`` the fraction of the landing zone's belt the parts already there cover:
+        ``clump_prob`` on an empty belt, rising towards 1 as the zone fills,
+        p = base + (1 - base) (1 - exp(-cover / clump_cover_scale)) (docs/simulator.md)."""
+        s = self.spec
+        if self.ideal:
+            return 0.0
+        base = max(s.clump_prob, 0.0)
+        if s.clump_cover_scale <= 0 or cover <= 0:
+            return base
+        return base + (1.0 - base) * -math.expm1(-cover / s.clump_cover_scale)
+
+    def clump(self, cover: float = 0.0) -> tuple[float, float] | None:
+        """Whether a part lands against or on the part that landed before it (its chance:
+        ``clump_probability``): None, or (direction in radians, centre distance as a
+        fraction of the two radii's sum)."""
+        p = self.clump_probability(cover)
+        if p <= 0:
             return None
-        if self.rng_land.random() >= self.spec.clump_prob:
+        if self.rng_land.random() >= p:
             return None
         return (float(self.rng_land.uniform(-math.pi, math.pi)),
                 float(self.rng_land.uniform(0.45, 0.85)))

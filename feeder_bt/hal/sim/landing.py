@@ -17,7 +17,7 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from ...geometry import is_convex, near, outer, place_outline, pose_outline, wrap_deg
+from ...geometry import is_convex, near, outer, place_outline, polygon_area, pose_outline, wrap_deg
 from ...scenario.model import Scenario
 from .accounting import SimPart
 from .axis import Axis
@@ -41,6 +41,7 @@ class Landing:
     counts: Counter[str]
     _last_landed: int | None
     _outlines: dict[tuple[str, str], np.ndarray]
+    _areas: dict[tuple[str, str], float]
 
     def outline(self, ptype: str, pose: str) -> np.ndarray:
         """A part's outline in a pose (part frame; with holes, NaN rows part its rings: see
@@ -67,7 +68,7 @@ class Landing:
         prev = self.on_horizontal.get(self._last_landed) if not dropped else None
         if not dropped:
             self._last_landed = part.id
-        if prev is not None and (c := imp.clump()) is not None:
+        if prev is not None and (c := imp.clump(self.zone_cover(t))) is not None:
             ang, frac = c
             dist = frac * (part.radius + prev.radius)
             part.x0 = prev.x0 + dist * math.cos(ang)
@@ -81,9 +82,29 @@ class Landing:
         part.angle = wrap_deg(part.angle + turn)
         part.settle_t0, part.settle_end = t, (t + settle if settle > 0 else -math.inf)
 
+    def zone_cover(self, t: float) -> float:
+        """The fraction of the landing zone (the belt's first ``sim.clump_zone_mm``, its
+        full width) that the parts on the belt cover at ``t``: how loaded the belt is where
+        parts land (a part overlapping the zone's end counts whole)."""
+        zone = self.imperfect.spec.clump_zone_mm
+        belt = self.horizontal.pos(t)
+        area = 0.0
+        for p in self.on_horizontal.values():
+            if p.x0 + belt - p.radius < zone:
+                area += self._area(p)
+        return area / (zone * self.h_width)
+
+    def _area(self, part: SimPart) -> float:
+        key = (part.type, part.pose)
+        a = self._areas.get(key)
+        if a is None:
+            a = self._areas[key] = polygon_area(self.outline(part.type, part.pose))
+        return a
+
     def _settle(self, part: SimPart, t: float) -> None:
         """A part comes to rest on the horizontal belt (landing, or dropped by the robot):
-        which parts does it touch?"""
+        which parts does it touch? It lands at the belt's speed (slip.py)."""
+        part.slip_v = 0.0
         belt = self.horizontal.pos(t)
         ax, ay = part.x0 + belt, part.y             # part_xy(part, t)
         for other in self.on_horizontal.values():

@@ -38,6 +38,7 @@ from .axis import Axis
 from .grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
 from .imperfect import Imperfections
 from .landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
+from .slip import BeltSlip
 
 __all__ = [
     "AUDIT_EVERY", "EDGE_MARGIN_MM", "LAND_X_MM", "PLACES", "PLACE_TOL_MM", "RECYCLE_S",
@@ -57,7 +58,7 @@ class Notification:
     hinted_version: int = -1
 
 
-class World(PartAccounting, Landing, RobotGrips):
+class World(PartAccounting, Landing, RobotGrips, BeltSlip):
     """Ground truth of the simulated cell, advanced by ``step(now)``."""
 
     #: pulses the robot controller's belt counter gained or lost (an ``encoder_slip``
@@ -89,6 +90,7 @@ class World(PartAccounting, Landing, RobotGrips):
         order = [t for t, n in scenario.hopper.items() for _ in range(n)]
         self.rng.shuffle(order)
         self._outlines: dict[tuple[str, str], np.ndarray] = {}
+        self._areas: dict[tuple[str, str], float] = {}
         self._poses: dict[str, tuple[list[str], np.ndarray]] = {}
         for ptype in order:
             pid = next(ids)
@@ -128,6 +130,9 @@ class World(PartAccounting, Landing, RobotGrips):
         self.misplaced_by_type: Counter[str] = Counter()
 
         self._start_accounting()     # accounting by identity (accounting.py)
+        # parts sliding on the belt (slip.py): each type's friction, none on an ideal cell
+        self._start_slip(self.t, {k: (0.0, 0.0) if cell.sim.ideal else p.belt_friction(cell.sim)
+                                  for k, p in scenario.parts.items()})
 
     # ------------------------------------------------------------------ time
     def schedule(self, t: float, fn: Callable[[float], None]) -> int:
@@ -156,11 +161,13 @@ class World(PartAccounting, Landing, RobotGrips):
             if t is None or t > limit:
                 break
             self.t = max(self.t, t)
+            self._slip_to(self.t)
             if arg is None:
                 kind(self.t)
             else:
                 kind(self.t, arg)
         self.t = now
+        self._slip_to(now)
         if self.notifications:
             self._hint_notifications()
         self.check_accounting()
@@ -262,6 +269,8 @@ class World(PartAccounting, Landing, RobotGrips):
             self.counts["landed_touching"] += 1
 
     def _fall(self, t: float, pid: int) -> None:
+        if self.on_horizontal[pid].x0 + self.horizontal.pos(t) < self.h_len - 1e-6:
+            return      # it slid back since its fall was foreseen (slip.py): not yet
         part = self.on_horizontal.pop(pid)
         self._untouch(part)
         part.passes += 1
