@@ -221,8 +221,20 @@ def summary(report: dict) -> str:
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
             + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
                if p.get("recirculated_per_placed") is not None else "")
-            + _ceiling_line(report) + _kits_line(report) + _robots_line(report) + "\n"
+            + _ceiling_line(report) + _fit_line(report) + _kits_line(report)
+            + _robots_line(report) + "\n"
             + story_text(report))
+
+
+def _fit_line(report: dict) -> str:
+    """The robot model the policies learnt, and how well it predicted the arm's moves."""
+    fitted = (report.get("robot_model") or {}).get("fitted") or {}
+    res = fitted.get("residual") or {}
+    if not res.get("moves"):
+        return ""
+    return (f"\n  robot fit: x{fitted['time_scale']:.3f} {1000 * fitted['offset_s']:+.0f} ms;"
+            f" residual rms {res['rms_ms']:.0f} ms ({res['rms_pct']:.1f} %),"
+            f" max {res['max_ms']:.0f} ms")
 
 
 def _kits_line(report: dict) -> str:

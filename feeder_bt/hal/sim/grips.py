@@ -24,7 +24,7 @@ from ...errors import EnvelopeError, HalError, MissedGrab
 from ...geometry import near, outer, place_outline, rings, wrap_deg
 from ...gripper import footprint, grip_poses
 from ...jobs import Job
-from ...robot_model import RobotModel
+from ...scara import ScaraModel
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import Held, PickResult, PickTarget, Pose
 from .accounting import SimPart
@@ -52,7 +52,7 @@ class RobotGrips:
     h_len: float
     h_width: float
     imperfect: Imperfections
-    robot_model: RobotModel
+    robot_model: ScaraModel
     robot_pose: Pose
     robot_busy: Job | None
     speed_override_pct: float
@@ -81,7 +81,7 @@ class RobotGrips:
         t_arr = t0
         for _ in range(6):
             cx, cy = self.commanded_xy(target, t_arr)
-            t_arr = t0 + scale * self.robot_model.arch_time(math.hypot(cx - px, cy - py),
+            t_arr = t0 + scale * self.robot_model.move_time((px, py), (cx, cy),
                                                             self.robot_speed_pct)
         cx, cy = self.commanded_xy(target, t_arr)
         if not self.robot_model.reachable(cx, cy):

@@ -30,7 +30,7 @@ from ...clock import EPS, SimClock
 from ...encoder import wrap
 from ...geometry import circumradius, place_outline
 from ...jobs import Job
-from ...robot_model import RobotModel
+from ...scara import world_arm
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import Pose
 from .accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
@@ -72,7 +72,9 @@ class World(PartAccounting, Landing, RobotGrips):
         self.incline = Axis(ic.accel_mm_s2, ic.max_mm_s)
         self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
         self.cpm = cell.encoder.counts_per_mm
-        self.robot_model = RobotModel(cell.robot)
+        # the arm as it really moves: a SCARA (feeder_bt.scara), sim_speed_factor times a
+        # Cobra 600; the trees see only the cell's Cartesian description (issues 16, 30)
+        self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
         self.imperfect = Imperfections(cell.sim, self.cpm, cell.robot.grip_tolerance_mm, seed)
         self._last_landed: int | None = None
         self.t = clock.now()
