@@ -260,15 +260,25 @@ def _robots_line(report: dict) -> str:
 
 def _ceiling_line(report: dict) -> str:
     """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
-    run came; with an inflow bound the three bounds get a line of their own (80 columns)."""
+    run came; with an inflow bound or the selection-aware robot bounds (a simulated run)
+    the bounds get a line of their own (80 columns)."""
     if "ceiling_ppm" not in report:
         return ""
     pct = report["of_ceiling_pct"]
     of = f": {pct:.0f} % of it" if pct is not None else ""
-    each = (f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f}")
-    if "inflow_bound_ppm" in report:
+    robot = f"robot {report['robot_bound_ppm']:.1f}"
+    if report.get("robot_bound_selection_ppm") is not None:
+        mean = report.get("robot_bound_mean_ppm")
+        robot = (f"robot {report['robot_bound_ppm']:.1f} corner"
+                 + (f", {mean:.1f} mean" if mean is not None else "")
+                 + f", {report['robot_bound_selection_ppm']:.1f} selection;")
+    each = f"{robot} supply {report['supply_bound_ppm']:.1f}" if robot.endswith(";") else (
+        f"{robot}, supply {report['supply_bound_ppm']:.1f}")
+    if "inflow_bound_ppm" in report or robot.endswith(";"):
+        inflow = (f", inflow {report['inflow_bound_ppm']:.1f}"
+                  if "inflow_bound_ppm" in report else "")
         return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound)"
-                f"{of}\n  bounds: {each}, inflow {report['inflow_bound_ppm']:.1f}")
+                f"{of}\n  bounds: {each}{inflow}")
     return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
             f"{each}){of}")
 

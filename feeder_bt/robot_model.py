@@ -58,6 +58,11 @@ class RobotModel:
         the world's SCARA (``feeder_bt.scara``) needs both ends."""
         return self.arch_time(math.dist(a, b), speed_pct)
 
+    def arch_times_from(self, start: tuple[float, float], x: np.ndarray, y: np.ndarray,
+                        speed_pct: float) -> np.ndarray:
+        """``move_time`` from ``start`` to many points at once."""
+        return self.arch_times(np.hypot(x - start[0], y - start[1]), speed_pct)
+
     def standard_cycle(self, speed_pct: float = 100.0) -> float:
         """The 25/305/25 mm cycle, there and back."""
         return 2 * self.arch_time(305.0, speed_pct)

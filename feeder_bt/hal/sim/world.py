@@ -38,6 +38,7 @@ from .axis import Axis
 from .grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
 from .imperfect import Imperfections
 from .landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
+from .passlog import PassLog
 
 __all__ = [
     "AUDIT_EVERY", "EDGE_MARGIN_MM", "LAND_X_MM", "PLACES", "PLACE_TOL_MM", "RECYCLE_S",
@@ -75,6 +76,8 @@ class World(PartAccounting, Landing, RobotGrips):
         # the arm as it really moves: a SCARA (feeder_bt.scara), sim_speed_factor times a
         # Cobra 600; the trees see only the cell's Cartesian description (issues 16, 30)
         self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
+        # every pass along the belt and every pick, for the report's robot bounds
+        self.passlog = PassLog(clock.now(), 0.0)
         self.imperfect = Imperfections(cell.sim, self.cpm, cell.robot.grip_tolerance_mm, seed)
         self._last_landed: int | None = None
         self.t = clock.now()
@@ -163,6 +166,8 @@ class World(PartAccounting, Landing, RobotGrips):
             else:
                 kind(self.t, arg)
         self.t = now
+        if now >= self.passlog.next_t:
+            self.passlog.sample(now, self.horizontal.pos(now))
         if self.notifications:
             self._hint_notifications()
         self.check_accounting()
@@ -259,6 +264,8 @@ class World(PartAccounting, Landing, RobotGrips):
         self._imperfect_landing(part, t, dropped=False)
         self._settle(part, t)
         self.on_horizontal[pid] = part
+        self.passlog.landed(pid, t, part.x0, part.y, part.type,
+                            part.pickable and not part.touching)
         self.counts["landed"] += 1
         if part.touching:
             self.counts["landed_touching"] += 1
