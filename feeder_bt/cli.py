@@ -261,26 +261,28 @@ def _robots_line(report: dict) -> str:
 def _ceiling_line(report: dict) -> str:
     """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
     run came; with an inflow bound or the selection-aware robot bounds (a simulated run)
-    the bounds get a line of their own (80 columns)."""
+    the bounds get lines of their own (80 columns)."""
     if "ceiling_ppm" not in report:
         return ""
     pct = report["of_ceiling_pct"]
     of = f": {pct:.0f} % of it" if pct is not None else ""
+    supply = f"supply {report['supply_bound_ppm']:.1f}"
+    if report.get("robot_bound_selection_ppm") is None and "inflow_bound_ppm" not in report:
+        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
+                f"robot {report['robot_bound_ppm']:.1f}, {supply}){of}")
     robot = f"robot {report['robot_bound_ppm']:.1f}"
     if report.get("robot_bound_selection_ppm") is not None:
         mean = report.get("robot_bound_mean_ppm")
-        robot = (f"robot {report['robot_bound_ppm']:.1f} corner"
-                 + (f", {mean:.1f} mean" if mean is not None else "")
-                 + f", {report['robot_bound_selection_ppm']:.1f} selection;")
-    each = f"{robot} supply {report['supply_bound_ppm']:.1f}" if robot.endswith(";") else (
-        f"{robot}, supply {report['supply_bound_ppm']:.1f}")
-    if "inflow_bound_ppm" in report or robot.endswith(";"):
-        inflow = (f", inflow {report['inflow_bound_ppm']:.1f}"
-                  if "inflow_bound_ppm" in report else "")
-        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound)"
-                f"{of}\n  bounds: {each}{inflow}")
-    return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
-            f"{each}){of}")
+        robot += (" corner" + (f", {mean:.1f} mean" if mean is not None else "")
+                  + f", {report['robot_bound_selection_ppm']:.1f} selection;")
+    else:
+        robot += ","
+    out = (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound){of}"
+           f"\n  bounds: {robot} {supply}")
+    if "inflow_bound_ppm" in report:
+        out += (f"\n  inflow bound {report['inflow_bound_ppm']:.1f} parts/min (parts reach "
+                f"the robot {report['inflow_lag_s']:.1f} s after they come)")
+    return out
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

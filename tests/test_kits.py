@@ -83,7 +83,10 @@ def test_a_run_builds_kits_in_their_proportions(tmp_path):
                               duration=600.0, fast=True, seed=2, view="none", db=None,
                               supply=str(ROOT / "supply" / "mix_drift.yaml")))
     assert "kits" not in free and "kits " not in summary(free)
-    assert free["parts"]["retrieved"]["lens"] > 3 * free["parts"]["retrieved"]["square"]
+    # without a kit the proportions are the supply's and the prices': not held to 3 to 1
+    # (with the SCARA world the squares' nearer place pose makes them the cheaper picks)
+    lens, square = free["parts"]["retrieved"]["lens"], free["parts"]["retrieved"]["square"]
+    assert not 3 * square <= lens <= 3 * square + 3
 
 
 @pytest.mark.parametrize("kit, what", [
