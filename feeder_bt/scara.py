@@ -213,6 +213,12 @@ class ScaraModel(RobotModel):
 
 
 def world_arm(spec: RobotSpec, speed_factor: float = 1.0) -> ScaraModel:
-    """The simulated world's arm for the cell's robot, ``speed_factor`` times as fast as a
-    Cobra 600 (the cell's ``sim_speed_factor``: a study's slower or faster arm)."""
-    return ScaraModel(spec, ScaraSpec().scaled(speed_factor))
+    """The simulated world's arm for the cell's robot: a Cobra 600 shaped to the cell's
+    reach (both links scaled to sum to ``reach_mm``) and timed so its Adept cycle is the
+    one the cell's description was calibrated to (cells/sim.yaml: 0.5 s; the original
+    cell's Adept 550: 0.7 s), times ``speed_factor`` (the cell's ``sim_speed_factor``: a
+    study's slower or faster arm)."""
+    k = spec.reach_mm / (INNER_MM + OUTER_MM)
+    shape = ScaraSpec(inner_mm=INNER_MM * k, outer_mm=OUTER_MM * k)
+    f = ScaraModel(spec, shape).standard_cycle() / RobotModel(spec).standard_cycle()
+    return ScaraModel(spec, shape.scaled(f * speed_factor))

@@ -13,6 +13,7 @@ import pytest
 from feeder_bt.cli import summary
 from feeder_bt.hal.sim.passlog import PassLog
 from feeder_bt.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.robot_model import RobotModel
 from feeder_bt.run import RunOptions, run_job
 from feeder_bt.scara import RAMP_S, ScaraModel, ScaraSpec, world_arm
 from feeder_bt.scenario import load_cell, load_scenario
@@ -42,7 +43,7 @@ def test_a_pure_joint_1_rotation():
     """Both ends 400 mm from the base, 60 degrees apart: the elbow keeps its angle, joint 1
     turns 60 degrees at 386 deg/s. The arch: up, across, down, each acceleration
     overlapping the previous deceleration."""
-    arm = world_arm(CELL.robot)
+    arm = ScaraModel(CELL.robot)              # the Cobra 600's own figures
     a, b = at(400.0, 150.0), at(400.0, 210.0)
     across = trap(60.0, 386.0, RAMP_S)
     assert across == pytest.approx(RAMP_S + 60 / 386)           # it cruises
@@ -54,7 +55,7 @@ def test_a_pure_joint_1_rotation():
 def test_a_radial_move_is_elbow_limited():
     """From 200 to 590 mm along one direction the elbow opens by far more than joint 1
     turns: joint 2 (720 deg/s) sets the time. Angles by the law of cosines."""
-    arm = world_arm(CELL.robot)
+    arm = ScaraModel(CELL.robot)
     l1, l2 = 325.0, 275.0
 
     def elbow(r: float) -> float:
@@ -75,11 +76,18 @@ def test_a_radial_move_is_elbow_limited():
 
 def test_speed_scales_every_joint_and_the_calibration():
     """SPEED s %: speeds times s, accelerations times s squared, so every time is 1/s;
-    the Adept cycle (25/305/25 mm there and back) is 0.5 s at 100 %."""
+    the Adept cycle (25/305/25 mm there and back) is 0.5 s at 100 % for the Cobra 600's
+    figures, and the world's arm keeps the cell's own calibration (its Cartesian model's
+    cycle: 0.5 s on the new cell, 0.7 s for the original cell's Adept 550)."""
+    assert ScaraModel(CELL.robot).standard_cycle() == pytest.approx(0.5, abs=1e-4)
+    old = load_cell(ROOT / "cells" / "original_cwru.yaml").robot
+    for spec in (CELL.robot, old):
+        assert world_arm(spec).standard_cycle() == pytest.approx(
+            RobotModel(spec).standard_cycle(), rel=1e-9)
+    assert world_arm(old).scara.inner_mm + world_arm(old).scara.outer_mm == old.reach_mm
     arm = world_arm(CELL.robot)
     a, b = (900.0, 150.0), (1330.0, -120.0)
     assert arm.move_time(a, b, 50.0) == pytest.approx(2 * arm.move_time(a, b, 100.0))
-    assert arm.standard_cycle() == pytest.approx(0.5, abs=1e-3)
     assert world_arm(CELL.robot, 0.5).move_time(a, b, 100.0) == pytest.approx(
         2 * arm.move_time(a, b, 100.0))
     # the vectorised form agrees with the scalar one
