@@ -136,12 +136,23 @@ class ScaraModel(RobotModel):
         q1 = np.arctan2(ry, rx) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
         return q1, q2
 
+    def _joint(self, x: float, y: float) -> tuple[float, float]:
+        """``joints`` for one point, in plain floats (the simulated robot's every move)."""
+        bx, by = self.spec.base_mm
+        dx, dy = x - bx, y - by
+        rx, ry = self._cos * dx + self._sin * dy, -self._sin * dx + self._cos * dy
+        l1, l2 = self.scara.inner_mm, self.scara.outer_mm
+        c2 = (rx * rx + ry * ry - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
+        q2 = self._sign * math.acos(min(max(c2, -1.0), 1.0))
+        return math.atan2(ry, rx) - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2)), q2
+
     def _transfer(self, a: tuple[float, float], b: tuple[float, float], s: float
                   ) -> tuple[float, float]:
         """(time, ramp time) of the joint-interpolated move a → b in the plane."""
-        q1, q2 = self.joints(np.array([a[0], b[0]]), np.array([a[1], b[1]]))
-        d1 = abs(math.remainder(float(q1[1] - q1[0]), math.tau))
-        d2 = abs(float(q2[1] - q2[0]))
+        p1, p2 = self._joint(a[0], a[1])
+        q1, q2 = self._joint(b[0], b[1])
+        d1 = abs(math.remainder(q1 - p1, math.tau))
+        d2 = abs(q2 - p2)
         sc = self.scara
         t1 = trapezoid(d1, sc.j1_rad_s * s, sc.j1_rad_s2 * s * s)
         t2 = trapezoid(d2, sc.j2_rad_s * s, sc.j2_rad_s2 * s * s)
