@@ -82,8 +82,12 @@ def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
     robot picked, and nearest-first over the parts that passed."""
     pricing = Pricing.of(world.robot_model, cell_spec, scenario)
     log = world.passlog
+    t_end = world.clock.now()
+    if log.belt_t[0] > t_end - sim_seconds + 1e-6:
+        # a changeover (the operator loaded another scenario) began a new world: its
+        # record covers only part of the run, so these bounds would not bound it
+        return {"robot_bounds_since_s": round(log.belt_t[0] - (t_end - sim_seconds), 3)}
     mean = mean_bound(pricing, log.picks)
-    t_end = log.belt_t[0] + sim_seconds
     placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), t_end)
     sel = placed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     return {"robot_bound_mean_ppm": round(mean[1], 3) if mean else None,
