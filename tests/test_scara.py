@@ -209,3 +209,47 @@ def _corner_move(r: dict) -> float:
     p = pricing()
     best = p.model.best_pick_point(p.places["lens"], (0.0, p.x_hi, 28.0, 610.0 - 28.0))
     return p.model.move_time(p.places["lens"], best, 100.0)
+
+
+ARM = """
+.PROGRAM main()
+    SPEED 50 ALWAYS
+    SET f = INVERSE(TRANS(1370, 305, 0, 0, 0, 0))
+    SET a = f:TRANS(1370, -150, 0, 0, 180, 0)
+    SET b = f:TRANS(1100, 100, 0, 0, 180, 0)
+    SET c = f:TRANS(1000, 400, 0, 0, 180, 0)
+    MOVE a
+    BREAK
+    t0 = TIMER(-3)
+    MOVE b
+    BREAK
+    t1 = TIMER(-3)
+    MOVE c
+    MOVE a
+    BREAK
+    t2 = TIMER(-3)
+.END
+"""
+
+
+def test_the_v_plus_emulators_arm_moves_like_the_scara():
+    """The V+ emulator's arm times each motion with the world's SCARA (joint-interpolated,
+    at SPEED 50), and two motions in continuous path overlap one's deceleration with the
+    next one's acceleration (no per-move noise here)."""
+    from vplus_rig import make_runtime, run
+
+    rt = make_runtime(ARM)
+    world = rt.plant.world
+    world.imperfect.time_factor = lambda: 1.0
+    run(ARM, rt=rt)
+    g = {k: rt.globals[k].v for k in ("t0", "t1", "t2")}
+    arm = world.robot_model
+    a, b, c = (0.0, -455.0, 0.0), (-270.0, -205.0, 0.0), (-370.0, 95.0, 0.0)
+    t_ab, _ = arm.segment_time(a, b, 50.0)
+    t_bc, r_bc = arm.segment_time(b, c, 50.0)
+    t_ca, r_ca = arm.segment_time(c, a, 50.0)
+    assert g["t1"] - g["t0"] == pytest.approx(t_ab, abs=0.02)     # the servo's tick
+    assert g["t2"] - g["t1"] == pytest.approx(t_bc + t_ca - min(r_bc, r_ca), abs=0.02)
+    # not the Cartesian trapezoid the controller prices with
+    cart = RobotModel(CELL.robot).arch_time(math.dist(a, b) - CELL.robot.approach_mm, 50.0)
+    assert abs(cart - t_ab) > 0.05
