@@ -221,8 +221,20 @@ def summary(report: dict) -> str:
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
             + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
                if p.get("recirculated_per_placed") is not None else "")
-            + _ceiling_line(report) + _kits_line(report) + _robots_line(report) + "\n"
+            + _ceiling_line(report) + _fit_line(report) + _kits_line(report)
+            + _robots_line(report) + "\n"
             + story_text(report))
+
+
+def _fit_line(report: dict) -> str:
+    """The robot model the policies learnt, and how well it predicted the arm's moves."""
+    fitted = (report.get("robot_model") or {}).get("fitted") or {}
+    res = fitted.get("residual") or {}
+    if not res.get("moves"):
+        return ""
+    return (f"\n  robot fit: x{fitted['time_scale']:.3f} {1000 * fitted['offset_s']:+.0f} ms;"
+            f" residual rms {res['rms_ms']:.0f} ms ({res['rms_pct']:.1f} %),"
+            f" max {res['max_ms']:.0f} ms")
 
 
 def _kits_line(report: dict) -> str:
@@ -248,17 +260,29 @@ def _robots_line(report: dict) -> str:
 
 def _ceiling_line(report: dict) -> str:
     """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
-    run came; with an inflow bound the three bounds get a line of their own (80 columns)."""
+    run came; with an inflow bound or the selection-aware robot bounds (a simulated run)
+    the bounds get lines of their own (80 columns)."""
     if "ceiling_ppm" not in report:
         return ""
     pct = report["of_ceiling_pct"]
     of = f": {pct:.0f} % of it" if pct is not None else ""
-    each = (f"robot {report['robot_bound_ppm']:.1f}, supply {report['supply_bound_ppm']:.1f}")
+    supply = f"supply {report['supply_bound_ppm']:.1f}"
+    if report.get("robot_bound_selection_ppm") is None and "inflow_bound_ppm" not in report:
+        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
+                f"robot {report['robot_bound_ppm']:.1f}, {supply}){of}")
+    robot = f"robot {report['robot_bound_ppm']:.1f}"
+    if report.get("robot_bound_selection_ppm") is not None:
+        mean = report.get("robot_bound_mean_ppm")
+        robot += (" corner" + (f", {mean:.1f} mean" if mean is not None else "")
+                  + f", {report['robot_bound_selection_ppm']:.1f} selection;")
+    else:
+        robot += ","
+    out = (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound){of}"
+           f"\n  bounds: {robot} {supply}")
     if "inflow_bound_ppm" in report:
-        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound)"
-                f"{of}\n  bounds: {each}, inflow {report['inflow_bound_ppm']:.1f}")
-    return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
-            f"{each}){of}")
+        out += (f"\n  inflow bound {report['inflow_bound_ppm']:.1f} parts/min (parts reach "
+                f"the robot {report['inflow_lag_s']:.1f} s after they come)")
+    return out
 
 
 def cmd_tree(args: argparse.Namespace) -> int:

@@ -10,9 +10,10 @@ import numpy as np
 
 from .cell import Cell
 from .kits import kits_report
+from .robot_bounds import Pricing, mean_bound, selection_bound
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
-from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm
+from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm, transport_lag_s
 from .ticker import Ticker
 from .vocabulary import split
 
@@ -53,22 +54,46 @@ Inflow = tuple[int, list[tuple[float, int]]]      # parts at the start, (s, part
 
 
 def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds: float,
-           inflow: Inflow | None = None, span_s: float | None = None) -> dict[str, Any]:
+           inflow: Inflow | None = None, span_s: float | None = None,
+           selection_ppm: float | None = None, lag_s: float = 0.0) -> dict[str, Any]:
     """The supply bound (``feeder_bt.supply_bound``) beside the robot's, and the inflow
     bound when parts enter only by totes; the lowest is the ceiling, and parts/min as a %
-    of it. The inflow bound counts parts over the run's whole ``span_s`` and is put per
-    minute of feeding, like parts/min."""
+    of it. The inflow bound counts parts over the run's whole ``span_s``, each arrival
+    ``lag_s`` late (the ride to the robot), and is put per minute of feeding, like
+    parts/min. ``selection_ppm``: nearest-first over the run's parts (robot_bounds.py)."""
     supply = supply_bound_ppm(located_in_reach, feed_seconds)
     out: dict[str, Any] = {"supply_bound_ppm": round(supply, 3)}
     inflow_ppm = None
     if inflow is not None and feed_seconds > 0:
-        parts = inflow_bound_parts(*inflow, robot_ppm, span_s or feed_seconds)
+        parts = inflow_bound_parts(*inflow, robot_ppm, span_s or feed_seconds, lag_s)
         inflow_ppm = parts * 60.0 / feed_seconds
         out["inflow_bound_ppm"] = round(inflow_ppm, 3)
-    which, ceil = ceiling(robot_ppm, supply, inflow_ppm)
+        out["inflow_lag_s"] = round(lag_s, 3)
+    which, ceil = ceiling(robot_ppm, supply, inflow_ppm, selection_ppm)
     ppm = retrieved * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     return {**out, "ceiling": which, "ceiling_ppm": round(ceil, 3),
             "of_ceiling_pct": round(100.0 * ppm / ceil, 1) if ceil > 0 else None}
+
+
+def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
+                       feed_seconds: float, sim_seconds: float) -> dict[str, Any]:
+    """The selection-aware robot bounds over the simulated world's record of the run
+    (``feeder_bt.robot_bounds``), with the world's own arm: the mean cycle over where the
+    robot picked, and nearest-first over the parts that passed."""
+    pricing = Pricing.of(world.robot_model, cell_spec, scenario)
+    log = world.passlog
+    t_end = world.clock.now()
+    if log.belt_t[0] > t_end - sim_seconds + 1e-6:
+        # a changeover (the operator loaded another scenario) began a new world: its
+        # record covers only part of the run, so these bounds would not bound it
+        return {"robot_bounds_since_s": round(log.belt_t[0] - (t_end - sim_seconds), 3)}
+    mean = mean_bound(pricing, log.picks)
+    placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), t_end)
+    sel = placed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
+    return {"robot_bound_mean_ppm": round(mean[1], 3) if mean else None,
+            "robot_bound_mean_cycle_s": round(mean[0], 4) if mean else None,
+            "robot_bound_selection_ppm": round(sel, 3),
+            "robot_bound_selection_parts": placed}
 
 
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
@@ -109,8 +134,14 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                                             if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
-    bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario) if cell.scenario
+    # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
+    # (feeder_bt.scara), or on a real cell the cell's description (issue 30)
+    arm = world.robot_model if world is not None else None
+    bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario, arm) if cell.scenario
                               else (0.0, 0.0))
+    robot_bounds = (world_robot_bounds(cell.cell, cell.scenario, world, feed_seconds,
+                                       sim_seconds)
+                    if world is not None and cell.scenario else {})
     report: dict[str, Any] = {
         "scenario": cell.scenario.name if cell.scenario else None,
         "cell": cell.cell.name,
@@ -123,10 +154,14 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "feed_seconds": round(feed_seconds, 3),
         "wall_seconds": round(wall_seconds, 3),
         "parts_per_minute": round(total * 60.0 / feed_seconds, 3) if feed_seconds > 0 else 0.0,
+        # the corner case: the shortest cycle anywhere in the pick window
         "robot_bound_ppm": round(bound_ppm, 3),
         "robot_bound_cycle_s": round(bound_cycle, 4),
+        "robot_bound_kind": "corner",
+        **robot_bounds,
         **bounds(s.counts["located_in_reach"], bound_ppm, total, feed_seconds, inflow,
-                 sim_seconds),
+                 sim_seconds, robot_bounds.get("robot_bound_selection_ppm"),
+                 transport_lag_s(cell.cell)),
         "parts": parts,
         # one vocabulary (vocabulary.py): device faults apart from the misses the trees retry
         "faults": split(s.faults)[0],

@@ -92,6 +92,12 @@ class RobotFit:
         self.samples: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self.busy_s = 0.0              # commanded to the end of every pick and place that ended
+        # the fit's one-step prediction residual (predicted before each update against the
+        # measured move): how well the controller's Cartesian form fits the arm (issue 30)
+        self.res_n = 0
+        self.res_sq = 0.0
+        self.res_max = 0.0
+        self.res_moves_s = 0.0
 
     @property
     def k(self) -> float:
@@ -113,6 +119,10 @@ class RobotFit:
             return False
         phi = np.array([t_nom, 1.0])
         r = move_s - float(phi @ self.theta)
+        self.res_n += 1
+        self.res_sq += r * r
+        self.res_max = max(self.res_max, abs(r))
+        self.res_moves_s += move_s
         s = max(self.scale, MIN_SCALE_S)
         w = 1.0 if abs(r) <= HUBER * s else HUBER * s / abs(r)
         p_phi = self.P @ phi
@@ -122,12 +132,28 @@ class RobotFit:
         self.P = 0.5 * (self.P + self.P.T)
         if np.trace(self.P) > np.trace(self.P0):     # no wind-up while nothing is learnt
             self.P *= np.trace(self.P0) / np.trace(self.P)
-        self.theta = np.array([min(max(self.k, K_BOUNDS[0]), K_BOUNDS[1]),
-                               min(max(self.c, C_BOUNDS[0]), C_BOUNDS[1])])
+        self.theta = self._bounded(self.theta)
         self.scale = 0.97 * self.scale + 0.03 * 1.25 * min(abs(r), 5 * s)
         self.mean_sq = 0.97 * self.mean_sq + 0.03 * r * r
         self.samples[kind] += 1
         return True
+
+    def _bounded(self, theta: np.ndarray) -> np.ndarray:
+        """``theta`` moved inside the bounds along the fit's own uncertainty: an estimate
+        held at one bound moves the other as the data correlate them (clipping each alone
+        leaves a pair that fits nothing: with a world whose offset wants to be below
+        ``C_BOUNDS``, the fit ran 0.2 s above every move, issue 30)."""
+        k, c = float(theta[0]), float(theta[1])
+        P = self.P
+        cb = min(max(c, C_BOUNDS[0]), C_BOUNDS[1])
+        if cb != c:
+            k += P[0, 1] / P[1, 1] * (cb - c)
+            c = cb
+        kb = min(max(k, K_BOUNDS[0]), K_BOUNDS[1])
+        if kb != k:
+            c = min(max(c + P[0, 1] / P[0, 0] * (kb - k), C_BOUNDS[0]), C_BOUNDS[1])
+            k = kb
+        return np.array([k, c])
 
     # ---------------------------------------------------------------- timing jobs
     def pick_done(self, timing: Timing, t_end: float, grip_x: float) -> None:
@@ -168,8 +194,21 @@ class RobotFit:
                        "a_max_mm_s2": round(eff.a_max_mm_s2, 1),
                        "time_scale": round(self.k, 4), "offset_s": round(self.c, 4),
                        "standard_cycle_s": round(self.model.standard_cycle(), 4),
-                       "rms_residual_s": round(math.sqrt(self.mean_sq), 4)},
+                       "rms_residual_s": round(math.sqrt(self.mean_sq), 4),
+                       "residual": self.residual()},
         }
+
+    def residual(self) -> dict[str, Any]:
+        """The fit's prediction error over the run: every accepted move's time predicted
+        before the fit saw it, against the measured time (rms and max in ms, rms as a %
+        of the mean measured move)."""
+        if self.res_n == 0:
+            return {"moves": 0, "rms_ms": None, "max_ms": None, "rms_pct": None}
+        rms = math.sqrt(self.res_sq / self.res_n)
+        mean = self.res_moves_s / self.res_n
+        return {"moves": self.res_n, "rms_ms": round(1000.0 * rms, 2),
+                "max_ms": round(1000.0 * self.res_max, 2),
+                "rms_pct": round(100.0 * rms / mean, 2) if mean > 0 else None}
 
 
 def robot_fit(ctx: Any) -> RobotFit:

@@ -52,6 +52,17 @@ class RobotModel:
         short = 2.0 * np.sqrt(d / a)
         return np.where(d <= ramp, short, 2.0 * v / a + (d - ramp) / v)
 
+    def move_time(self, a: tuple[float, float], b: tuple[float, float],
+                  speed_pct: float) -> float:
+        """An arch from ``a`` to ``b`` (cell frame): here a function of the distance alone;
+        the world's SCARA (``feeder_bt.scara``) needs both ends."""
+        return self.arch_time(math.dist(a, b), speed_pct)
+
+    def arch_times_from(self, start: tuple[float, float], x: np.ndarray, y: np.ndarray,
+                        speed_pct: float) -> np.ndarray:
+        """``move_time`` from ``start`` to many points at once."""
+        return self.arch_times(np.hypot(x - start[0], y - start[1]), speed_pct)
+
     def standard_cycle(self, speed_pct: float = 100.0) -> float:
         """The 25/305/25 mm cycle, there and back."""
         return 2 * self.arch_time(305.0, speed_pct)
@@ -73,9 +84,9 @@ class RobotModel:
         """One pick-and-place from ``start``: arch to the pick, (settle), grip, arch to the
         place, release — the same sum the simulated robot's jobs take."""
         sp = self.spec
-        return (self.arch_time(math.dist(start, pick), speed_pct)
+        return (self.move_time(start, pick, speed_pct)
                 + (sp.track_settle_s if tracking else 0.0) + sp.grip_s
-                + self.arch_time(math.dist(pick, place), speed_pct) + sp.release_s
+                + self.move_time(pick, place, speed_pct) + sp.release_s
                 + 2 * sp.command_overhead_s)
 
     def best_pick_point(self, place: tuple[float, float],

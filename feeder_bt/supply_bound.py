@@ -66,24 +66,44 @@ def supply_bound_ppm(located_in_reach: int, feed_seconds: float) -> float:
 
 
 def inflow_bound_parts(initial: int, arrivals: Sequence[tuple[float, int]],
-                       robot_ppm: float, span_s: float) -> float:
+                       robot_ppm: float, span_s: float, lag_s: float = 0.0) -> float:
     """The most parts any feeder could have placed in ``[0, span_s]`` when the cell held
     ``initial`` parts at 0 and ``arrivals`` (seconds, parts) came later, with a robot that
     places at most ``robot_ppm``: ``min over s of A(s) + R (span_s - s) + 1`` (the one
     for a cycle cut by ``s``). ``A`` is a staircase and ``R (span_s - s)`` falls, so the
-    minimum is at 0, just before an arrival, or at the end (``A(span_s)``)."""
+    minimum is at 0, just before an arrival, or at the end (``A(span_s)``). A part that
+    arrives at ``t`` reaches the robot no sooner than ``t + lag_s`` (``transport_lag_s``:
+    the ride up the incline and along the belt), so each arrival counts from then; the
+    cell starts with every part in the hopper (the simulated world does), so nothing is
+    placed before ``lag_s``."""
     rate = robot_ppm / 60.0
     arrived = float(initial + sum(n for t, n in arrivals if t <= 0))
     best = arrived + rate * span_s + 1
-    for t, n in sorted(a for a in arrivals if 0 < a[0] <= span_s):
+    if lag_s > 0:
+        best = min(best, rate * max(span_s - lag_s, 0.0) + 1)
+    for t, n in sorted((t + lag_s, n) for t, n in arrivals if 0 < t):
+        if t > span_s:
+            break
         best = min(best, arrived + rate * (span_s - t) + 1)      # just before it came
         arrived += n
     return min(best, arrived)
 
 
-def ceiling(robot_ppm: float, supply_ppm: float | None, inflow_ppm: float | None = None
-            ) -> tuple[str, float]:
+def transport_lag_s(cell: CellSpec) -> float:
+    """The shortest time from a tote's part entering the hopper to its reaching the robot:
+    up the whole incline and along the horizontal belt from its start to the nearest point
+    of the reach, both belts at their top speed (a lower bound on the real ride: the
+    hopper's release, a landing downstream of the belt's start, slower belts all add)."""
+    inc, hor = cell.conveyors["incline"], cell.conveyors["horizontal"]
+    to_reach = max(cell.robot.base_mm[0] - cell.robot.reach_mm, 0.0)
+    return inc.length_mm / inc.max_mm_s + to_reach / hor.max_mm_s
+
+
+def ceiling(robot_ppm: float, supply_ppm: float | None, inflow_ppm: float | None = None,
+            selection_ppm: float | None = None) -> tuple[str, float]:
     """(which bound, parts/min): the lowest bound known is the ceiling (``None``: that
-    bound not known; the robot's is always)."""
-    known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm)]
+    bound not known; the robot's corner bound always is). ``selection``: nearest-first
+    picking over the parts the run really had (``feeder_bt.robot_bounds``)."""
+    known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm),
+             ("selection", selection_ppm)]
     return min(((k, v) for k, v in known if v is not None), key=lambda kv: kv[1])

@@ -34,6 +34,12 @@ def test_the_bound_by_hand():
     assert inflow_bound_parts(10, [(30.0, 100)], R, 60.0) == pytest.approx(10 + R / 2 + 1)
     # a tote 0.1 s before the end comes too late to be placed
     assert inflow_bound_parts(5, [(59.9, 5)], R, 60.0) == pytest.approx(5 + R * 0.1 / 60 + 1)
+    # the ride to the robot (issue 30): a tote at 30 s reaches it at 35 s, and the parts
+    # in the hopper at the start are not placed before 5 s either
+    assert inflow_bound_parts(10, [(30.0, 100)], R, 60.0, 5.0) == pytest.approx(
+        10 + R * 25 / 60 + 1)
+    assert inflow_bound_parts(150, [], R, 10.0, 5.0) == pytest.approx(R * 5 / 60 + 1)
+    assert inflow_bound_parts(5, [(56.0, 5)], R, 60.0, 5.0) == 5      # arrives too late
 
 
 def test_the_ceiling_is_the_lowest_bound_known():
@@ -42,6 +48,7 @@ def test_the_ceiling_is_the_lowest_bound_known():
     assert ceiling(60.0, 90.0, 66.1) == ("robot", 60.0)
     assert ceiling(109.6, None, None) == ("robot", 109.6)
     assert ceiling(109.6, 109.6) == ("robot", 109.6)                # a tie: the robot's
+    assert ceiling(109.6, 90.0, 66.1, 60.2) == ("selection", 60.2)  # nearest-first replay
 
 
 @pytest.fixture(scope="module")
@@ -58,10 +65,17 @@ def test_a_run_stays_under_its_inflow_bound_which_is_its_ceiling(tight):
     r = tight
     placed = sum(r["parts"]["retrieved"].values())
     assert [(e["t"], e["kind"]) for e in r["supply"]["log"]] == [(20.0, "tote")]
-    bound = inflow_bound_parts(30, [(20.0, 30)], r["robot_bound_ppm"], r["sim_seconds"])
+    assert r["inflow_lag_s"] == pytest.approx(1219 / 400 + (1370 - 600) / 400, abs=1e-3)
+    bound = inflow_bound_parts(30, [(20.0, 30)], r["robot_bound_ppm"], r["sim_seconds"],
+                               r["inflow_lag_s"])
     assert bound == 60                                   # everything that came
     assert r["inflow_bound_ppm"] == pytest.approx(bound * 60 / r["feed_seconds"], abs=1e-3)
-    assert r["ceiling"] == "inflow" and r["ceiling_ppm"] == r["inflow_bound_ppm"]
+    # the ceiling: the inflow bound, or the nearest-first replay of the parts that came
+    # (issue 30), which cannot place more than came either
+    assert r["robot_bound_selection_parts"] <= bound
+    assert r["ceiling"] in ("inflow", "selection")
+    assert r["ceiling_ppm"] == min(r["inflow_bound_ppm"], r["robot_bound_selection_ppm"])
+    assert placed <= r["robot_bound_selection_parts"]
     assert r["ceiling_ppm"] < r["supply_bound_ppm"]     # passes count a part again and again
     assert 0.9 * bound <= placed <= bound               # near it: the bound is not loose
     census = r["world"]["census"]
@@ -84,19 +98,22 @@ def test_no_inflow_bound_when_placed_parts_go_back_to_the_hopper(tmp_path):
     plan.write_text("start: {lens: 20}\ntotes: {every_s: 20, parts: 20}\n")
     r = run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=30.0,
                            fast=True, seed=1, view="none", supply=str(plan)))
-    assert "inflow_bound_ppm" not in r and r["ceiling"] in ("robot", "supply")
+    assert "inflow_bound_ppm" not in r and r["ceiling"] in ("robot", "supply", "selection")
 
 
 def test_the_summary_gives_the_three_bounds_in_80_columns(tight):
     scarce = tight
     every = summary(scarce).splitlines()
     i = next(i for i, s in enumerate(every) if s.startswith("  ceiling "))
-    lines = every[: i + 2]                   # the faults and misses lines follow (vocabulary)
-    assert lines[-2] == (f"  ceiling {scarce['ceiling_ppm']:.1f} parts/min (inflow bound): "
-                         f"{scarce['of_ceiling_pct']:.0f} % of it")
-    assert lines[-1] == (f"  bounds: robot {scarce['robot_bound_ppm']:.1f}, supply "
-                         f"{scarce['supply_bound_ppm']:.1f}, inflow "
-                         f"{scarce['inflow_bound_ppm']:.1f}")
+    lines = every[i: i + 3]
+    assert lines[0] == (f"  ceiling {scarce['ceiling_ppm']:.1f} parts/min "
+                        f"({scarce['ceiling']} bound): {scarce['of_ceiling_pct']:.0f} % of it")
+    assert lines[1] == (f"  bounds: robot {scarce['robot_bound_ppm']:.1f} corner, "
+                        f"{scarce['robot_bound_mean_ppm']:.1f} mean, "
+                        f"{scarce['robot_bound_selection_ppm']:.1f} selection; supply "
+                        f"{scarce['supply_bound_ppm']:.1f}")
+    assert lines[2] == (f"  inflow bound {scarce['inflow_bound_ppm']:.1f} parts/min (parts "
+                        f"reach the robot {scarce['inflow_lag_s']:.1f} s after they come)")
     assert all(len(line) <= 80 for line in every)
 
 
@@ -116,4 +133,7 @@ def test_robot_busy_tells_a_starved_robot_from_a_saturated_one(tight, tmp_path):
         placed = sum(r["parts"]["retrieved"].values())
         busy_s = r["robot_busy_pct"] / 100 * r["feed_seconds"]
         assert 0.95 * placed * r["robot_bound_cycle_s"] <= busy_s <= r["feed_seconds"]
-    assert tight["robot_busy_pct"] < 75 < 90 < full["robot_busy_pct"]
+    # 85, not 90 as with the Cartesian world: the SCARA's far-side moves are slower than
+    # the controller's model says, and grabs that reach the belt's end after the part fell
+    # off are misses, whose time is not counted busy (issue 30, docs/performance.md)
+    assert tight["robot_busy_pct"] < 75 < 85 < full["robot_busy_pct"]

@@ -73,8 +73,12 @@ class Rig:
                 continue
             t = PickTarget(r["id"], r["x_mm"], r["y_mm"], r["angle_deg"], w.robot_track_count(w.now()))
             try:
-                w.plan_pick(t, w.now())
+                _, t_grip = w.plan_pick(t, w.now())
             except FeederError:
+                continue
+            # as the controller's too_far rule: not a part the belt carries off its end
+            # before the grip (the world's SCARA takes longer to the far side, issue 30)
+            if w.commanded_xy(t, t_grip)[0] > w.scenario.retrieve.too_far_mm:
                 continue
             return t
         raise AssertionError("no pickable part in reach")

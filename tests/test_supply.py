@@ -400,9 +400,10 @@ def test_the_supply_bound_matches_the_worlds_truth(plain):
     landed_ppm = r["world"]["landed"] * 60.0 / r["feed_seconds"]
     assert r["supply_bound_ppm"] == pytest.approx(truth_ppm, rel=0.05)
     assert r["supply_bound_ppm"] <= landed_ppm
-    assert r["ceiling"] == ("supply" if r["supply_bound_ppm"] < r["robot_bound_ppm"]
-                            else "robot")
-    assert r["ceiling_ppm"] == min(r["supply_bound_ppm"], r["robot_bound_ppm"])
+    known = {"supply": r["supply_bound_ppm"], "robot": r["robot_bound_ppm"],
+             "selection": r["robot_bound_selection_ppm"]}
+    assert r["ceiling_ppm"] == min(known.values())
+    assert known[r["ceiling"]] == r["ceiling_ppm"]
     assert r["of_ceiling_pct"] == pytest.approx(
         100 * r["parts_per_minute"] / r["ceiling_ppm"], abs=0.1)
     assert r["parts_per_minute"] <= r["ceiling_ppm"]
@@ -411,8 +412,12 @@ def test_the_supply_bound_matches_the_worlds_truth(plain):
 def test_the_summary_names_the_ceiling_in_80_columns(plain):
     from feeder_bt.cli import summary
     r = plain[0]
-    last = next(s for s in summary(r).splitlines() if s.startswith("  ceiling "))
-    assert last == (f"  ceiling {r['ceiling_ppm']:.1f} parts/min ({r['ceiling']} bound; robot "
-                    f"{r['robot_bound_ppm']:.1f}, supply {r['supply_bound_ppm']:.1f}): "
-                    f"{r['of_ceiling_pct']:.0f} % of it")
-    assert len(last) <= 80
+    lines = summary(r).splitlines()
+    i = next(i for i, s in enumerate(lines) if s.startswith("  ceiling "))
+    assert lines[i] == (f"  ceiling {r['ceiling_ppm']:.1f} parts/min ({r['ceiling']} bound): "
+                        f"{r['of_ceiling_pct']:.0f} % of it")
+    assert lines[i + 1] == (f"  bounds: robot {r['robot_bound_ppm']:.1f} corner, "
+                            f"{r['robot_bound_mean_ppm']:.1f} mean, "
+                            f"{r['robot_bound_selection_ppm']:.1f} selection; "
+                            f"supply {r['supply_bound_ppm']:.1f}")
+    assert len(lines[i]) <= 80 and len(lines[i + 1]) <= 80

@@ -7,12 +7,13 @@ is itself a motion during which the arm holds still (or keeps tracking: NOT CONF
 ``BRAKE``, from any task, ends the motion in progress where the arm is (User's Guide v17
 p. 33).
 
-Times come from the plant's robot model (``World.robot_model``: the same trapezoidal
-profile the simulated robot uses, at the program speed times the operator's override, and
-the simulator's per-move time factor) over the Cartesian length of each motion. A motion
-the program reached while the previous one still ran follows on without a stop
-(continuous path, User's Guide ch. 8): the two take the time of one profile over both
-lengths; after a BREAK, a DELAY or a BRAKE the next starts from rest. A target
+Times come from the plant's arm (``World.robot_model``, a SCARA: ``feeder_bt.scara``, the
+one the simulated robot uses): each motion is joint-interpolated, joints 1, 2 and Z each a
+trapezoid under its own limits, the slowest setting the time, at the program speed times
+the operator's override, times the simulator's per-move time factor. A motion the program
+reached while the previous one still ran follows on without a stop (continuous path,
+User's Guide ch. 8): its acceleration overlaps the previous motion's deceleration; after a
+BREAK, a DELAY or a BRAKE the next starts from rest. A target
 outside the annulus ``inner_reach_mm .. reach_mm`` about the base (robot world) is refused
 with -610 *Location out of range* before the arm moves; a tracked location that leaves
 the reach or the belt's window stops the arm and calls the window program.
@@ -28,7 +29,6 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from ...robot_model import trapezoid_time
 from .task import VError
 from .trans import BeltLoc, Trans
 
@@ -65,7 +65,7 @@ class Arm:
         self.fault_armed = False               # the next motion runs into something
         self.log: list[tuple[str, tuple[float, float, float]]] = []   # (kind, cell xyz)
         self.owner = None                      # the task that moves the arm (task 0)
-        self.path_mm = 0.0                     # path length since the arm was last at rest
+        self.ramp_s = 0.0                      # the last motion's deceleration (0: at rest)
 
     # ------------------------------------------------------------ where
     def _at(self, target: Any, count: int) -> Trans:
@@ -106,7 +106,8 @@ class Arm:
             raise VError(ERR_POWER_OFF, "*Robot power off*")
         now = self.rt.now()
         prev = self.loc
-        before = self.path_mm if blend else 0.0
+        before = self.ramp_s if blend else 0.0
+        ramp = 0.0
         start = self.here(now)
         self.loc = start
         self.motion = None
@@ -114,17 +115,17 @@ class Arm:
         if kind == "delay":                    # hold still, or keep tracking the belt
             duration = float(target)
             target = prev if isinstance(prev, BeltLoc) else start
-            self.path_mm = 0.0
+            self.ramp_s = 0.0
         else:
             for _ in range(4):                 # intercept a tracked target
                 end = self._at(target, self.rt.track_count(now + duration))
-                duration = self._time(start, end, before)
+                duration, ramp = self._time(start, end, before)
             end = self._at(target, self.rt.track_count(now + duration))
             if not self.in_reach(end) and isinstance(target, BeltLoc):
                 duration, end = self._wait_for_reach(target, now, duration, end)
             if not self.in_reach(end):         # where the arm meets the target
                 raise VError(ERR_RANGE, "*Location out of range*")
-            self.path_mm = before + math.dist(start.xyz, end.xyz)
+            self.ramp_s = ramp
             if isinstance(target, BeltLoc) and kind == "moves":
                 duration += self.rt.robot_spec().track_settle_s
             self.log.append((kind, tuple((self.true_base @ end).xyz)))  # type: ignore[arg-type]
@@ -147,21 +148,19 @@ class Arm:
                 return t - now, loc
         return duration, end
 
-    def _time(self, a: Trans, b: Trans, before: float = 0.0) -> float:
-        """The motion's time: one profile over the path since rest, less what the
-        motions before it on that path took."""
+    def _time(self, a: Trans, b: Trans, before: float = 0.0) -> tuple[float, float]:
+        """(the motion's time, its deceleration's): the arm's joint-space time, less the
+        overlap of its acceleration with the previous motion's deceleration ``before``."""
         world = self.rt.plant.world
-        spec = world.robot_model.spec
-        d = math.dist(a.xyz, b.xyz)
-        s = max(self.speed, 1e-3) / 100.0 * world.speed_override_pct / 100.0
-        v, acc = spec.v_max_mm_s * s, spec.a_max_mm_s2 * s * s
-        t = trapezoid_time(before + d, v, acc) - trapezoid_time(before, v, acc)
-        return world.imperfect.time_factor() * t
+        pct = max(self.speed, 1e-3) * world.speed_override_pct / 100.0
+        t, ramp = world.robot_model.segment_time(a.xyz, b.xyz, pct)
+        f = world.imperfect.time_factor()
+        return f * (t - min(before, ramp)), f * ramp
 
     def brake(self) -> None:
         """BRAKE: the arm stops where it is; nothing more of this motion runs."""
         now = self.rt.now()
-        self.path_mm = 0.0
+        self.ramp_s = 0.0
         if self.motion is not None and now < self.motion.t1:
             self.loc = self.here(now)
             self.motion = None

@@ -14,7 +14,6 @@ import numpy as np
 from ...clock import SimClock
 from ...errors import HalError
 from ...jobs import DoneJob, FutureJob, Job
-from ...robot_model import RobotModel, with_speed_factor
 from ...scenario.model import CellSpec, Scenario
 from ...vision.calibration import Calibration
 from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
@@ -192,9 +191,10 @@ class SimRobot:
 
     def place(self, pose: Pose) -> Job:
         w = self.world
-        d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
+        here = (w.robot_pose.x, w.robot_pose.y)
         duration = (w.cell.robot.command_overhead_s + w.cell.robot.release_s
-                    + w.imperfect.time_factor() * w.robot_model.arch_time(d, w.robot_speed_pct))
+                    + w.imperfect.time_factor() * w.robot_model.move_time(
+                        here, (pose.x, pose.y), w.robot_speed_pct))
         job = self._run("robot.place", duration, lambda t: w.release(pose, t))
         if isinstance(job, TimedJob):     # a place is never abandoned: the part is let go
             job.on_cancel = lambda: job.succeed(w.release(pose, w.now()))
@@ -202,14 +202,15 @@ class SimRobot:
 
     def move_to(self, pose: Pose) -> Job:
         w = self.world
-        d = ((pose.x - w.robot_pose.x) ** 2 + (pose.y - w.robot_pose.y) ** 2) ** 0.5
+        here = (w.robot_pose.x, w.robot_pose.y)
 
         def arrive(t: float) -> Pose:
             w.robot_pose = pose
             return pose
 
         return self._run("robot.move", w.imperfect.time_factor()
-                         * w.robot_model.arch_time(d, w.robot_speed_pct), arrive)
+                         * w.robot_model.move_time(here, (pose.x, pose.y), w.robot_speed_pct),
+                         arrive)
 
     def move_safe(self) -> Job:
         return self.move_to(Pose(*self.world.cell.robot.safe_mm))
@@ -290,10 +291,7 @@ class SimHal(Hal):
 
 
 def make_sim_hal(scenario: Scenario, cell: CellSpec, clock: SimClock, seed: int) -> SimHal:
-    world = World(scenario, cell, clock, seed)
-    if cell.robot.sim_speed_factor != 1.0:     # the arm as it really moves; the trees see
-        world.robot_model = RobotModel(         # only the cell's description (issue 16)
-            with_speed_factor(cell.robot, cell.robot.sim_speed_factor))
+    world = World(scenario, cell, clock, seed)   # its arm: a SCARA (world.robot_model)
     hal = SimHal(
         conveyors={"horizontal": SimConveyor("horizontal", world.horizontal, world),
                    "incline": SimConveyor("incline", world.incline, world)},

@@ -24,12 +24,13 @@ from ...errors import EnvelopeError, HalError, MissedGrab
 from ...geometry import near, outer, place_outline, rings, wrap_deg
 from ...gripper import footprint, grip_poses
 from ...jobs import Job
-from ...robot_model import RobotModel
+from ...scara import ScaraModel
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import Held, PickResult, PickTarget, Pose
 from .accounting import SimPart
 from .axis import Axis
 from .imperfect import Imperfections
+from .passlog import PassLog
 
 RECYCLE_S = 20.0                # placed parts go back to the hopper after this long
 PLACE_TOL_MM = 10.0             # a part released farther than this from its own type's
@@ -52,7 +53,8 @@ class RobotGrips:
     h_len: float
     h_width: float
     imperfect: Imperfections
-    robot_model: RobotModel
+    robot_model: ScaraModel
+    passlog: PassLog
     robot_pose: Pose
     robot_busy: Job | None
     speed_override_pct: float
@@ -81,7 +83,7 @@ class RobotGrips:
         t_arr = t0
         for _ in range(6):
             cx, cy = self.commanded_xy(target, t_arr)
-            t_arr = t0 + scale * self.robot_model.arch_time(math.hypot(cx - px, cy - py),
+            t_arr = t0 + scale * self.robot_model.move_time((px, py), (cx, cy),
                                                             self.robot_speed_pct)
         cx, cy = self.commanded_xy(target, t_arr)
         if not self.robot_model.reachable(cx, cy):
@@ -133,6 +135,7 @@ class RobotGrips:
             self.counts["grip_slipped"] += 1
             raise MissedGrab(f"the grip did not hold ({best_d:.1f} mm off the centre)")
         self.on_horizontal.pop(best.id)
+        self.passlog.picked(best.id, t, cx, cy, best.type)
         self._untouch(best)
         self._relocate(best, "horizontal", "gripper")
         best.held_error_deg = wrap_deg(best.angle - target.angle_deg)
@@ -237,6 +240,8 @@ class RobotGrips:
             self._imperfect_landing(part, t, dropped=True)
             self._settle(part, t)               # it may land on or against another
             self.on_horizontal[pid] = part
+            self.passlog.landed(pid, t, part.x0, part.y, part.type,
+                                part.pickable and not part.touching)
         else:
             self._relocate(part, "gripper", "return")
             heapq.heappush(self.returning, (t + self.cell.return_transit_s, pid))

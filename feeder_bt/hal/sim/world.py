@@ -30,7 +30,7 @@ from ...clock import EPS, SimClock
 from ...encoder import wrap
 from ...geometry import circumradius, place_outline
 from ...jobs import Job
-from ...robot_model import RobotModel
+from ...scara import world_arm
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import Pose
 from .accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
@@ -38,6 +38,7 @@ from .axis import Axis
 from .grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
 from .imperfect import Imperfections
 from .landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
+from .passlog import PassLog
 from .slip import BeltSlip
 
 __all__ = [
@@ -73,7 +74,11 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.incline = Axis(ic.accel_mm_s2, ic.max_mm_s)
         self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
         self.cpm = cell.encoder.counts_per_mm
-        self.robot_model = RobotModel(cell.robot)
+        # the arm as it really moves: a SCARA (feeder_bt.scara), sim_speed_factor times a
+        # Cobra 600; the trees see only the cell's Cartesian description (issues 16, 30)
+        self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
+        # every pass along the belt and every pick, for the report's robot bounds
+        self.passlog = PassLog(clock.now(), 0.0)
         self.imperfect = Imperfections(cell.sim, self.cpm, cell.robot.grip_tolerance_mm, seed)
         self._last_landed: int | None = None
         self.t = clock.now()
@@ -168,6 +173,8 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
                 kind(self.t, arg)
         self.t = now
         self._slip_to(now)
+        if now >= self.passlog.next_t:
+            self.passlog.sample(now, self.horizontal.pos(now))
         if self.notifications:
             self._hint_notifications()
         self.check_accounting()
@@ -264,6 +271,8 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self._imperfect_landing(part, t, dropped=False)
         self._settle(part, t)
         self.on_horizontal[pid] = part
+        self.passlog.landed(pid, t, part.x0, part.y, part.type,
+                            part.pickable and not part.touching)
         self.counts["landed"] += 1
         if part.touching:
             self.counts["landed_touching"] += 1
