@@ -64,11 +64,12 @@ class KitTracker:
 
 def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: float,
                robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
-               span_s: float) -> dict[str, float]:
+               span_s: float, lag_s: float = 0.0) -> dict[str, float]:
     """Kits per minute no feeder could beat: the robot's (``robot_ppm`` over the parts a
     kit holds), the supply's (each type's parts that came within reach, over the kit's
     count of it) and, when placed parts leave the cell, the inflow's (each type's arrival
-    curve met by the robot, over the kit's count)."""
+    curve met by the robot ``lag_s`` after it, the ride to the robot, over the kit's
+    count)."""
     if feed_seconds <= 0:
         return {}
     per_min = 60.0 / feed_seconds
@@ -76,7 +77,7 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
            "supply_bound_kpm": min(in_reach.get(t, 0) * per_min / n for t, n in counts.items())}
     if inflow is not None:
         out["inflow_bound_kpm"] = min(
-            inflow_bound_parts(*inflow.get(t, (0, [])), robot_ppm, span_s) * per_min / n
+            inflow_bound_parts(*inflow.get(t, (0, [])), robot_ppm, span_s, lag_s) * per_min / n
             for t, n in counts.items())
     out = {k: round(v, 3) for k, v in out.items()}
     out["ceiling_kpm"] = min(out.values())
@@ -85,10 +86,11 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
 
 def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: float,
                 robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
-                span_s: float) -> dict[str, object]:
+                span_s: float, lag_s: float = 0.0) -> dict[str, object]:
     """The report's ``kits``: the kit, how many were completed and how fast, its bounds."""
     kpm = tracker.completed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
-    bounds = kit_bounds(tracker.counts, in_reach, feed_seconds, robot_ppm, inflow, span_s)
+    bounds = kit_bounds(tracker.counts, in_reach, feed_seconds, robot_ppm, inflow, span_s,
+                        lag_s)
     ceil = bounds.get("ceiling_kpm", math.inf)
     return {"kit": tracker.counts, "order": tracker.order or "any",
             "completed": tracker.completed, "per_minute": round(kpm, 3), **bounds,

@@ -176,7 +176,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     }
     if s.kit is not None:                 # kits (thesis 8.2.1.5): how many, how fast, bounds
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
-                                     inflow_by_type, sim_seconds)
+                                     inflow_by_type, sim_seconds, transport_lag_s(cell.cell))
     counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",
                      None)
     if callable(counts):                  # a camera counting its frames (hal/camera/pylon.py)

@@ -55,6 +55,10 @@ def test_kit_bounds_are_the_lowest_of_robot_supply_and_inflow():
     assert b["inflow_bound_kpm"] == pytest.approx(15.0)   # 15 squares came in all
     assert b["ceiling_kpm"] == min(b["robot_bound_kpm"], b["supply_bound_kpm"],
                                    b["inflow_bound_kpm"])
+    # the ride to the robot: squares arriving at 30 s reach it at 70 s, after the run
+    late = kit_bounds({"square": 1, "lens": 3}, {"square": 30, "lens": 300}, 60.0, 100.0,
+                      {"square": (10, [(30.0, 5)]), "lens": (100, [])}, 60.0, lag_s=40.0)
+    assert late["inflow_bound_kpm"] == pytest.approx(10.0)
 
 
 def kit_scenario(tmp_path: Path, kit: str) -> Path:
