@@ -82,6 +82,10 @@ def stats(rows: list[dict]) -> dict:
              for r in rows if r.get("robot_bound_ppm")]
     if len(fixed) == len(rows):
         out["best_possible_ppm"] = round(statistics.mean(fixed), 2)
+    sel = [r.get("robot_bound_selection_ppm") for r in rows]
+    if rows and all(sel):       # nearest-first over the parts that passed (issue 30)
+        out["selection_bound_ppm"] = round(statistics.mean(sel), 2)
+        out["of_selection_bound"] = round(out["mean"] / out["selection_bound_ppm"], 3)
     kpm = [r.get("kpm") for r in rows]
     if rows and None not in kpm:              # a kit scenario: kits/min and the kit ceiling
         kc = [r.get("kit_ceiling_kpm") for r in rows]
@@ -183,6 +187,8 @@ def _cell(s: dict) -> str:
 def _of(s: dict) -> str:
     of = f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
         else "-"
+    of += (f"; {100 * s['of_selection_bound']:.1f} % of the selection bound "
+           f"{s['selection_bound_ppm']:.1f}" if "of_selection_bound" in s else "")
     of += f"; robot busy {s['robot_busy_pct']:.0f} %" if "robot_busy_pct" in s else ""
     return of + (f"; recirculated {s['recirc_per_placed']:.2f}/placed"
                  if "recirc_per_placed" in s else "")

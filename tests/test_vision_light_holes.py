@@ -289,7 +289,9 @@ def test_a_run_whose_recipe_matches_nothing_says_so_within_a_minute(tmp_path):
         rows = con.execute("SELECT t, data FROM events WHERE kind = 'vision_no_match' "
                            "ORDER BY t").fetchall()
     assert rows and rows[0][0] < 60.0
-    assert "lens/flat" in rows[0][1]
+    # the first alarm names the class nearest the blobs then in view (flat or on edge,
+    # as the belt happens to bring them); the run's summary above names the most common
+    assert '"nearest":"lens/' in rows[0][1]
 
 
 def test_a_run_that_feeds_raises_no_alarm():

@@ -67,6 +67,7 @@ def evaluate(job: Job) -> dict[str, Any]:
     parts = report["parts"]
     out = {"ppm": float(report["parts_per_minute"]), "seed": job.seed,
            "robot_bound_ppm": report.get("robot_bound_ppm"),
+           "robot_bound_selection_ppm": report.get("robot_bound_selection_ppm"),
            "inflow_bound_ppm": report.get("inflow_bound_ppm"),
            "robot_busy_pct": report.get("robot_busy_pct"),
            "ceiling_ppm": report.get("ceiling_ppm"),
