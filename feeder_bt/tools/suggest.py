@@ -24,6 +24,7 @@ from ..vision.features import FEATURES
 from ..vision.locator import Locator
 from .common import BadInput, check_size, load_golden, read_image, scenario_locator
 
+FEW_SAMPLES = 20            # fewer good blobs than this: say the ranges may be too narrow
 OUTLIER_AREA = 0.20        # good-image blobs further than this from the median area are not samples
 MARGIN_SPAN = 0.25         # widen each range by this fraction of its span ...
 MARGIN_VALUE = 0.03        # ... plus this fraction of its centre
@@ -89,6 +90,10 @@ def cmd_suggest(args: argparse.Namespace) -> int:
     sug = suggest(good, bad, part, pose, spec.poses[pose].pickable, nominal_area=nominal)
     print(f"# {sug.good} good blob(s), {sug.bad} bad; the class lets through "
           f"{sug.bad_let_through} bad", file=sys.stderr)
+    if sug.good < FEW_SAMPLES:      # a part seen in several frames is one sample many times
+        print(f"# only {sug.good} good blob(s) of {part}/{pose}: its ranges may be too "
+              f"narrow for the turns and places it was not seen in; give more images "
+              f"(at least {FEW_SAMPLES} blobs)", file=sys.stderr)
     print(sug.yaml())
     return 0
 
