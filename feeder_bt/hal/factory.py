@@ -157,6 +157,10 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
 
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
+    if kind == "sim" and cell.presentation == "plate":      # issue 31
+        from .sim.plate import make_plate_sim_hal
+        clock = SimClock()
+        return make_plate_sim_hal(scenario, cell, clock, seed), clock
     if kind == "sim":
         from .sim.devices import make_sim_hal
         clock = SimClock()
