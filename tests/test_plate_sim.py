@@ -172,3 +172,18 @@ def test_plate_runs_repeat_by_seed(plate_run):
     again = run_job(RunOptions(scenario=SCENARIO, duration=600.0, fast=True, seed=1,
                                view="none"))
     assert again["parts"] == plate_run["parts"]
+
+
+def test_plate_actions_are_in_the_report(plate_run):
+    plate = plate_run["plate"]
+    assert plate["decisions"] > 0 and plate["dispense"] > 0
+    assert sum(v for k, v in plate.items() if k != "decisions") >= plate["decisions"]
+
+
+def test_squares_that_land_face_down_are_flipped_not_misplaced():
+    r = run_job(RunOptions(scenario="scenarios/plate_squares.yaml", duration=300.0, fast=True,
+                           seed=2, view="none"))
+    assert r["parts"]["lost"] == 0 and r["parts"]["retrieved"]["square"] > 50
+    assert r["parts"]["misoriented"] == 0            # face-down squares are never picked
+    assert r["parts"]["located_unpickable"] > 0      # the recipe saw them face down
+    assert r["plate"]["flip"] > 0                    # and smart feeding flipped them
