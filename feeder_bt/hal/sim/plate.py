@@ -25,14 +25,14 @@ import numpy as np
 
 from ...clock import SimClock
 from ...errors import HalError
-from ...geometry import circumradius, outer, wrap_deg
+from ...geometry import circumradius, is_convex, outer, place_outline, wrap_deg
 from ...jobs import DoneJob, Job
 from ...robot_model import RobotModel, with_speed_factor
 from ...scenario.model import CellSpec, Scenario
 from ..interfaces import PlateStatus
 from .accounting import SimPart
 from .devices import SimCamera, SimConveyor, SimHal, SimIO, SimRobot, SimRobotPosition, TimedJob
-from .landing import TOUCH_GAP_MM
+from .landing import TOUCH_GAP_MM, _grown
 from .world import World
 
 PURGE_TRANSIT_S = 1.0      # a purged part falls back into the bulk container in this long
@@ -175,11 +175,28 @@ class PlateWorld(World):
         d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
         near = np.triu(d <= rc[:, None] + rc[None, :] + TOUCH_GAP_MM, 1)
         sure = d < ri[:, None] + ri[None, :]
+        grown: dict[int, np.ndarray | None] = {}      # each part's grown outline, once
+
+        def polygon(k: int) -> np.ndarray | None:
+            if k not in grown:
+                q = parts[k]
+                ring = outer(q.outline)
+                grown[k] = (_grown(place_outline(ring, q.x0, q.y, q.angle), (q.x0, q.y),
+                                   TOUCH_GAP_MM / 2).astype(np.float32)
+                            if is_convex(ring) else None)
+            return grown[k]
+
         for i, j in zip(*np.nonzero(near), strict=True):
             a, b = parts[i], parts[j]
-            if sure[i, j] or self._touch(a, b, t):
-                a.touching.add(b.id)
-                b.touching.add(a.id)
+            if not sure[i, j]:
+                pa, pb = polygon(i), polygon(j)
+                if pa is not None and pb is not None:      # convex: the belt's own test
+                    if cv2.intersectConvexConvex(pa, pb)[0] <= 0.0:
+                        continue
+                elif not self._touch(a, b, t):
+                    continue
+            a.touching.add(b.id)
+            b.touching.add(a.id)
 
     def _inradius(self, part: SimPart) -> float:
         """The largest circle about the part's centre inside its outer outline."""
