@@ -1,0 +1,64 @@
+"""A drive fault of the plate in the middle of a run (issue 31), in virtual time: the
+present tree resets and homes the plate and feeding goes on; a second fault within a
+minute goes to the operator (FAULT) with the manual's words."""
+
+from __future__ import annotations
+
+from feeder_bt.cell import Cell, CellState
+from feeder_bt.clock import SimClock
+from feeder_bt.errors import PlateFault
+from feeder_bt.hal.sim.plate import make_plate_sim_hal
+from feeder_bt.jobs import DoneJob
+from feeder_bt.scenario import load_scenario
+from feeder_bt.ticker import Ticker
+
+SERVO = ("AnyFeeder plate.flip: m13: Motor 1 servo error: possibly overloaded; check for "
+         "obstructions or hardware problems; error must be reset before operation can "
+         "continue")
+
+
+def plate_cell(seed: int = 1):
+    scenario, spec = load_scenario("scenarios/plate_lenses.yaml")
+    clock = SimClock()
+    hal = make_plate_sim_hal(scenario, spec, clock, seed)
+    cell = Cell(spec, hal, clock)
+    cell.load(scenario)
+    return cell, hal, Ticker(cell, fast=True)
+
+
+def fail_actions(hal, at: list[int]) -> list[int]:
+    """The plate's Nth actions (counted over every action) fail with a servo error."""
+    plate, n, failed = hal.plate, [0], []
+    for name in ("dispense", "feed", "flip", "purge"):
+        real = getattr(plate, name)
+
+        def wrapped(*a, _real=real, _name=name, **kw):
+            n[0] += 1
+            if n[0] in at:
+                failed.append(n[0])
+                return DoneJob(f"plate.{_name}", error=PlateFault(SERVO))
+            return _real(*a, **kw)
+        setattr(plate, name, wrapped)
+    return failed
+
+
+def test_a_servo_error_is_reset_and_feeding_goes_on():
+    cell, hal, ticker = plate_cell()
+    failed = fail_actions(hal, at=[20])
+    cell.start()
+    ticker.run(until=300.0)
+    assert failed == [20]
+    assert cell.state is CellState.RUNNING
+    assert cell.stats.faults["plate"] == 1 and cell.stats.recoveries["plate"] == 1
+    assert sum(cell.stats.retrieved.values()) > 100
+    assert hal.world.lost() == 0
+
+
+def test_two_servo_errors_in_a_minute_fault_with_the_manuals_words():
+    cell, hal, ticker = plate_cell()
+    fail_actions(hal, at=[20, 21])
+    cell.start()
+    ticker.run(until=300.0, stop=lambda: cell.state is CellState.FAULT)
+    assert cell.state is CellState.FAULT
+    assert "m13" in cell.fault_reason and "must be reset" in cell.fault_reason
+    assert "\n" not in cell.fault_reason
