@@ -62,3 +62,23 @@ def test_two_servo_errors_in_a_minute_fault_with_the_manuals_words():
     assert cell.state is CellState.FAULT
     assert "m13" in cell.fault_reason and "must be reset" in cell.fault_reason
     assert "\n" not in cell.fault_reason
+
+
+def test_the_dashboard_shows_the_plate_and_its_queued_parts():
+    from feeder_bt.ui.belt import BeltPanel
+    cell, hal, ticker = plate_cell()
+    cell.start()
+    panel = BeltPanel(cell)
+    plate = panel.geometry["plate"]
+    assert plate == {"origin_mm": [110.0, 155.0], "size_mm": [440.0, 300.0]}
+    seen = []
+
+    def queued() -> bool:
+        snap = panel.snapshot()
+        seen[:] = snap["parts"]
+        return bool(seen)
+    ticker.run(until=120.0, stop=queued)
+    assert seen
+    (x0, y0), (w, h) = plate["origin_mm"], plate["size_mm"]
+    for p in seen:                          # where the locator put them, on the plate
+        assert x0 - 5 <= p["x_mm"] <= x0 + w + 5 and y0 - 5 <= p["y_mm"] <= y0 + h + 5
