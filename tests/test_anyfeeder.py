@@ -177,3 +177,28 @@ def test_no_feeder_is_a_lost_link():
         assert isinstance(wait(feeder.init()).error, CommsLost)
     finally:
         feeder.close()
+
+
+def test_feeder_emulate_plate_serves_the_feeder_on_loopback(capsys):
+    import re
+    import threading
+
+    from feeder_bt.cli import build_parser
+    args = build_parser().parse_args(["emulate", "plate", "--port", "0"])
+    stop = threading.Event()
+    t = threading.Thread(target=args.handler, args=(args, stop), daemon=True)
+    t.start()
+    out, port = "", None
+    deadline = time.monotonic() + LONG
+    while port is None and time.monotonic() < deadline:
+        out += capsys.readouterr().out
+        m = re.search(r"anyfeeder emulator: socket://127\.0\.0\.1:(\d+)", out)
+        port = int(m.group(1)) if m else None
+        time.sleep(0.02)
+    try:
+        assert port is not None, out
+        assert Raw(port).ask("x=1", 2) == ["m16", "m26"]
+    finally:
+        stop.set()
+        t.join(LONG)
+    assert not t.is_alive()
