@@ -16,6 +16,7 @@ import py_trees
 from py_trees.common import Access, Status
 
 from ..errors import HalError, PlateFault
+from ..hal.interfaces import PlateFeeder
 from ..jobs import Job, JobState
 from ..plate_policy import next_actions, part_area_mm2, view_of
 from .common import Ctx, JobLeaf, Leaf, client
@@ -33,7 +34,7 @@ def init_plate_keys() -> None:
     bb.set(PLAN, None)
 
 
-def _plate(ctx: Ctx):
+def _plate(ctx: Ctx) -> PlateFeeder:
     if ctx.hal.plate is None:
         raise HalError("this cell has no plate feeder (cell presentation: plate)")
     return ctx.hal.plate
