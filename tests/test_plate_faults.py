@@ -82,3 +82,22 @@ def test_the_dashboard_shows_the_plate_and_its_queued_parts():
     (x0, y0), (w, h) = plate["origin_mm"], plate["size_mm"]
     for p in seen:                          # where the locator put them, on the plate
         assert x0 - 5 <= p["x_mm"] <= x0 + w + 5 and y0 - 5 <= p["y_mm"] <= y0 + h + 5
+
+
+def test_a_new_golden_image_on_a_plate_purges_it_first():
+    from feeder_bt.behaviours.locate import ClearForGolden
+    cell, hal, ticker = plate_cell()
+    cell.start()
+    ticker.run(until=60.0)                    # parts on the plate by now
+    cell.stop()
+    ticker.run(until=90.0, stop=lambda: cell.state is CellState.STOPPED)
+    assert cell.state is CellState.STOPPED and hal.world.on_horizontal
+    leaf = ClearForGolden("clear", cell.ctx)
+    leaf.initialise()
+    assert leaf.job.name == "plate.purge"
+    t = cell.clock.now()
+    while not leaf.job.done and t < 120.0:
+        t += 0.05
+        cell.clock.advance_to(t)
+        hal.step(t)
+    assert leaf.job.ok and not hal.world.on_horizontal and hal.world.lost() == 0
