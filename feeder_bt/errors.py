@@ -112,6 +112,12 @@ class CardFault(ConveyorFault):
     kind = "card_fault"
 
 
+class PlateFault(HalError):
+    """A plate feeder's drive reported an error (AnyFeeder: a servo error, an error
+    state, no sync signal); the message carries the manual's words (issue 31)."""
+    kind = "plate"
+
+
 class JobCancelled(HalError):
     kind = "cancelled"
 

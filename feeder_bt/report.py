@@ -177,6 +177,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if s.kit is not None:                 # kits (thesis 8.2.1.5): how many, how fast, bounds
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
                                      inflow_by_type, sim_seconds, transport_lag_s(cell.cell))
+    if cell.cell.presentation == "plate":   # the plate's actions (issue 31)
+        report["plate"] = {k[len("plate_"):]: v for k, v in sorted(s.counts.items())
+                           if k.startswith("plate_")}
     counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",
                      None)
     if callable(counts):                  # a camera counting its frames (hal/camera/pylon.py)

@@ -57,8 +57,11 @@ class Plant:
         self.error: BaseException | None = None   # an accounting error stops the plant
 
     def _build(self, scenario: Scenario) -> None:
-        self.hal: SimHal = make_sim_hal(scenario, self.cell, self.clock,  # type: ignore[arg-type]
-                                        self.seed)
+        make = make_sim_hal
+        if self.cell.presentation == "plate":     # a vibratory-plate cell (issue 31)
+            from ..hal.sim.plate import make_plate_sim_hal as make
+        self.hal: SimHal = make(scenario, self.cell, self.clock,  # type: ignore[arg-type]
+                                self.seed)
         self.world = self.hal.world
         self._axes = {letter.upper(): getattr(self.world, name)
                       for name, letter in self.cell.galil.axes.items()}

@@ -145,18 +145,27 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         closers.append(camera.close)
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
         wire_line_trigger(cell, camera.source, io)
+        plate = None
+        if cell.presentation == "plate":    # an AnyFeeder on its serial line (issue 31)
+            from .anyfeeder.driver import AnyFeeder
+            plate = AnyFeeder(cell.plate, clock)
+            closers.append(plate.close)
     except BaseException:
         for close in reversed(closers):
             close()
         raise
     hal = DriverHal(conveyors=conveyors, robot=adept.robot, robot_position=adept.position,
-                    camera=camera, io=io, kind=kind)
+                    camera=camera, io=io, kind=kind, plate=plate)
     hal.closers = closers
     return hal
 
 
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
+    if kind == "sim" and cell.presentation == "plate":      # issue 31
+        from .sim.plate import make_plate_sim_hal
+        clock = SimClock()
+        return make_plate_sim_hal(scenario, cell, clock, seed), clock
     if kind == "sim":
         from .sim.devices import make_sim_hal
         clock = SimClock()
@@ -185,6 +194,12 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     galil = GalilEmulator(plant, faults=faults).start()
     adept = AdeptEmulator(plant, faults=faults).start()
     ports = adept.ports
+    plate_emu = None
+    if cell.presentation == "plate":        # the AnyFeeder emulator over the plate (issue 31)
+        from ..emulators.anyfeeder import AnyFeederEmulator
+        plate_emu = AnyFeederEmulator(plant).start()
+        cell = dataclasses.replace(cell, plate=dataclasses.replace(
+            cell.plate, url=f"socket://127.0.0.1:{plate_emu.port}"))
     wired = dataclasses.replace(
         cell,
         galil=dataclasses.replace(cell.galil, url=f"socket://127.0.0.1:{galil.port}"),
@@ -205,9 +220,14 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
             source.close()
         galil.stop()
         adept.stop()
+        if plate_emu is not None:
+            plate_emu.stop()
         plant.stop()
         raise
     hal.closers[:0] = [plant.stop, galil.stop, adept.stop]    # closed last, after drivers
+    if plate_emu is not None:
+        hal.closers.insert(1, plate_emu.stop)
+        hal.extras["plate_emulator"] = plate_emu
     hal.extras.update(plant=plant, galil_emulator=galil, adept_emulator=adept)
     hal.world = plant.world        # for the report's accounting only; the trees never read it
     return hal, clock

@@ -203,6 +203,46 @@ class DigitalIO(Protocol):
         """Input changes since the last call (drained)."""
 
 
+@dataclass(frozen=True)
+class PlateStatus:
+    """A plate feeder's word on itself: initialised, busy, and its fault (None: none)."""
+
+    initialised: bool
+    busy: bool
+    fault: HalError | None = None
+
+
+PLATE_ACTIONS = ("dispense", "feed_forward", "feed_backward", "flip", "flip_forward",
+                 "purge")
+
+
+class PlateFeeder(Protocol):
+    """A vibratory plate with a bulk container and a backlight (an AnyFeeder-class
+    feeder, issue 31): the incremental presentation of thesis chapter 2. Each action is a
+    job that ends when the parts are at rest on the plate."""
+
+    def init(self) -> Job:
+        """Home the drives; nothing else is accepted before it (AnyFeeder Guide, m16)."""
+
+    def dispense(self, reps: int) -> Job:
+        """Drop parts from the bulk container onto the rear of the plate."""
+
+    def feed(self, direction: int, reps: int) -> Job:
+        """Vibrate the parts forward (+1, away from the bulk) or backward (-1)."""
+
+    def flip(self, reps: int, direction: int = 0) -> Job:
+        """Throw the parts up so they land in new poses (0: in place; +-1: and feed)."""
+
+    def purge(self, reps: int) -> Job:
+        """Carry the parts on the plate back into the bulk container."""
+
+    def reset(self) -> Job:
+        """Clear a servo error or error state (AnyFeeder Guide, m13/m17: "Error must be
+        reset before operation can continue")."""
+
+    def status(self) -> PlateStatus: ...
+
+
 @dataclass
 class Hal:
     """The whole cell as the trees see it."""
@@ -214,6 +254,7 @@ class Hal:
     io: DigitalIO
     kind: str = "sim"
     extras: dict = field(default_factory=dict)
+    plate: PlateFeeder | None = None     # a plate cell's feeder (issue 31); None: belts
 
     def step(self, now: float) -> None:
         """Advance anything that runs on the clock (the simulated world) to ``now``."""

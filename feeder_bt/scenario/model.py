@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .plate_model import PlatePolicy, PlateSpec
+
 # ---------------------------------------------------------------------------- parts
 
 
@@ -171,6 +173,7 @@ class PresentParams:
     big_advance_mm: float = 1100.0       # incremental: load the horizontal belt
     small_advance_mm: float = 240.0      # incremental: about half the camera window
     big_advance_incline_mm: float = 400.0
+    plate: PlatePolicy = field(default_factory=PlatePolicy)   # a plate cell (issue 31)
 
 
 @dataclass
@@ -496,3 +499,5 @@ class CellSpec:
     galil: GalilSpec = field(default_factory=GalilSpec)
     adept: AdeptSpec = field(default_factory=AdeptSpec)
     sim: SimImperfections = field(default_factory=SimImperfections)   # simulated cell only
+    presentation: str = "belt"           # belt | plate (issue 31, docs/plate-feeders.md)
+    plate: PlateSpec = field(default_factory=PlateSpec)

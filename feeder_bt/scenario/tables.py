@@ -37,6 +37,7 @@ from feeder_bt.scenario.model import (
     Threshold,
     VisionRecipe,
 )
+from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
 
 # ============================================================================ allowed values
 
@@ -272,6 +273,15 @@ ADJUST_PARAMS: dict[str, dict[str, Range]] = {
 }
 ADJUST_ALGORITHMS: tuple[str, ...] = tuple(ADJUST_PARAMS)
 ENUMS[(AdjustParams, "algorithm")] = ADJUST_ALGORITHMS
+# a vibratory-plate cell (issue 31, scenario/plate_model.py)
+ENUMS[(CellSpec, "presentation")] = ("belt", "plate")
+ENUMS[(PlatePolicy, "policy")] = ("smart", "fixed")
+for _f in ("feed_reps", "flip_reps", "dispense_reps"):
+    RANGES[(PlatePolicy, _f)] = Range(1, 10)            # AnyFeeder Guide Table 3-2: [turns]
+RANGES[(PlatePolicy, "purge_reps")] = Range(1, 127)     # Table 3-2: purge 1...127
+for _f in ("feed_mm_per_rep", "rep_s", "dispense_per_rep", "purge_mm_per_rep", "timeout_s"):
+    RANGES[(PlateSpec, _f)] = POSITIVE
+RANGES[(PlateSpec, "flip_prob")] = Range(0, 1)
 
 #: Ordering constraints between adjuster parameters: (algorithm, smaller, larger, strict).
 ADJUST_ORDER: tuple[tuple[str, str, str, bool], ...] = (

@@ -31,8 +31,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p = subparsers.add_parser("emulate", help="serve the Galil and/or V+ controller emulators "
                                               "on 127.0.0.1, backed by the simulated cell; "
                                               "the person's actions on standard input")
-    p.add_argument("controller", choices=["galil", "adept", "cell"],
-                   help="galil, adept, or cell (both and the camera over one simulated cell)")
+    p.add_argument("controller", choices=["galil", "adept", "cell", "plate"],
+                   help="galil, adept, or cell (both and the camera over one simulated cell); "
+                        "plate: an AnyFeeder over a simulated plate (issue 31)")
     p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                    help=f"scenario whose parts the simulated cell carries (default {DEFAULT_SCENARIO})")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
@@ -45,6 +46,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    metavar=("DX", "DY", "DEG"),
                    help="the simulated robot's true base differs from the cell file's by this "
                         "(mm, mm, deg): what `feeder commission adept` must measure")
+    p.add_argument("--servo-error-at", type=int, default=None, metavar="N",
+                   help="plate: the Nth action ends with a servo error (m13)")
     p.add_argument("--camera-delay-ms", type=float, default=0.0, metavar="MS",
                    help="the emulated camera exposes this long after its trigger (default 0): "
                         "what the timing step of `feeder commission camera` must find")
@@ -92,6 +95,8 @@ def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
     from ..emulators.plant import Plant
     from .commission.camera import cell_target
 
+    if args.controller == "plate":
+        return emulate_plate(args, stop)
     scenario, cell = load_scenario(args.scenario, args.cell)
     plant = Plant(scenario, cell, args.seed).start()
     stop = stop or threading.Event()
@@ -138,5 +143,37 @@ def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
     finally:
         for s in servers:
             s.stop()
+        plant.stop()
+    return 0
+
+
+PLATE_SCENARIO = "scenarios/plate_lenses.yaml"
+
+
+def emulate_plate(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+    """``feeder emulate plate``: the AnyFeeder emulator over a simulated plate, its bytes
+    raw on ``--port`` (a serial-to-Ethernet bridge), until Ctrl-C or SIGTERM."""
+    from ..emulators.anyfeeder import AnyFeederEmulator
+    from ..emulators.plant import Plant
+
+    path = PLATE_SCENARIO if args.scenario == DEFAULT_SCENARIO else args.scenario
+    scenario, cell = load_scenario(path, args.cell)
+    if cell.presentation != "plate":
+        raise SystemExit(f"emulate plate: {cell.path}: not a plate cell "
+                         "(presentation: plate); try cells/sim_plate.yaml")
+    stop = stop or threading.Event()
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    plant = Plant(scenario, cell, args.seed).start()
+    emu = AnyFeederEmulator(plant, host=args.host, port=args.port or 0,
+                            servo_error_at=getattr(args, "servo_error_at", None)).start()
+    print(f"anyfeeder emulator: socket://{args.host}:{emu.port}", flush=True)
+    try:
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        emu.stop()
         plant.stop()
     return 0

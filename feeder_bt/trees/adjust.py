@@ -8,9 +8,12 @@ from py_trees.composites import Sequence
 
 from ..behaviours.adjust import Adjust, CheckDrift
 from ..behaviours.common import Ctx, Wait
+from . import plate
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    if plate.is_plate(ctx):          # smart feeding chooses plate actions (issue 31)
+        return plate.build_adjust(ctx)
     return Sequence("adjust", memory=True, children=[
         Wait("period", ctx, ctx.scenario.adjust.period_s),
         Adjust(f"adjust ({ctx.scenario.adjust.algorithm})", ctx),

@@ -12,10 +12,11 @@ from py_trees.decorators import SuccessIsRunning
 
 from ..behaviours.common import Ctx, ErrorIs, Wait
 from ..behaviours.locate import GrabGolden
+from ..behaviours.plate import InitPlate, PurgePlate, init_plate_keys
 from ..behaviours.present import StopConveyors
 from ..behaviours.retrieve import MoveSafe, PhaseIs, Reconcile, Recover, SetRobotSpeed
 from ..behaviours.setup import ClearWindow, SetSignal, SyncEncoders
-from . import adjust, locate, present, retrieve
+from . import adjust, locate, plate, present, retrieve
 
 SETTLE_S = 0.25        # after the conveyors stop, before the encoders are tied together
 
@@ -47,6 +48,8 @@ class Loop(SuccessIsRunning):
 def build_feeding(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     """Four branches that never end: each absorbs its own failures (recovery fallbacks) and
     reports what it cannot handle on ``/faults/escalate``, so the Parallel never fails."""
+    if plate.is_plate(ctx):
+        init_plate_keys()
     branches = [present.build(ctx), locate.build(ctx), retrieve.build(ctx), adjust.build(ctx)]
     return Parallel("feeder", policy=ParallelPolicy.SuccessOnAll(synchronise=False),
                     children=[Loop(f"{b.name} loop", b) for b in branches])
@@ -61,10 +64,14 @@ def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
         _robot_to_safe(ctx),
     ] if robot else []
     steps.append(StopConveyors("stop conveyors", ctx))
+    if plate.is_plate(ctx):          # nothing is accepted before the plate is homed
+        steps.append(InitPlate("home the plate", ctx))
     if vision.backlight:
         steps.append(SetSignal("backlight on", ctx, "backlight", True))
-    if vision.golden_image:
-        steps += [ClearWindow("clear the window", ctx), GrabGolden("golden image", ctx)]
+    if vision.golden_image:         # a plate is cleared by a purge (issue 31)
+        clear = (PurgePlate("clear the plate", ctx) if plate.is_plate(ctx)
+                 else ClearWindow("clear the window", ctx))
+        steps += [clear, GrabGolden("golden image", ctx)]
     # the belt must be at rest, and a real controller's cached counts fresh, for the sync
     steps += [Wait("belt at rest", ctx, SETTLE_S), SyncEncoders("sync encoders", ctx)]
     return Sequence("set-up" if robot else "set-up (part server)", memory=True,

@@ -19,7 +19,9 @@ from ..behaviours.locate import (
     Recognise,
     WaitTravel,
 )
+from ..behaviours.plate import AskPlate
 from ..scenario.plugins import load_class
+from . import plate
 
 KEY = "/locate/error"
 
@@ -27,7 +29,7 @@ KEY = "/locate/error"
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     # a scenario may replace the recipe step with a leaf class of its own (locate.leaf)
     recipe = load_class(ctx.scenario.locate.leaf) if ctx.scenario.locate.leaf else Recognise
-    if ctx.scenario.present.mode == "continuous":
+    if ctx.scenario.present.mode == "continuous" and not plate.is_plate(ctx):
         frame = Sequence("frame", memory=True, children=[
             WaitTravel("wait belt travel", ctx),
             Grab("grab + latch", ctx),
@@ -40,7 +42,9 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             Grab("grab + latch", ctx),
             recipe("recipe", ctx),
             Enqueue("enqueue", ctx),
-            AdvanceIfNothing("advance if nothing", ctx),
+            # a plate: the adjuster plans a plate action instead (issue 31)
+            AskPlate("plate action if nothing", ctx) if plate.is_plate(ctx)
+            else AdvanceIfNothing("advance if nothing", ctx),
         ])
     link = Sequence("link lost", memory=True, children=[
         ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),

@@ -12,11 +12,14 @@ from py_trees.decorators import Inverter
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
 from ..behaviours.present import FirstJamIn, RunConveyors, ServeAdvance, Shake, StopConveyors
+from . import plate
 
 KEY = "/present/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    if plate.is_plate(ctx):          # a vibratory plate serves plate actions (issue 31)
+        return plate.build_present(ctx)
     if ctx.scenario.present.mode == "continuous":
         work = RunConveyors("run conveyors", ctx)
     else:

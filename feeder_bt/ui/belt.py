@@ -1,5 +1,6 @@
 """The dashboard's belt view (issue 17): the horizontal belt in plan, from the controller's
-own data — never the simulator's.
+own data — never the simulator's. On a plate cell (issue 31) the same view shows the plate
+(``geometry["plate"]``) and the parts queued on it, which do not move.
 
 Where the parts are is what the cell believes: each queued part's pose at its latch, moved
 by the belt travel since then as the robot controller's belt encoder counts it
@@ -39,8 +40,14 @@ class BeltPanel:
         w, h = cam.width_px, cam.height_px
         corners = cal.px_to_mm(np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5],
                                          [-0.5, h - 0.5]]))
+        length, width, plate = conv.length_mm, conv.width_mm, None
+        if spec.presentation == "plate":     # a plate cell: the plate in the same frame
+            (px, py), (pl, pw) = spec.plate.origin_mm, spec.plate.size_mm
+            plate = {"origin_mm": [_r(px), _r(py)], "size_mm": [_r(pl), _r(pw)]}
+            length = px + pl + 40.0
+            width = max(py + pw, spec.robot.base_mm[1]) + 40.0
         self.geometry = {
-            "length_mm": _r(conv.length_mm), "width_mm": _r(conv.width_mm),
+            "length_mm": _r(length), "width_mm": _r(width), "plate": plate,
             "camera": [[_r(x), _r(y)] for x, y in corners],
             "robot": {"base_mm": [_r(v) for v in spec.robot.base_mm],
                       "reach_mm": _r(spec.robot.reach_mm),

@@ -35,12 +35,16 @@ window.feederBelt = (() => {
     svg.setAttribute("viewBox", `${-MARGIN} ${-MARGIN - 20} ${right + 2 * MARGIN} ` +
                                 `${b.width_mm + 2 * MARGIN + 20}`);
     svg.replaceChildren();
+    // a plate cell (issue 31): the plate's rectangle in the same frame, its parts still
+    const area = b.plate ? {x: b.plate.origin_mm[0], y: b.plate.origin_mm[1],
+                            w: b.plate.size_mm[0], h: b.plate.size_mm[1]}
+                         : {x: 0, y: 0, w: b.length_mm, h: b.width_mm};
+    const box = {x: String(area.x), y: String(area.y), width: String(area.w),
+                 height: String(area.h)};
     const clip = el("clipPath", {id: "belt-clip"});
-    clip.appendChild(el("rect", {x: "0", y: "0", width: String(b.length_mm),
-                                 height: String(b.width_mm)}));
+    clip.appendChild(el("rect", box));
     svg.appendChild(clip);
-    svg.appendChild(el("rect", {class: "belt", x: "0", y: "0", width: String(b.length_mm),
-                                height: String(b.width_mm)}));
+    svg.appendChild(el("rect", {class: "belt", ...box}));
     // the robot's window: its reach about the base, less the inner reach, on the belt
     const reach = el("g", {"clip-path": "url(#belt-clip)", class: "reach"});
     const [bx, by] = rob.base_mm;
@@ -61,8 +65,8 @@ window.feederBelt = (() => {
                                    points: b.camera.map((c) => c.join(",")).join(" ")}));
     svg.appendChild(el("text", {class: "label", x: String(b.camera[0][0] + 4), y: "-6"},
                        "camera"));
-    svg.appendChild(el("text", {class: "label", x: "0", y: String(b.width_mm + 16)},
-                       "belt travel \u2192"));
+    svg.appendChild(el("text", {class: "label", x: String(area.x), y: String(area.y + area.h + 16)},
+                       b.plate ? "plate: feed forward \u2192" : "belt travel \u2192"));
     const parts = el("g", {id: "belt-parts"});
     for (const p of b.parts) parts.appendChild(partShape(p, "part"));
     // a gripped part is off the belt (where the gripper is, the robot's frame would say)

@@ -1,0 +1,201 @@
+"""An AnyFeeder emulator over the simulated plate (issue 31): ``feeder emulate plate``.
+
+It listens on 127.0.0.1 and passes the feeder's bytes raw, as a serial-to-Ethernet bridge
+in a plant would, so the driver reaches it with ``socket://127.0.0.1:PORT``. As strict as
+the Adept AnyFeeder User's Guide (Rev. B, 3.6) allows us to be: a line that is not the
+syntax, an unknown command or a value out of range gets ``m12``/``m22`` ("Invalid
+command"); any command before the init gets ``m16``/``m26`` ("not initialized"); after a
+servo error (``m13``) every command but the reset gets ``m17``/``m27`` ("Error must be
+reset before operation can continue"). A command while an action runs is refused with
+``m12``/``m22`` — the Guide does not say what the feeder answers then (docs/plate-
+feeders.md: check at commissioning). An action answers ``m11``, ``m21`` at once and
+``m20``, ``m10`` when the simulated plate is at rest (Table 3-6).
+
+Faults for tests and rehearsals: ``servo_error_at`` (the Nth action ends ``m13``) and
+``no_sync_at`` (the Nth action ends ``m28``).
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+
+from ..hal.anyfeeder.protocol import (
+    BACKLIGHT_OFF,
+    BACKLIGHT_ON,
+    CR,
+    OUTPUT_PARAM,
+    PURGE_TURNS,
+    SPEED,
+    SPEED_PARAMS,
+    TURNS,
+    ProtocolError,
+    parse_command,
+)
+from ..scenario.plate_model import PlateCommands
+from .plant import Plant
+
+
+class AnyFeederEmulator:
+    """One client at a time on ``port`` (0: any free port, see ``.port``)."""
+
+    def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
+                 servo_error_at: int | None = None, no_sync_at: int | None = None) -> None:
+        self.plant = plant
+        self.plate = plant.hal.plate
+        self.cmds: PlateCommands = plant.cell.plate.commands
+        self.params: dict[int, int] = {1: 3, 2: 3}      # Table 3-7 defaults
+        self.initialised = False
+        self.error_state = False
+        self.busy = False
+        self.actions = 0
+        self.servo_error_at, self.no_sync_at = servo_error_at, no_sync_at
+        self.lines: list[str] = []                      # what it received, for tests
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self._sock.bind((host, port))
+        self._sock.listen(1)
+        self.port = self._sock.getsockname()[1]
+        self._stop = threading.Event()
+        self._send_lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> AnyFeederEmulator:
+        self._thread = threading.Thread(target=self._serve, name="anyfeeder-emulator",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        try:
+            self._sock.close()
+        except OSError:
+            pass
+        if self._thread is not None:
+            self._thread.join(2.0)
+
+    # ------------------------------------------------------------------ the link
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._sock.accept()
+            except OSError:
+                return
+            with conn:
+                self._talk(conn)
+
+    def _talk(self, conn: socket.socket) -> None:
+        buf = b""
+        conn.settimeout(0.2)
+        while not self._stop.is_set():
+            try:
+                data = conn.recv(256)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if not data:
+                return
+            buf += data
+            while CR in buf:
+                raw, buf = buf.split(CR, 1)
+                self._line(conn, raw.decode("ascii", "replace"))
+
+    def _send(self, conn: socket.socket, *codes: str) -> None:
+        with self._send_lock:
+            try:
+                conn.sendall(b"".join(c.encode("ascii") + CR for c in codes))
+            except OSError:
+                pass
+
+    # ------------------------------------------------------------------ the feeder
+    def _line(self, conn: socket.socket, text: str) -> None:
+        self.lines.append(text)
+        try:
+            cmd = parse_command(text)
+        except ProtocolError:
+            return self._send(conn, "m12", "m22")
+        if self.busy:
+            return self._send(conn, "m12", "m22")
+        if cmd.param is not None and not self._value_ok(cmd.param, cmd.value):
+            return self._send(conn, "m12", "m22")
+        if cmd.execute is None:                      # a parameter set: no response
+            self.params[cmd.param] = cmd.value
+            return None
+        number = cmd.execute
+        if cmd.param is not None:
+            self.params[cmd.param] = cmd.value
+        if number == self.cmds.reset:
+            self.error_state = False
+            self.initialised = False                 # homed again after a reset
+            return self._send(conn, "m11", "m21", "m20", "m10")
+        if self.error_state:
+            return self._send(conn, "m17", "m27")
+        if number == self.cmds.init:
+            return self._start(conn, number, lambda: self.plate.init(), init=True)
+        if not self.initialised:
+            return self._send(conn, "m16", "m26")
+        if number in SPEED_PARAMS:
+            return self._send(conn, "m11", "m21", "m20", "m10")
+        if number == OUTPUT_PARAM:
+            mode = self.params.get(OUTPUT_PARAM, 0)
+            if mode in (BACKLIGHT_OFF, BACKLIGHT_ON):
+                with self.plant.lock:
+                    self.plant.world.io["backlight"] = mode == BACKLIGHT_ON
+            return self._send(conn, "m11", "m21", "m20", "m10")
+        job = self._job(number)
+        if job is None:
+            return self._send(conn, "m12", "m22")
+        return self._start(conn, number, job)
+
+    def _value_ok(self, param: int, value: int | None) -> bool:
+        if value is None:
+            return False
+        c = self.cmds
+        if param == c.purge:
+            lo, hi = PURGE_TURNS
+        elif param in SPEED_PARAMS:
+            lo, hi = SPEED
+        elif param == OUTPUT_PARAM:
+            lo, hi = 0, 5
+        elif param in (c.feed_forward, c.feed_backward, c.flip_forward, c.flip_backward,
+                       c.flip, c.dispense):
+            lo, hi = TURNS
+        else:
+            return False
+        return lo <= value <= hi
+
+    def _job(self, number: int):
+        c, reps = self.cmds, self.params.get(number, 1)
+        p = self.plate
+        table = {c.feed_forward: lambda: p.feed(1, reps), c.feed_backward: lambda: p.feed(-1, reps),
+                 c.flip_forward: lambda: p.flip(reps, 1), c.flip_backward: lambda: p.flip(reps, -1),
+                 c.flip: lambda: p.flip(reps), c.dispense: lambda: p.dispense(reps),
+                 c.purge: lambda: p.purge(reps)}
+        return table.get(number)
+
+    def _start(self, conn: socket.socket, number: int, make, init: bool = False) -> None:
+        self.busy = True
+        self.actions += 0 if init else 1
+        n = self.actions
+        self._send(conn, "m11", "m21")
+        with self.plant.lock:
+            job = make()
+
+        def finish() -> None:
+            self.plant.wait(job, timeout=60.0)
+            self.busy = False
+            if not job.ok:
+                self._send(conn, "m17", "m27")
+                return
+            if init:
+                self.initialised = True
+            if not init and n == self.servo_error_at:
+                self.error_state = True
+                return self._send(conn, "m20", "m13")
+            if not init and n == self.no_sync_at:
+                return self._send(conn, "m10", "m28")
+            self._send(conn, "m20", "m10")
+
+        threading.Thread(target=finish, name="anyfeeder-action", daemon=True).start()

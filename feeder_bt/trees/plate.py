@@ -1,0 +1,58 @@
+"""The branches of a vibratory-plate cell (issue 31) that differ from a belt cell's.
+
+*present* serves plate actions instead of belt advances and recovers the plate's drive
+faults: a servo error or error state is reset and the plate homed again, as the AnyFeeder
+Guide allows ("Error must be reset before operation can continue", Table 3-5); a second
+within a minute, or a reset that fails, goes to the operator (FAULT) with the manual's
+words. *adjust* is smart feeding: judge each look that found nothing new and plan the next
+plate action. *locate* and *retrieve* keep the belt cell's trees (incremental mode, static
+picks), with ``AskPlate`` for ``AdvanceIfNothing``.
+"""
+
+from __future__ import annotations
+
+import py_trees
+from py_trees.composites import Selector, Sequence
+
+from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from ..behaviours.plate import ChoosePlateAction, InitPlate, ResetPlate, ServePlate, WaitLook
+from ..behaviours.present import FirstJamIn
+
+KEY = "/present/error"
+
+
+def is_plate(ctx: Ctx) -> bool:
+    return ctx.cell.presentation == "plate"
+
+
+def build_present(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    work = ServePlate("run plate actions", ctx)
+    link = Sequence("link lost", memory=True, children=[
+        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
+        CountFault("count link fault", ctx, KEY),
+        Retry("reconnect (back-off)", ctx, KEY),
+    ])
+    drive = Sequence("plate drive fault", memory=True, children=[
+        ErrorIs("servo or drive error?", ctx, KEY, ("plate",)),
+        CountFault("count plate fault", ctx, KEY),
+        Selector("reset once a minute", memory=True, children=[
+            Sequence("reset and home", memory=True, children=[
+                FirstJamIn("first in a minute?", ctx),
+                ResetPlate("reset the error", ctx),
+                InitPlate("home the plate", ctx),
+            ]),
+            Escalate("again within a minute", ctx, KEY,
+                     lambda: f"plate feeder: {ctx.stats.counted.get(KEY)}; again within a "
+                             "minute of a reset"),
+        ]),
+    ])
+    return Selector("present", memory=True, children=[
+        work, link, drive, Escalate("plate failed", ctx, KEY, "plate feeder does not respond"),
+    ])
+
+
+def build_adjust(ctx: Ctx) -> py_trees.behaviour.Behaviour:
+    wait = WaitLook("a look to judge?", ctx)
+    return Sequence("adjust", memory=True, children=[
+        wait, ChoosePlateAction(f"smart feeding ({ctx.scenario.present.plate.policy})", ctx,
+                                wait)])
