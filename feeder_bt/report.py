@@ -88,11 +88,13 @@ def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
         # record covers only part of the run, so these bounds would not bound it
         return {"robot_bounds_since_s": round(log.belt_t[0] - (t_end - sim_seconds), 3)}
     mean = mean_bound(pricing, log.picks)
+    out = {"robot_bound_mean_ppm": round(mean[1], 3) if mean else None,
+           "robot_bound_mean_cycle_s": round(mean[0], 4) if mean else None}
+    if cell_spec.presentation == "plate":   # nothing passes a plate: no nearest-first replay
+        return out
     placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), t_end)
     sel = placed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
-    return {"robot_bound_mean_ppm": round(mean[1], 3) if mean else None,
-            "robot_bound_mean_cycle_s": round(mean[0], 4) if mean else None,
-            "robot_bound_selection_ppm": round(sel, 3),
+    return {**out, "robot_bound_selection_ppm": round(sel, 3),
             "robot_bound_selection_parts": placed}
 
 
