@@ -81,7 +81,8 @@ def pickable_target(plant: Plant, tool_offset=(0.0, 0.0, 0.0), timeout: float = 
             t = plant.world.now()
             rows = plant.world.truth(t)
             latch = plant.world.robot_track_count(t)
-        for r in rows:
+        # the part that entered last: the most time left in the window on a loaded machine
+        for r in sorted(rows, key=lambda r: r["x_mm"]):
             alone = all(math.hypot(o["x_mm"] - r["x_mm"], o["y_mm"] - r["y_mm"]) > 70
                         for o in rows if o["id"] != r["id"])
             if (r["pickable"] and r["singulated"] and alone and 600 <= r["x_mm"] <= 800
