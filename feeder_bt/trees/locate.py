@@ -22,6 +22,7 @@ from ..behaviours.locate import (
 from ..behaviours.plate import AskPlate
 from ..scenario.plugins import load_class
 from . import plate
+from .branches import link_lost
 
 KEY = "/locate/error"
 
@@ -46,11 +47,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             AskPlate("plate action if nothing", ctx) if plate.is_plate(ctx)
             else AdvanceIfNothing("advance if nothing", ctx),
         ])
-    link = Sequence("link lost", memory=True, children=[
-        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
-        CountFault("count link fault", ctx, KEY),
-        Retry("reconnect (back-off)", ctx, KEY),
-    ])
+    link = link_lost(ctx, KEY)
     grab_failed = Sequence("grab failed", memory=True, children=[
         ErrorIs("camera fault?", ctx, KEY, ("grab_failed", "hal")),
         CountFault("count grab fault", ctx, KEY),

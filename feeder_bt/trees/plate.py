@@ -14,9 +14,10 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
 from ..behaviours.plate import ChoosePlateAction, InitPlate, ResetPlate, ServePlate, WaitLook
 from ..behaviours.present import FirstJamIn
+from .branches import link_lost
 
 KEY = "/present/error"
 
@@ -27,11 +28,7 @@ def is_plate(ctx: Ctx) -> bool:
 
 def build_present(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     work = ServePlate("run plate actions", ctx)
-    link = Sequence("link lost", memory=True, children=[
-        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
-        CountFault("count link fault", ctx, KEY),
-        Retry("reconnect (back-off)", ctx, KEY),
-    ])
+    link = link_lost(ctx, KEY)
     drive = Sequence("plate drive fault", memory=True, children=[
         ErrorIs("servo or drive error?", ctx, KEY, ("plate",)),
         CountFault("count plate fault", ctx, KEY),

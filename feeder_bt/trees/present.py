@@ -13,6 +13,7 @@ from py_trees.decorators import Inverter
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
 from ..behaviours.present import FirstJamIn, RunConveyors, ServeAdvance, Shake, StopConveyors
 from . import plate
+from .branches import link_lost
 
 KEY = "/present/error"
 
@@ -24,11 +25,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         work = RunConveyors("run conveyors", ctx)
     else:
         work = ServeAdvance("advance on request", ctx)
-    link = Sequence("link lost", memory=True, children=[
-        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
-        CountFault("count link fault", ctx, KEY),
-        Retry("reconnect (back-off)", ctx, KEY),
-    ])
+    link = link_lost(ctx, KEY)
     jam = Sequence("jam", memory=True, children=[
         ErrorIs("jammed?", ctx, KEY, ("conveyor",)),
         CountFault("count jam", ctx, KEY),

@@ -14,7 +14,7 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
 from ..behaviours.retrieve import (
     FailedPicksBelow,
     FollowRobotSpeed,
@@ -28,6 +28,7 @@ from ..behaviours.retrieve import (
     Recover,
 )
 from ..scenario.plugins import load_class
+from .branches import link_lost
 
 KEY = "/retrieve/error"
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
@@ -106,12 +107,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
                 MoveSafe("move to safe", ctx)]),
         ]),
     ])
-    link = Sequence("link lost", memory=True, children=[
-        ErrorIs("link lost?", ctx, KEY, ("comms_lost",)),
-        CountFault("count link fault", ctx, KEY),
-        Retry("reconnect (back-off)", ctx, KEY),
-        _settle(ctx, "settle the part"),
-    ])
+    link = link_lost(ctx, KEY, _settle(ctx, "settle the part"))
     unknown = Sequence("unknown part held", memory=True, children=[
         ErrorIs("unknown part?", ctx, KEY, ("unknown_part",)),
         Escalate("to the operator", ctx, None, UNKNOWN_PART)])
