@@ -187,3 +187,19 @@ def test_squares_that_land_face_down_are_flipped_not_misplaced():
     assert r["parts"]["misoriented"] == 0            # face-down squares are never picked
     assert r["parts"]["located_unpickable"] > 0      # the recipe saw them face down
     assert r["plate"]["flip"] > 0                    # and smart feeding flipped them
+
+
+def test_a_part_the_plate_drops_is_counted_lost_and_named():
+    """The accounting can fail: a part that leaves the plate for nowhere is found by the
+    audit, by id, and a part that is on the plate twice is a duplicate."""
+    hal, clock = plate_hal(seed=3)
+    w = hal.world
+    finish(hal, clock, hal.plate.init())
+    finish(hal, clock, hal.plate.dispense(3))
+    gone, _ = w.on_horizontal.popitem()     # broken physics: a part falls off the world
+    twice = next(iter(w.on_horizontal))
+    w.hopper.append(twice)                  # and one is on the plate and in the bulk
+    w.audit()
+    assert w.lost() == 1 and w.duplicated() == 1
+    named = {(p["kind"], p["id"]) for p in w.problems}
+    assert ("lost", gone) in named and ("duplicated", twice) in named
