@@ -64,33 +64,53 @@ class KitTracker:
 
 def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: float,
                robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
-               span_s: float, lag_s: float = 0.0) -> dict[str, float]:
+               span_s: float, lag_s: float = 0.0, selection_kits: int | None = None
+               ) -> dict[str, float]:
     """Kits per minute no feeder could beat: the robot's (``robot_ppm`` over the parts a
     kit holds), the supply's (each type's parts that came within reach, over the kit's
-    count of it) and, when placed parts leave the cell, the inflow's (each type's arrival
-    curve met by the robot ``lag_s`` after it, the ride to the robot, over the kit's
-    count)."""
+    count of it) and, when placed parts leave the cell, the inflow's.
+
+    The inflow bound in kits: the kits done by the end are at most those whose parts of
+    each type had reached the robot by some time ``s`` (``A_t(s) / n_t``; an arrival
+    counts ``lag_s`` after it, the ride to the robot) plus what the robot builds after
+    ``s``: a kit takes ``size`` cycles, so ``robot_ppm / size`` kits a minute, plus the
+    one kit a part of which was placed before ``s``. ``selection_kits``: kits a
+    nearest-first robot completes from the run's passes, taking only the types the kit
+    wants (``robot_bounds.selection_bound``; simulated runs only), a yardstick as the
+    parts' selection bound is."""
     if feed_seconds <= 0:
         return {}
     per_min = 60.0 / feed_seconds
-    out = {"robot_bound_kpm": robot_ppm / sum(counts.values()),
+    size = sum(counts.values())
+    out = {"robot_bound_kpm": robot_ppm / size,
            "supply_bound_kpm": min(in_reach.get(t, 0) * per_min / n for t, n in counts.items())}
     if inflow is not None:
         out["inflow_bound_kpm"] = min(
-            inflow_bound_parts(*inflow.get(t, (0, [])), robot_ppm, span_s, lag_s) * per_min / n
+            _kit_inflow(*inflow.get(t, (0, [])), n, robot_ppm / size, span_s, lag_s) * per_min
             for t, n in counts.items())
+    if selection_kits is not None:
+        out["selection_bound_kpm"] = selection_kits * per_min
     out = {k: round(v, 3) for k, v in out.items()}
     out["ceiling_kpm"] = min(out.values())
     return out
 
 
+def _kit_inflow(initial: int, arrivals: list[tuple[float, int]], n: int, kits_pm: float,
+                span_s: float, lag_s: float) -> float:
+    """Kits a type's arrivals allow (``n`` of it a kit) with a robot building ``kits_pm``:
+    the parts' inflow bound (``supply_bound.inflow_bound_parts``) counted in kits."""
+    return inflow_bound_parts(initial / n, [(t, k / n) for t, k in arrivals], kits_pm,
+                              span_s, lag_s)
+
+
 def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: float,
                 robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
-                span_s: float, lag_s: float = 0.0) -> dict[str, object]:
+                span_s: float, lag_s: float = 0.0, selection_kits: int | None = None
+                ) -> dict[str, object]:
     """The report's ``kits``: the kit, how many were completed and how fast, its bounds."""
     kpm = tracker.completed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     bounds = kit_bounds(tracker.counts, in_reach, feed_seconds, robot_ppm, inflow, span_s,
-                        lag_s)
+                        lag_s, selection_kits)
     ceil = bounds.get("ceiling_kpm", math.inf)
     return {"kit": tracker.counts, "order": tracker.order or "any",
             "completed": tracker.completed, "per_minute": round(kpm, 3), **bounds,

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .cell import Cell
-from .kits import kits_report
+from .kits import KitTracker, kits_report
 from .robot_bounds import Pricing, mean_bound, selection_bound
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
@@ -80,22 +80,40 @@ def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
     """The selection-aware robot bounds over the simulated world's record of the run
     (``feeder_bt.robot_bounds``), with the world's own arm: the mean cycle over where the
     robot picked, and nearest-first over the parts that passed."""
+    since = _record_since(world, sim_seconds)
+    if since is not None:
+        return {"robot_bounds_since_s": since}
     pricing = Pricing.of(world.robot_model, cell_spec, scenario)
     log = world.passlog
-    t_end = world.clock.now()
-    if log.belt_t[0] > t_end - sim_seconds + 1e-6:
-        # a changeover (the operator loaded another scenario) began a new world: its
-        # record covers only part of the run, so these bounds would not bound it
-        return {"robot_bounds_since_s": round(log.belt_t[0] - (t_end - sim_seconds), 3)}
     mean = mean_bound(pricing, log.picks)
     out = {"robot_bound_mean_ppm": round(mean[1], 3) if mean else None,
            "robot_bound_mean_cycle_s": round(mean[0], 4) if mean else None}
     if cell_spec.presentation == "plate":   # nothing passes a plate: no nearest-first replay
         return out
-    placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), t_end)
+    placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), world.clock.now())
     sel = placed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     return {**out, "robot_bound_selection_ppm": round(sel, 3),
             "robot_bound_selection_parts": placed}
+
+
+def world_kit_selection(cell_spec: CellSpec, scenario: Scenario, world: Any, kit: KitTracker,
+                        sim_seconds: float) -> int | None:
+    """Kits a nearest-first robot taking only the types the kit wants completes from the
+    run's passes (``robot_bounds.selection_bound``); None where the replay cannot run."""
+    if _record_since(world, sim_seconds) is not None or cell_spec.presentation == "plate":
+        return None
+    replay = KitTracker(kit.counts, kit.order)
+    selection_bound(Pricing.of(world.robot_model, cell_spec, scenario), world.passlog,
+                    tuple(cell_spec.robot.safe_mm), world.clock.now(), replay)
+    return replay.completed
+
+
+def _record_since(world: Any, sim_seconds: float) -> float | None:
+    """None if the world's record covers the whole run; else from when it does: a
+    changeover (the operator loaded another scenario) began a new world, whose record
+    would not bound the run."""
+    start = world.passlog.belt_t[0] - (world.clock.now() - sim_seconds)
+    return round(start, 3) if start > 1e-6 else None
 
 
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
@@ -177,8 +195,11 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                    "gripper_blocked": s.counts["gripper_blocked"]},
     }
     if s.kit is not None:                 # kits (thesis 8.2.1.5): how many, how fast, bounds
+        kit_sel = (world_kit_selection(cell.cell, cell.scenario, world, s.kit, sim_seconds)
+                   if world is not None and cell.scenario else None)
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
-                                     inflow_by_type, sim_seconds, transport_lag_s(cell.cell))
+                                     inflow_by_type, sim_seconds, transport_lag_s(cell.cell),
+                                     kit_sel)
     if cell.cell.presentation == "plate":   # the plate's actions (issue 31)
         report["plate"] = {k[len("plate_"):]: v for k, v in sorted(s.counts.items())
                            if k.startswith("plate_")}

@@ -17,6 +17,8 @@ with the world's own arm (a SCARA, ``feeder_bt.scara``):
   feeding is what nearest-first picking could have placed from this run's supply. It is
   not an optimum (a lookahead policy may beat nearest-first on a stream), so it is a
   yardstick, not a proof; the tests check a run stays below it.
+  With a kit, the replay takes only the types the kit wants next (``KitTracker``), and
+  the kits it completes are the report's ``kits.selection_bound_kpm``.
 
 A part picked in the replay is gone for the rest of its pass; a part the run's robot
 picked stays available to the replay until it leaves the reach; a pass the run's robot
@@ -30,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kits import KitTracker
 from .robot_model import RobotModel
 from .scenario.model import CellSpec, Scenario
 
@@ -80,10 +83,12 @@ def mean_bound(pricing: Pricing, picks: list[tuple[float, float, float, str]]
     return mean, 60.0 / mean
 
 
-def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: float
-                    ) -> int:
+def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: float,
+                    kit: KitTracker | None = None) -> int:
     """Parts a nearest-first robot places from the run's passes by ``t_end`` (see the
-    module); ``log`` is the world's ``PassLog``."""
+    module); ``log`` is the world's ``PassLog``. With ``kit`` (a fresh ``KitTracker``) the
+    robot takes only the types the kit wants next, as the retrieve tree does, and the
+    tracker counts the kits it completes."""
     bt = np.asarray(log.belt_t)
     bp = np.maximum.accumulate(np.asarray(log.belt_pos))   # a reversal never un-passes
     t_on = np.asarray(log.t_on)
@@ -141,6 +146,10 @@ def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: fl
             x_grip = x_now + (pos(t + move + pricing.hold_s) - p_now)
             ok = (pricing.model.reachable_mask(x_arr, ya)
                   & pricing.model.reachable_mask(x_grip, ya) & (x_grip <= pricing.x_hi))
+            if kit is not None:
+                wanted = kit.wanted()
+                ok &= np.fromiter((types[i] in wanted for i in active.tolist()), bool,
+                                  active.size)
             if ok.any():
                 idx = np.flatnonzero(ok)
                 sel = active[idx]
@@ -151,6 +160,8 @@ def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: fl
                 t += float(cycle[j])
                 if t <= t_end:
                     done += 1
+                    if kit is not None:
+                        kit.placed(types[sel[j]])
                 here = (float(place_x[sel[j]]), float(place_y[sel[j]]))
                 active = np.delete(active, idx[j])
                 continue

@@ -65,7 +65,7 @@ def supply_bound_ppm(located_in_reach: int, feed_seconds: float) -> float:
     return located_in_reach * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
 
 
-def inflow_bound_parts(initial: int, arrivals: Sequence[tuple[float, int]],
+def inflow_bound_parts(initial: float, arrivals: Sequence[tuple[float, float]],
                        robot_ppm: float, span_s: float, lag_s: float = 0.0) -> float:
     """The most parts any feeder could have placed in ``[0, span_s]`` when the cell held
     ``initial`` parts at 0 and ``arrivals`` (seconds, parts) came later, with a robot that

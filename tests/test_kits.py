@@ -55,10 +55,26 @@ def test_kit_bounds_are_the_lowest_of_robot_supply_and_inflow():
     assert b["inflow_bound_kpm"] == pytest.approx(15.0)   # 15 squares came in all
     assert b["ceiling_kpm"] == min(b["robot_bound_kpm"], b["supply_bound_kpm"],
                                    b["inflow_bound_kpm"])
-    # the ride to the robot: squares arriving at 30 s reach it at 70 s, after the run
+    # the ride to the robot: squares arriving at 30 s reach it at 70 s, after the run;
+    # nothing reaches the robot before 40 s, and then it builds a kit every 4 cycles:
+    # 100 / 4 kits a minute over the 20 s left, plus one begun before
     late = kit_bounds({"square": 1, "lens": 3}, {"square": 30, "lens": 300}, 60.0, 100.0,
                       {"square": (10, [(30.0, 5)]), "lens": (100, [])}, 60.0, lag_s=40.0)
-    assert late["inflow_bound_kpm"] == pytest.approx(10.0)
+    assert late["inflow_bound_kpm"] == pytest.approx(25.0 * 20.0 / 60.0 + 1.0, abs=1e-3)
+
+
+def test_the_kit_inflow_bound_charges_a_kit_its_whole_size_of_robot_cycles():
+    """Scarce squares arriving late: once the last one is in, the robot still needs the
+    lenses of its kit, so the kits after ``s`` come at the robot's rate over the kit's
+    size, not over the square's count of it."""
+    b = kit_bounds({"square": 1, "lens": 3}, {"square": 100, "lens": 300}, 60.0, 60.0,
+                   {"square": (0, [(50.0, 20)]), "lens": (300, [])}, 60.0)
+    # just before the squares came: none yet, then 15 kits/min for the last 10 s, + 1
+    assert b["inflow_bound_kpm"] == pytest.approx(15.0 * 10.0 / 60.0 + 1.0)
+    # the parts' form (a square at every robot cycle) would allow 60 * 10 / 60 + 1 = 11
+    assert b["inflow_bound_kpm"] < 11.0
+    assert kit_bounds({"square": 1, "lens": 3}, {"square": 100, "lens": 300}, 60.0, 60.0,
+                      None, 60.0, selection_kits=3)["ceiling_kpm"] == 3.0
 
 
 def kit_scenario(tmp_path: Path, kit: str) -> Path:
@@ -82,6 +98,8 @@ def test_a_run_builds_kits_in_their_proportions(tmp_path):
     assert 3 * k["completed"] <= got["lens"] <= 3 * k["completed"] + 3
     assert k["per_minute"] == pytest.approx(k["completed"] / 10.0, abs=1e-3)
     assert 0 < k["per_minute"] <= k["ceiling_kpm"] and "inflow_bound_kpm" in k
+    # a nearest-first robot taking only the wanted types, over the same passes
+    assert k["per_minute"] <= k["selection_bound_kpm"] <= r["robot_bound_selection_ppm"] / 4
     assert f"kits {k['completed']} (1 square + 3 lens)" in summary(r)
     free = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "lenses_and_squares.yaml"),
                               duration=600.0, fast=True, seed=2, view="none", db=None,

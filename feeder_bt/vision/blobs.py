@@ -124,27 +124,6 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         if not det.reason and area < min_area_mm2:
             det.reason = "too small"
     return blobs
-    steps = _boundary_steps([b.contour for b in blobs], full)
-    for b, n in zip(blobs, steps, strict=True):
-        b.area_px += 0.5 * n
-        b.det.features["area_mm2"] = area = b.area_px * s2
-        if not b.det.reason and area < min_area_mm2:
-            b.det.reason = "too small"
-    xy, scales = (mapping or calibration).px_to_mm_scale(np.array(centres))
-    for b, (x, y) in zip(blobs, xy.tolist(), strict=True):
-        b.det.x_mm, b.det.y_mm = x, y
-    if not calibration.linear:
-        # a lens or a tilted camera: the scale where each blob lies (a few per mille
-        # from the calibration's mm_per_px over the window), for areas and lengths
-        for b, sc in zip(blobs, scales.tolist(), strict=True):
-            b.scale = float(sc)
-            b.det.features["area_mm2"] = area = b.area_px * b.scale ** 2
-            reason = b.det.reason
-            if area < min_area_mm2 and not reason:
-                b.det.reason = "too small"
-            elif reason == "too small" and area >= min_area_mm2:
-                b.det.reason = ""
-    return blobs
 
 
 def measure_feature(b: Blob, name: str, calibration: Calibration,
