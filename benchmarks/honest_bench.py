@@ -95,6 +95,12 @@ def stats(rows: list[dict]) -> dict:
         if all(kc):
             out["kits"]["ceiling_kpm"] = round(statistics.mean(kc), 3)
             out["kits"]["of_ceiling"] = round(out["kits"]["mean"] / out["kits"]["ceiling_kpm"], 3)
+        # each kit bound (robot, supply, inflow, selection), its mean and ours of it
+        each = [r.get("kit_bounds_kpm") or {} for r in rows]
+        for name in sorted(set.intersection(*(set(b) for b in each))):
+            mean = round(statistics.mean(b[name] for b in each), 3)
+            out["kits"][f"{name}_bound_kpm"] = mean
+            out["kits"][f"of_{name}_bound"] = round(out["kits"]["mean"] / mean, 3) if mean else None
     busy = [r.get("robot_busy_pct") for r in rows]
     if all(b is not None for b in busy):      # near 100 %: the robot limits, not control
         out["robot_busy_pct"] = round(statistics.mean(busy), 1)
@@ -220,15 +226,18 @@ def markdown(result: dict) -> str:
                          f"water marks | | {_x(tu['best_possible_vs_watermarks'])} | |")
         if "kits_ours_vs_watermarks" in tu:
             lines += ["", "| setting (same budget) | kits/min mean (min–max, sd) | "
-                      "of the kit ceiling |", "|---|---|---|"]
+                      "of the kit ceiling | of the kit inflow bound | of the kit selection "
+                      "bound |", "|---|---|---|---|---|"]
             for space, label in SPACES.items():
                 k = tu[space]["kits"]
-                of = (f"{100 * k['of_ceiling']:.1f} % of {k['ceiling_kpm']:.2f}"
-                      if "of_ceiling" in k else "-")
+                ofs = [f"{100 * k[f'of_{b}']:.1f} % of {k[f'{b}_kpm']:.2f}"
+                       if k.get(f"of_{b}") is not None else "-"
+                       for b in ("ceiling", "inflow_bound", "selection_bound")]
                 lines.append(f"| {label} | {k['mean']:.3f} ({k['min']:.3f}–{k['max']:.3f}, "
-                             f"sd {k['stdev']:.3f}) | {of} |")
-            lines += [f"| ours / tuned water marks | {_x(tu['kits_ours_vs_watermarks'])} | |",
-                      f"| ours / best fixed | {_x(tu['kits_ours_vs_fixed'])} | |"]
+                             f"sd {k['stdev']:.3f}) | " + " | ".join(ofs) + " |")
+            lines += [f"| ours / tuned water marks | {_x(tu['kits_ours_vs_watermarks'])} "
+                      "| | | |",
+                      f"| ours / best fixed | {_x(tu['kits_ours_vs_fixed'])} | | | |"]
     return "\n".join(lines)
 
 

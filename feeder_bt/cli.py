@@ -243,7 +243,10 @@ def _kits_line(report: dict) -> str:
     if not k:
         return ""
     kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items())
+    which = next((name[:-len("_bound_kpm")] for name, v in k.items()
+                  if name.endswith("_bound_kpm") and v == k.get("ceiling_kpm")), None)
     of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"
+          + (f" ({which} bound)" if which else "")
           if k.get("of_ceiling_pct") is not None else "")
     return f"\n  kits {k['completed']} ({kit}): {k['per_minute']:.1f} kits/min{of}"
 

@@ -101,6 +101,8 @@ def test_a_run_builds_kits_in_their_proportions(tmp_path):
     # a nearest-first robot taking only the wanted types, over the same passes
     assert k["per_minute"] <= k["selection_bound_kpm"] <= r["robot_bound_selection_ppm"] / 4
     assert f"kits {k['completed']} (1 square + 3 lens)" in summary(r)
+    lowest = min((n for n in k if n.endswith("_bound_kpm")), key=k.get)
+    assert f"of the kit ceiling {k['ceiling_kpm']:.1f} ({lowest[:-10]} bound)" in summary(r)
     free = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "lenses_and_squares.yaml"),
                               duration=600.0, fast=True, seed=2, view="none", db=None,
                               supply=str(ROOT / "supply" / "mix_drift.yaml")))

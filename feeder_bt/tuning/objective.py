@@ -78,6 +78,8 @@ def evaluate(job: Job) -> dict[str, Any]:
     if kits:                    # a kit scenario's objective (search.objective_unit)
         out["kpm"] = float(kits["per_minute"])
         out["kit_ceiling_kpm"] = kits.get("ceiling_kpm")
+        out["kit_bounds_kpm"] = {k[:-len("_bound_kpm")]: v for k, v in kits.items()
+                                 if k.endswith("_bound_kpm")}
         out["kits"] = kits.get("completed")
     if report.get("fault"):
         out["error"] = f"the run faulted: {report['fault']}"
