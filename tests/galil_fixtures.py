@@ -12,6 +12,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
+
+from serial.urlhandler import protocol_socket
 
 from feeder_bt.clock import RealClock
 from feeder_bt.emulators.faults import FaultPlan
@@ -33,6 +36,22 @@ WAIT_S = 30.0                # how long an event-driven wait may take on a loade
 # test of the watchdog or the heartbeat sets its own (``rig(galil={...})``).
 WATCHDOG_S = 10.0
 HEARTBEAT_S = 10.0
+
+
+@contextmanager
+def no_reconnect_pause() -> Iterator[None]:
+    """pyserial's ``socket://`` close() sleeps 0.3 s "in case of quick reconnects, give the
+    server some time" (serial/urlhandler/protocol_socket.py, pyserial 3.5); a rig being
+    torn down never reconnects, and the Galil tests' ~46 rigs waited ~14 s for it. Only
+    around a teardown's close: a reconnect under test keeps the library's pause."""
+    saved = protocol_socket.time
+    protocol_socket.time = SimpleNamespace(**{**{k: getattr(time, k) for k in dir(time)
+                                                 if not k.startswith("_")},
+                                              "sleep": lambda s: None})
+    try:
+        yield
+    finally:
+        protocol_socket.time = saved
 
 
 def wait_until(cond: Callable[[], object], timeout: float = WAIT_S, step: float = 0.005) -> bool:
@@ -112,4 +131,5 @@ def rig(faults: FaultPlan | None = None, pty: bool = False,
                     assert job.ok, job.error
             yield r
         finally:
-            ctl.close()
+            with no_reconnect_pause():
+                ctl.close()

@@ -22,6 +22,10 @@ from feeder_bt.jobs import Job, JobState
 from feeder_bt.scenario import load_scenario
 
 BELT_COUNTS_S = 8000          # both belts at 400 mm/s (20 counts/mm): parts arrive fast
+# The belts run this long (world seconds) at once after they are started (Plant.run_ahead):
+# the first part comes into the reach ~4.7 s after the start (seeds 1-4), which a test
+# would otherwise spend waiting in real time; it still waits for its part by condition.
+PARTS_AHEAD_S = 4.0
 # The driver's time-outs and the tests' waits only bound a hung test: a loaded machine may
 # answer slowly, and no test is judged by how fast it does. A test of a time-out makes the
 # controller truly silent (a stall released afterwards) and sets a short one for itself.
@@ -63,6 +67,7 @@ def rig():
     ctrl = AdeptController(spec, RealClock(), inputs=inputs, robot=cell.robot)
     plant.jog("A", BELT_COUNTS_S)
     plant.jog("B", BELT_COUNTS_S)
+    plant.run_ahead(PARTS_AHEAD_S)
     try:
         yield plant, emu, ctrl, faults, scenario
     finally:

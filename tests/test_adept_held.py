@@ -22,6 +22,7 @@ from feeder_bt.scenario import load_scenario
 from tests.test_adept_driver import (
     BELT_COUNTS_S,
     MOTION_TIMEOUT_S,
+    PARTS_AHEAD_S,
     TIMEOUT_S,
     WAIT_S,
     pickable_target,
@@ -45,6 +46,7 @@ def _rig(belt_direction: int = 1, spec_direction: str = "forward"):
                            counts_per_mm=cell.encoder.counts_per_mm)
     plant.jog("A", BELT_COUNTS_S)
     plant.jog("B", BELT_COUNTS_S)
+    plant.run_ahead(PARTS_AHEAD_S)
     return plant, emu, ctrl, faults, scenario
 
 

@@ -22,12 +22,31 @@ from feeder_bt.scenario import load_scenario
 LONG = 30.0
 
 
-@pytest.fixture
-def plant():
+def _plant(quick: bool):
     scenario, cell = load_scenario("scenarios/plate_lenses.yaml")
+    if quick:
+        cell = dataclasses.replace(cell, plate=dataclasses.replace(cell.plate, **QUICK))
     p = Plant(scenario, cell, seed=1).start()
     yield p
     p.stop()
+
+
+# A plate whose actions take a tenth of the cell's times: what the protocol and the driver
+# answer does not depend on how long an action runs (the replies come at its end, and the
+# parts move at its end: hal/sim/plate.py), only the real seconds waited for them do.
+QUICK = {"init_s": 0.2, "rep_s": 0.035, "settle_s": 0.03}
+
+
+@pytest.fixture
+def plant():
+    """The cell's plate, its times as the cell file gives them (a command while busy
+    arrives well inside the 2 s init)."""
+    yield from _plant(quick=False)
+
+
+@pytest.fixture
+def quick_plant():
+    yield from _plant(quick=True)
 
 
 def emulator(plant, **kw) -> AnyFeederEmulator:
@@ -96,7 +115,8 @@ def test_bad_syntax_is_an_invalid_command(plant):
         emu.stop()
 
 
-def test_a_command_before_init_is_refused(plant):
+def test_a_command_before_init_is_refused(quick_plant):
+    plant = quick_plant
     emu = emulator(plant)
     try:
         raw = Raw(emu.port)
@@ -122,7 +142,8 @@ def test_a_command_while_busy_is_refused(plant):
 
 # ------------------------------------------------------------------ the driver
 
-def test_the_driver_works_the_simulated_plate(plant):
+def test_the_driver_works_the_simulated_plate(quick_plant):
+    plant = quick_plant
     emu = emulator(plant)
     feeder = driver(plant, emu)
     try:
@@ -144,7 +165,8 @@ def test_the_driver_works_the_simulated_plate(plant):
         emu.stop()
 
 
-def test_a_servo_error_is_one_line_and_reset_and_init_recover_it(plant):
+def test_a_servo_error_is_one_line_and_reset_and_init_recover_it(quick_plant):
+    plant = quick_plant
     emu = emulator(plant, servo_error_at=2)
     feeder = driver(plant, emu)
     try:

@@ -35,6 +35,8 @@ from ..hal.anyfeeder.protocol import (
 from ..scenario.plate_model import PlateCommands
 from .plant import Plant
 
+POLL_S = 0.2        # how often the server's threads look at the stop flag
+
 
 class AnyFeederEmulator:
     """One client at a time on ``port`` (0: any free port, see ``.port``)."""
@@ -55,6 +57,10 @@ class AnyFeederEmulator:
         self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self._sock.bind((host, port))
         self._sock.listen(1)
+        # accept() looks at the stop flag this often: closing the socket from stop() does
+        # not wake an accept() blocked in another thread (Linux), and stop() then waited
+        # out its whole join time-out (as camera_server.py does it)
+        self._sock.settimeout(POLL_S)
         self.port = self._sock.getsockname()[1]
         self._stop = threading.Event()
         self._send_lock = threading.Lock()
@@ -80,6 +86,8 @@ class AnyFeederEmulator:
         while not self._stop.is_set():
             try:
                 conn, _ = self._sock.accept()
+            except TimeoutError:
+                continue
             except OSError:
                 return
             with conn:
@@ -87,7 +95,7 @@ class AnyFeederEmulator:
 
     def _talk(self, conn: socket.socket) -> None:
         buf = b""
-        conn.settimeout(0.2)
+        conn.settimeout(POLL_S)
         while not self._stop.is_set():
             try:
                 data = conn.recv(256)

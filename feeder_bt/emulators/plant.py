@@ -37,6 +37,10 @@ class FollowClock(Clock):
         """Wall seconds until clock time ``t`` (0 if past)."""
         return max(0.0, (t - self.now()) / self.rate)
 
+    def advance(self, seconds: float) -> None:
+        """Jump ``seconds`` of clock time ahead at once (Plant.run_ahead)."""
+        self._t0 -= seconds / self.rate
+
 
 class Plant:
     """The simulated cell that the emulators act on. Hold ``lock`` for every access."""
@@ -101,6 +105,16 @@ class Plant:
                 return
 
     # ---------------------------------------------------------------- time
+    def run_ahead(self, seconds: float) -> None:
+        """Let ``seconds`` of the world pass at once, as if the plant had been running
+        unwatched that long: the world is event-driven (``World.step`` processes every
+        event up to the time it is given, in order), so the parts are where that much real
+        time would have put them. For tests whose subject begins when the belts already
+        carry parts; call it while no controller moves anything."""
+        with self.lock:
+            self.clock.advance(seconds)
+            self.world.step(self.clock.now())
+
     def now(self) -> float:
         with self.lock:
             return self.world.now()
