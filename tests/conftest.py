@@ -27,18 +27,6 @@ settings.register_profile("explore", parent=settings.get_profile("feeder"),
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "feeder"))
 
 
-# Files whose tests mostly wait on the wall clock (real-time runs, a browser, servers): run
-# first, so that with two workers (-n 2 --dist loadfile) their waiting overlaps the other
-# worker's computing instead of ending the run alone. A file's own tests keep their order.
-WAIT_FIRST = ("test_emulated_run.py", "test_view_pty.py", "test_ui_http.py",
-              "test_ui_browser.py")
-
-
-def pytest_collection_modifyitems(session, config, items) -> None:
-    rank = {name: i for i, name in enumerate(WAIT_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))   # stable: file order
-
-
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption(UPDATE_SHOTS, action="store_true",
                      help="write the browser tests' screenshots into docs/ (otherwise they go "
