@@ -72,10 +72,23 @@ def status_fields(cell: Cell, feed_seconds: float | None = None
     kinds = f" ({by_type})" if by_type and len(cell.stats.retrieved) > 1 else ""
     first = [f"{f['state']:<8} t {f['t']:6.1f} s", f"retrieved {f['retrieved']}{kinds}",
              f"{f['ppm']:.1f} parts/min", f"queue {f['queue']}"]
+    if cell.cell.presentation == "plate":    # no belts: what the plate has done instead
+        second = [f"located {f['located']}", f"missed {f['missed']}",
+                  "plate " + (plate_actions(cell.stats.counts) or "-"),
+                  f"robot {f['robot']:.0f}%"]
+        return first, second
     second = [f"located {f['located']}", f"missed {f['missed']}", f"too far {f['too_far']}",
               f"belt {f['horizontal']:.0f} mm/s", f"incline {f['incline']:.0f}%",
               f"robot {f['robot']:.0f}%"]
     return first, second
+
+
+def plate_actions(counts: dict[str, int]) -> str:
+    """The plate's actions so far, e.g. "dispense 7, feed forward 4, flip 50" (the
+    report's ``plate`` section, without smart feeding's count of decisions)."""
+    return ", ".join(f"{k[len('plate_'):].replace('_', ' ')} {v}"
+                     for k, v in sorted(counts.items())
+                     if k.startswith("plate_") and k != "plate_decisions" and v)
 
 
 def status_lines(cell: Cell, feed_seconds: float | None = None, width: int = 1000

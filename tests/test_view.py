@@ -11,6 +11,7 @@ import pytest
 
 from feeder_bt.cell import Cell, CellState
 from feeder_bt.clock import SimClock
+from feeder_bt.hal.factory import make_hal
 from feeder_bt.hal.sim.devices import make_sim_hal
 from feeder_bt.scenario import load_scenario
 from feeder_bt.ticker import Ticker
@@ -103,4 +104,21 @@ def test_the_ascii_view_is_ascii():
     ticker.run(until=30.0)
     text = "\n".join(view.lines(80, 23))
     assert text.isascii() and "[*]" in text and "- Ctrl-C stops" in text
+    cell.hal.close()
+
+
+def test_a_plate_cell_shows_the_plate_s_actions_not_belt_speeds():
+    """A plate cell has no belts: its status line says what the plate did instead."""
+    scenario, spec = load_scenario("scenarios/plate_lenses.yaml")
+    hal, clock = make_hal("sim", scenario, spec, seed=1)
+    cell = Cell(spec, hal, clock)
+    cell.load(scenario)
+    ticker = Ticker(cell, fast=True)
+    cell.start()
+    ticker.run(until=120.0)
+    line = status_line(cell)
+    counts = cell.stats.counts
+    assert counts["plate_dispense"] > 0 and f"dispense {counts['plate_dispense']}" in line
+    assert "plate " in line and "belt " not in line and "incline" not in line
+    assert "too far" not in line
     cell.hal.close()
