@@ -33,13 +33,15 @@ from ..hal.anyfeeder.protocol import (
     parse_command,
 )
 from ..scenario.plate_model import PlateCommands
+from .line_server import LineServer
 from .plant import Plant
 
-POLL_S = 0.2        # how often the server's threads look at the stop flag
 
-
-class AnyFeederEmulator:
+class AnyFeederEmulator(LineServer):
     """One client at a time on ``port`` (0: any free port, see ``.port``)."""
+
+    terminator = CR
+    thread_name = "anyfeeder-emulator"
 
     def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
                  servo_error_at: int | None = None, no_sync_at: int | None = None) -> None:
@@ -53,62 +55,11 @@ class AnyFeederEmulator:
         self.actions = 0
         self.servo_error_at, self.no_sync_at = servo_error_at, no_sync_at
         self.lines: list[str] = []                      # what it received, for tests
-        self._sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self._sock.bind((host, port))
-        self._sock.listen(1)
-        # accept() looks at the stop flag this often: closing the socket from stop() does
-        # not wake an accept() blocked in another thread (Linux), and stop() then waited
-        # out its whole join time-out (as camera_server.py does it)
-        self._sock.settimeout(POLL_S)
-        self.port = self._sock.getsockname()[1]
-        self._stop = threading.Event()
         self._send_lock = threading.Lock()
-        self._thread: threading.Thread | None = None
+        super().__init__(host, port)
 
-    def start(self) -> AnyFeederEmulator:
-        self._thread = threading.Thread(target=self._serve, name="anyfeeder-emulator",
-                                        daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        try:
-            self._sock.close()
-        except OSError:
-            pass
-        if self._thread is not None:
-            self._thread.join(2.0)
-
-    # ------------------------------------------------------------------ the link
-    def _serve(self) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._sock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            with conn:
-                self._talk(conn)
-
-    def _talk(self, conn: socket.socket) -> None:
-        buf = b""
-        conn.settimeout(POLL_S)
-        while not self._stop.is_set():
-            try:
-                data = conn.recv(256)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            if not data:
-                return
-            buf += data
-            while CR in buf:
-                raw, buf = buf.split(CR, 1)
-                self._line(conn, raw.decode("ascii", "replace"))
+    def on_line(self, conn: socket.socket, line: bytes) -> None:
+        self._line(conn, line.decode("ascii", "replace"))
 
     def _send(self, conn: socket.socket, *codes: str) -> None:
         with self._send_lock:

@@ -25,10 +25,10 @@ from ..hal.sim.imperfect import true_calibration
 from ..hal.sim.render import Renderer
 from ..hal.sim.target import TargetCamera
 from .camera import PlantCameraSource
+from .line_server import LineServer
 from .plant import Plant
 
 MARKER_MM = 20.0            # diameter of the round calibration marker the person puts down
-POLL_S = 0.1
 
 
 class CameraScene:
@@ -85,68 +85,23 @@ class CameraScene:
         return self._renderer.render([np.array(ring)], rng)
 
 
-class CameraServer:
+class CameraServer(LineServer):
     """Serves ``CameraScene.grab`` on a socket, one client at a time."""
 
+    thread_name = "camera-emu"
+
     def __init__(self, scene: CameraScene, host: str = "127.0.0.1", port: int = 0) -> None:
-        self.scene, self.host, self.port = scene, host, port
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._lsock: socket.socket | None = None
+        self.scene = scene
+        super().__init__(host, port)
 
-    def start(self) -> CameraServer:
-        lsock = socket.socket()
-        lsock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        lsock.bind((self.host, self.port))
-        lsock.listen(1)
-        lsock.settimeout(POLL_S)
-        self.port = lsock.getsockname()[1]
-        self._lsock = lsock
-        self._thread = threading.Thread(target=self._serve, name="camera-emu", daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(2.0)
-        if self._lsock is not None:
-            self._lsock.close()
-
-    def _serve(self) -> None:
-        assert self._lsock is not None
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._lsock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            with conn:
-                self._session(conn)
-
-    def _session(self, conn: socket.socket) -> None:
-        conn.settimeout(POLL_S)
-        buf = b""
-        while not self._stop.is_set():
-            try:
-                data = conn.recv(4096)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            if not data:
-                return
-            buf += data
-            while b"\n" in buf:
-                line, buf = buf.split(b"\n", 1)
-                verb = line.decode("ascii", "replace").strip().upper()
-                if verb == "GRAB":
-                    img = np.ascontiguousarray(self.scene.grab(), dtype=np.uint8)
-                    h, w = img.shape[:2]
-                    conn.sendall(f"OK {w} {h}\n".encode() + img.tobytes())
-                elif verb:
-                    conn.sendall(f"ERR unknown request {verb[:20]!r}\n".encode())
+    def on_line(self, conn: socket.socket, line: bytes) -> None:
+        verb = line.decode("ascii", "replace").strip().upper()
+        if verb == "GRAB":
+            img = np.ascontiguousarray(self.scene.grab(), dtype=np.uint8)
+            h, w = img.shape[:2]
+            conn.sendall(f"OK {w} {h}\n".encode() + img.tobytes())
+        elif verb:
+            conn.sendall(f"ERR unknown request {verb[:20]!r}\n".encode())
 
 
 class CameraClient:
