@@ -12,7 +12,9 @@ feeders.md: check at commissioning). An action answers ``m11``, ``m21`` at once 
 ``m20``, ``m10`` when the simulated plate is at rest (Table 3-6).
 
 Faults for tests and rehearsals: ``servo_error_at`` (the Nth action ends ``m13``) and
-``no_sync_at`` (the Nth action ends ``m28``).
+``no_sync_at`` (the Nth action ends ``m28``); in a whole emulated run, a fault plan's
+``servo_timeout`` rule for controller ``plate`` (``emulators.faults``; its ``command``
+matched against the action's line, e.g. ``x=1``) ends the matching action ``m13``.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from ..hal.anyfeeder.protocol import (
     parse_command,
 )
 from ..scenario.plate_model import PlateCommands
+from .faults import FaultPlan
 from .line_server import LineServer
 from .plant import Plant
 
@@ -44,7 +47,8 @@ class AnyFeederEmulator(LineServer):
     thread_name = "anyfeeder-emulator"
 
     def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
-                 servo_error_at: int | None = None, no_sync_at: int | None = None) -> None:
+                 servo_error_at: int | None = None, no_sync_at: int | None = None,
+                 faults: FaultPlan | None = None) -> None:
         self.plant = plant
         self.plate = plant.hal.plate
         self.cmds: PlateCommands = plant.cell.plate.commands
@@ -54,6 +58,7 @@ class AnyFeederEmulator(LineServer):
         self.busy = False
         self.actions = 0
         self.servo_error_at, self.no_sync_at = servo_error_at, no_sync_at
+        self.faults = faults            # controller "plate": servo_timeout ends it m13
         self.lines: list[str] = []                      # what it received, for tests
         self._send_lock = threading.Lock()
         super().__init__(host, port)
@@ -106,7 +111,9 @@ class AnyFeederEmulator(LineServer):
         job = self._job(number)
         if job is None:
             return self._send(conn, "m12", "m22")
-        return self._start(conn, number, job)
+        rule = self.faults.check("plate", text) if self.faults is not None else None
+        return self._start(conn, number, job,
+                           servo_error=rule is not None and rule.kind == "servo_timeout")
 
     def _value_ok(self, param: int, value: int | None) -> bool:
         if value is None:
@@ -134,7 +141,8 @@ class AnyFeederEmulator(LineServer):
                  c.purge: lambda: p.purge(reps)}
         return table.get(number)
 
-    def _start(self, conn: socket.socket, number: int, make, init: bool = False) -> None:
+    def _start(self, conn: socket.socket, number: int, make, init: bool = False,
+               servo_error: bool = False) -> None:
         self.busy = True
         self.actions += 0 if init else 1
         n = self.actions
@@ -150,7 +158,7 @@ class AnyFeederEmulator(LineServer):
                 return
             if init:
                 self.initialised = True
-            if not init and n == self.servo_error_at:
+            if not init and (n == self.servo_error_at or servo_error):
                 self.error_state = True
                 return self._send(conn, "m20", "m13")
             if not init and n == self.no_sync_at:

@@ -30,7 +30,7 @@ FAULT_KINDS = ("reject", "drop", "drop_during", "drop_after", "stall", "servo_ti
 @dataclass
 class FaultRule:
     kind: str                     # one of FAULT_KINDS
-    controller: str               # galil | adept | camera
+    controller: str               # galil | adept | camera | plate (servo_timeout: ends m13)
     command: str = ""             # applies to commands starting with this (case-insensitive)
     nth: int | None = None        # fire on the n-th matching command only (1-based)
     every: int | None = None      # fire on every n-th matching command

@@ -197,7 +197,7 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     plate_emu = None
     if cell.presentation == "plate":        # the AnyFeeder emulator over the plate (issue 31)
         from ..emulators.anyfeeder import AnyFeederEmulator
-        plate_emu = AnyFeederEmulator(plant).start()
+        plate_emu = AnyFeederEmulator(plant, faults=faults).start()
         cell = dataclasses.replace(cell, plate=dataclasses.replace(
             cell.plate, url=f"socket://127.0.0.1:{plate_emu.port}"))
     wired = dataclasses.replace(
