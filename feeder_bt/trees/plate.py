@@ -14,10 +14,9 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
+from ..behaviours.common import Ctx, Escalate
 from ..behaviours.plate import ChoosePlateAction, InitPlate, ResetPlate, ServePlate, WaitLook
-from ..behaviours.present import FirstJamIn
-from .branches import link_lost
+from .branches import link_lost, once_a_minute
 
 KEY = "/present/error"
 
@@ -29,20 +28,13 @@ def is_plate(ctx: Ctx) -> bool:
 def build_present(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     work = ServePlate("run plate actions", ctx)
     link = link_lost(ctx, KEY)
-    drive = Sequence("plate drive fault", memory=True, children=[
-        ErrorIs("servo or drive error?", ctx, KEY, ("plate",)),
-        CountFault("count plate fault", ctx, KEY),
-        Selector("reset once a minute", memory=True, children=[
-            Sequence("reset and home", memory=True, children=[
-                FirstJamIn("first in a minute?", ctx),
-                ResetPlate("reset the error", ctx),
-                InitPlate("home the plate", ctx),
-            ]),
-            Escalate("again within a minute", ctx, KEY,
-                     lambda: f"plate feeder: {ctx.stats.counted.get(KEY)}; again within a "
-                             "minute of a reset"),
-        ]),
-    ])
+    drive = once_a_minute(
+        ctx, KEY, ("plate drive fault", "servo or drive error?", "count plate fault",
+                   "reset once a minute", "reset and home", "first in a minute?",
+                   "again within a minute"), ("plate",),
+        [ResetPlate("reset the error", ctx), InitPlate("home the plate", ctx)],
+        lambda: f"plate feeder: {ctx.stats.counted.get(KEY)}; again within a minute of a "
+                "reset")
     return Selector("present", memory=True, children=[
         work, link, drive, Escalate("plate failed", ctx, KEY, "plate feeder does not respond"),
     ])

@@ -11,9 +11,9 @@ from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
 from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
-from ..behaviours.present import FirstJamIn, RunConveyors, ServeAdvance, Shake, StopConveyors
+from ..behaviours.present import RunConveyors, ServeAdvance, Shake, StopConveyors
 from . import plate
-from .branches import link_lost
+from .branches import link_lost, once_a_minute
 
 KEY = "/present/error"
 
@@ -26,19 +26,11 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     else:
         work = ServeAdvance("advance on request", ctx)
     link = link_lost(ctx, KEY)
-    jam = Sequence("jam", memory=True, children=[
-        ErrorIs("jammed?", ctx, KEY, ("conveyor",)),
-        CountFault("count jam", ctx, KEY),
-        Selector("shake once", memory=True, children=[
-            Sequence("shake it loose", memory=True, children=[
-                FirstJamIn("first jam in a minute?", ctx),
-                Shake("shake", ctx),
-                Wait("let it settle", ctx, 0.5),
-            ]),
-            Escalate("jammed again", ctx, KEY,
-                     "conveyor jammed again within a minute of a shake"),
-        ]),
-    ])
+    jam = once_a_minute(
+        ctx, KEY, ("jam", "jammed?", "count jam", "shake once", "shake it loose",
+                   "first jam in a minute?", "jammed again"), ("conveyor",),
+        [Shake("shake", ctx), Wait("let it settle", ctx, 0.5)],
+        "conveyor jammed again within a minute of a shake")
     # the controller's own programs stopped: neither a shake nor a retry can help
     card = Sequence("card fault", memory=True, children=[
         ErrorIs("card fault?", ctx, KEY, ("card_fault",)),
