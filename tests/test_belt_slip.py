@@ -42,14 +42,23 @@ def run_to(world: World, clock: SimClock, until: float, dt: float = 0.05) -> Non
         world.step(t)
 
 
+def fill(w: World, clock: SimClock, speed: float, until: float = 20.0,
+         stop_belt: bool = False) -> None:
+    """Lift parts onto the belt running at ``speed`` until ``until``, then stop the incline
+    (and the belt, with ``stop_belt``) and let them come to rest for a second."""
+    w.horizontal.jog(0.0, speed)
+    w.incline.jog(0.0, 100.0)
+    run_to(w, clock, until)
+    w.incline.jog(clock.now(), 0.0)
+    if stop_belt:
+        w.horizontal.jog(clock.now(), 0.0)
+    run_to(w, clock, until + 1.0)
+
+
 def loaded_belt(lenses, speed: float = 300.0, **sim) -> tuple[World, SimClock]:
     """A world with a dozen or so lenses at rest on a belt running at ``speed``."""
     w, clock = world_of(lenses, belt_mu_static=MU_S, belt_mu_kinetic=MU_K, **sim)
-    w.horizontal.jog(0.0, speed)
-    w.incline.jog(0.0, 100.0)
-    run_to(w, clock, 20.0)
-    w.incline.jog(clock.now(), 0.0)
-    run_to(w, clock, 21.0)
+    fill(w, clock, speed)
     assert len(w.on_horizontal) >= 5 and w.counts["slips"] == 0
     return w, clock
 
@@ -130,11 +139,7 @@ def test_braking_within_static_friction_slides_nothing(lenses):
 def test_slip_off_when_ideal_or_zero(lenses):
     for sim in ({"ideal": True}, {"belt_mu_static": 0.0}):
         w, clock = world_of(lenses, **sim)
-        w.horizontal.jog(0.0, 300.0)
-        w.incline.jog(0.0, 100.0)
-        run_to(w, clock, 20.0)
-        w.incline.jog(clock.now(), 0.0)
-        run_to(w, clock, 21.0)
+        fill(w, clock, 300.0)
         before = offsets(w)
         w.horizontal.accel = 50_000.0
         w.horizontal.jog(clock.now(), 0.0)
@@ -150,12 +155,7 @@ def test_a_shake_moves_parts_on_the_belt(lenses):
     for mu_s, mu_k in ((0.1, 0.08), (SimImperfections.belt_mu_static,
                                      SimImperfections.belt_mu_kinetic)):
         w, clock = world_of(lenses, belt_mu_static=mu_s, belt_mu_kinetic=mu_k)
-        w.horizontal.jog(0.0, 100.0)
-        w.incline.jog(0.0, 100.0)
-        run_to(w, clock, 20.0)
-        w.incline.jog(clock.now(), 0.0)
-        w.horizontal.jog(clock.now(), 0.0)
-        run_to(w, clock, 21.0)
+        fill(w, clock, 100.0, stop_belt=True)
         before = offsets(w)
         assert before
         SimConveyor("horizontal", w.horizontal, w).shake(20.0, 3)
@@ -252,11 +252,7 @@ def test_friction_per_part_type():
         cell.sim, belt_mu_static=MU_S, belt_mu_kinetic=MU_K))
     clock = SimClock()
     w = World(scenario, cell, clock, 4)
-    w.horizontal.jog(0.0, 200.0)
-    w.incline.jog(0.0, 100.0)
-    run_to(w, clock, 25.0)
-    w.incline.jog(clock.now(), 0.0)
-    run_to(w, clock, 26.0)
+    fill(w, clock, 200.0, until=25.0)
     before = offsets(w)
     types = {p.type for p in w.on_horizontal.values()}
     assert types == {"lens", "square"}
