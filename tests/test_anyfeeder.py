@@ -187,6 +187,28 @@ def test_a_servo_error_is_one_line_and_reset_and_init_recover_it(quick_plant):
         emu.stop()
 
 
+def test_a_fault_plan_ends_the_matching_action_with_a_servo_error(quick_plant):
+    """A fault plan's ``servo_timeout`` for controller ``plate`` (how a whole emulated run
+    injects one): the second action ends ``m13``; a kind the emulator cannot act on is
+    refused when it is built, not ignored."""
+    from feeder_bt.emulators.faults import FaultPlan
+    plan = FaultPlan()
+    plan.add("servo_timeout", "plate", "", nth=2)
+    emu = emulator(quick_plant, faults=plan)
+    feeder = driver(quick_plant, emu)
+    try:
+        assert wait(feeder.init()).ok and wait(feeder.dispense(1)).ok
+        assert "m13" in str(wait(feeder.feed(1, 1)).error)
+        assert [kind for ctrl, kind, _ in plan.log if ctrl == "plate"] == ["servo_timeout"]
+    finally:
+        feeder.close()
+        emu.stop()
+    bad = FaultPlan()
+    bad.add("drop", "plate")
+    with pytest.raises(ValueError, match="cannot inject 'drop'"):
+        AnyFeederEmulator(quick_plant, faults=bad)
+
+
 def test_no_feeder_is_a_lost_link():
     scenario, cell = load_scenario("scenarios/plate_lenses.yaml")
     s = socket.socket()

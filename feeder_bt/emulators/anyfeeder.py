@@ -39,6 +39,8 @@ from .faults import FaultPlan
 from .line_server import LineServer
 from .plant import Plant
 
+PLATE_FAULTS = ("servo_timeout",)    # the fault plan's kinds this emulator acts on
+
 
 class AnyFeederEmulator(LineServer):
     """One client at a time on ``port`` (0: any free port, see ``.port``)."""
@@ -59,6 +61,10 @@ class AnyFeederEmulator(LineServer):
         self.actions = 0
         self.servo_error_at, self.no_sync_at = servo_error_at, no_sync_at
         self.faults = faults            # controller "plate": servo_timeout ends it m13
+        for rule in faults.rules if faults is not None else ():
+            if rule.controller == "plate" and rule.kind not in PLATE_FAULTS:
+                raise ValueError(f"the AnyFeeder emulator cannot inject {rule.kind!r}; "
+                                 f"plate faults: {', '.join(PLATE_FAULTS)}")
         self.lines: list[str] = []                      # what it received, for tests
         self._send_lock = threading.Lock()
         super().__init__(host, port)
