@@ -464,8 +464,13 @@ def main(argv: list[str] | None = None) -> dict:
                      "opencv": cv2.__version__, "scikit-image": skimage.__version__},
         "machine": platform.machine(),
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
+    return write_report(report, args.out)
+
+
+def write_report(report: dict, out: Path) -> dict:
+    """The benchmark's JSON to ``out`` and to the terminal (``vision_floor`` too)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(report, indent=2) + "\n")
     print(json.dumps(report, indent=2))
     return report
 

@@ -20,7 +20,6 @@ of ``--repeats`` passes, then the median over frames. Writes
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import time
@@ -33,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from vision_bench import BlobPipeline, Ours  # noqa: E402
+from vision_bench import BlobPipeline, Ours, write_report  # noqa: E402
 
 from feeder_bt.scenario import load_scenario  # noqa: E402
 from feeder_bt.tools.render_cmd import render_frames  # noqa: E402
@@ -148,11 +147,9 @@ def main(argv: list[str] | None = None) -> dict:
                       for n in args.scenarios},
         "versions": {"python": platform.python_version(), "numpy": np.__version__,
                      "opencv": cv2.__version__},
+        "machine": platform.machine(),
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=2) + "\n")
-    print(json.dumps(report, indent=2))
-    return report
+    return write_report(report, args.out)
 
 
 if __name__ == "__main__":
