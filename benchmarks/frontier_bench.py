@@ -1,0 +1,185 @@
+"""The wear-budget frontier (issue 30, goal 1): what fixed settings reach at each
+recirculation cost, and what switching between them could reach under a budget.
+
+    python benchmarks/frontier_bench.py [--scenario scenarios/lenses.yaml]
+        [--belts 80,120,...] [--inclines 70,85,...] [--policies fifo,...]
+        [--screen-seeds 2] [--eval-seeds 5] [--duration 600] [--max-recirc 1.5]
+        [--points benchmarks/results/honest_budget.json] [--workers 2] [--out PATH]
+
+1. Screen: every fixed setting of a grid (belt mm/s x incline mm/s x pick policy, at the
+   scenario's frame spacing, no adjuster) on the tuning seeds (1..N). A 2-D space wants a
+   grid, and this one is given far more runs than a tuning budget, so the baseline is
+   found, not sampled.
+2. Evaluate on fresh seeds (101..): each policy's best setting within the budget, every
+   vertex of the screen's frontier (the upper concave envelope of parts/min against
+   recirculations/min), and the settings of ``--points`` (a honest_bench JSON: ours and the
+   tuned baselines), all on the same seeds.
+3. The time-sharing bound: a controller that spends a share of the time at each of some
+   fixed settings (each held long enough to be in its steady state) places the shares'
+   mix of their parts/min and recirculates the same mix of their recirculations/min, so
+   under a budget of R recirculations per placed part it reaches at most the best mix of
+   two settings with recirc/min = R x parts/min (a small linear programme; the optimum of
+   one with two constraints sits on at most two settings). Fresh-seed figures.
+
+What the bound does not cover, it says so: a controller that reacts within a pass (the
+pick policy does; all four are in the grid) or to transients of the belt. Those are the
+tuned settings of ``--points``, measured beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import multiprocessing
+import platform
+import statistics
+import sys
+import time
+from itertools import product
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))      # honest_bench, also when loaded by a test
+
+from honest_bench import FRESH_SEED0, run_all  # noqa: E402
+
+from feeder_bt.scenario.loader import RETRIEVE_POLICIES  # noqa: E402
+from feeder_bt.tuning.objective import Job  # noqa: E402
+from feeder_bt.tuning.search import describe  # noqa: E402
+from feeder_bt.tuning.space import MAX_INCLINE_PCT  # noqa: E402
+
+
+def fixed_overlay(belt: float, incline_mm_s: float, policy: str) -> dict:
+    """A constant belt and incline speed, no adjuster (incline as % of the belt)."""
+    pct = round(min(100.0 * incline_mm_s / belt, MAX_INCLINE_PCT), 2)
+    return {"present": {"horizontal_mm_s": belt, "incline_pct": pct},
+            "adjust": {"algorithm": "none"}, "retrieve": {"policy": policy}}
+
+
+def summary(rows: list[dict]) -> dict:
+    """Mean parts/min and recirculations over a setting's seeds (per seed kept)."""
+    ppm = [r["ppm"] for r in rows]
+    rc = [r["recirc_per_placed"] for r in rows]
+    return {"seeds": [r["seed"] for r in rows], "ppm": ppm,
+            "mean": round(statistics.mean(ppm), 2),
+            "sd": round(statistics.stdev(ppm), 2) if len(ppm) > 1 else 0.0,
+            "recirc_per_placed": round(statistics.mean(rc), 3),
+            "recirc_per_min": round(statistics.mean(p * r for p, r in zip(ppm, rc,
+                                                                            strict=True)), 2),
+            "lost": sum(r.get("lost") or 0 for r in rows)}
+
+
+def envelope(points: list[dict]) -> list[dict]:
+    """The upper concave envelope of (recirc/min, parts/min): the settings no mix beats."""
+    pts = sorted(points, key=lambda p: (p["recirc_per_min"], -p["mean"]))
+    hull: list[dict] = []
+    for p in pts:
+        if hull and p["mean"] <= hull[-1]["mean"]:
+            continue                       # costs more, places no more
+        while len(hull) >= 2:
+            a, b = hull[-2], hull[-1]
+            cross = ((b["recirc_per_min"] - a["recirc_per_min"]) * (p["mean"] - a["mean"])
+                     - (b["mean"] - a["mean"]) * (p["recirc_per_min"] - a["recirc_per_min"]))
+            if cross >= 0:                 # b lies on or under the chord a-p
+                hull.pop()
+            else:
+                break
+        hull.append(p)
+    return hull
+
+
+def time_sharing_bound(points: list[dict], budget: float) -> dict | None:
+    """The best mix of settings under ``budget`` recirculations per placed part: parts/min,
+    and the two settings and the share of time at the first."""
+    best: dict | None = None
+    for a, b in product(points, repeat=2):
+        ga = a["recirc_per_min"] - budget * a["mean"]       # <= 0: within the budget
+        gb = b["recirc_per_min"] - budget * b["mean"]
+        if ga > 0 or (gb <= 0 and a is not b):
+            continue
+        share = 1.0 if gb <= 0 else gb / (gb - ga)          # time at a so that the mix is R
+        ppm = share * a["mean"] + (1.0 - share) * b["mean"]
+        if best is None or ppm > best["ppm"]:
+            best = {"ppm": round(ppm, 2), "share_first": round(share, 3),
+                    "first": a["setting"], "second": b["setting"]}
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "lenses.yaml"))
+    ap.add_argument("--belts", default="80,120,160,200,260,330,400")
+    ap.add_argument("--inclines", default="70,85,100,115,130")
+    ap.add_argument("--policies", default=",".join(RETRIEVE_POLICIES))
+    ap.add_argument("--screen-seeds", type=int, default=2)
+    ap.add_argument("--eval-seeds", type=int, default=5)
+    ap.add_argument("--duration", type=float, default=600.0)
+    ap.add_argument("--max-recirc", type=float, default=1.5)
+    ap.add_argument("--points", default=str(ROOT / "benchmarks" / "results" /
+                                            "honest_budget.json"))
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "frontier.json"))
+    args = ap.parse_args()
+    scenario = str(Path(args.scenario).resolve())
+    floats = lambda s: [float(v) for v in s.split(",")]          # noqa: E731
+    grid = [fixed_overlay(b, i, p) for b, i, p in product(
+        floats(args.belts), floats(args.inclines), args.policies.split(","))
+        if i <= b * MAX_INCLINE_PCT / 100.0]
+    t0 = time.monotonic()
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
+        screen_seeds = range(1, args.screen_seeds + 1)
+        rows = run_all(pool, [Job(scenario, ov, s, args.duration)
+                              for ov in grid for s in screen_seeds])
+        n = args.screen_seeds
+        screened = [{"setting": describe(ov), "overlay": ov, **summary(rows[k * n:(k + 1) * n])}
+                    for k, ov in enumerate(grid)]
+        print(f"screened {len(grid)} settings on {n} seeds", flush=True)
+        within = [s for s in screened if s["recirc_per_placed"] <= args.max_recirc]
+        chosen = {s["setting"]: s for s in envelope(screened)}
+        for policy in args.policies.split(","):
+            mine = [s for s in within if s["overlay"]["retrieve"]["policy"] == policy]
+            if mine:
+                best = max(mine, key=lambda s: s["mean"])
+                chosen[best["setting"]] = best
+        points = json.loads(Path(args.points).read_text())["tuned"] if args.points else {}
+        named = {f"tuned {k}": v["overlay"] for k, v in points.items()
+                 if isinstance(v, dict) and "overlay" in v}
+        fresh = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
+        todo = [(s["setting"], s["overlay"]) for s in chosen.values()] + list(named.items())
+        rows = run_all(pool, [Job(scenario, ov, sd, args.duration)
+                              for _, ov in todo for sd in fresh])
+    k = args.eval_seeds
+    evaluated = [{"setting": name, "overlay": ov, **summary(rows[i * k:(i + 1) * k])}
+                 for i, (name, ov) in enumerate(todo)]
+    fixed = [e for e in evaluated if not e["setting"].startswith("tuned ")]
+    best_fixed = max((e for e in fixed if e["recirc_per_placed"] <= args.max_recirc),
+                     key=lambda e: e["mean"], default=None)
+    bound = time_sharing_bound(fixed, args.max_recirc)
+    out = {"machine": platform.machine(), "python": platform.python_version(),
+           "command": " ".join(["python", *sys.argv]), "scenario": args.scenario,
+           "duration_s": args.duration, "max_recirc": args.max_recirc,
+           "screen_seeds": list(screen_seeds), "eval_seeds": list(fresh),
+           "screened": screened, "evaluated": evaluated,
+           "best_fixed": best_fixed, "time_sharing_bound": bound,
+           "wall_s": round(time.monotonic() - t0, 1)}
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
+    print(f"\nfresh seeds {list(fresh)}, {args.duration:g} s, budget {args.max_recirc:g} "
+          f"recirculations per placed part:")
+    for e in sorted(evaluated, key=lambda e: -e["mean"]):
+        flag = "" if e["recirc_per_placed"] <= args.max_recirc else "  (over the budget)"
+        print(f"  {e['mean']:6.2f} parts/min (sd {e['sd']:.2f}), {e['recirc_per_placed']:.2f} "
+              f"recirculated per placed: {e['setting']}{flag}")
+    if best_fixed:
+        print(f"best fixed within the budget: {best_fixed['mean']:.2f} ({best_fixed['setting']})")
+    if bound:
+        print(f"time-sharing bound: {bound['ppm']:.2f} parts/min "
+              f"({bound['share_first']:.0%} {bound['first']}, rest {bound['second']})")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

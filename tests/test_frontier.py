@@ -1,0 +1,94 @@
+"""benchmarks/frontier_bench.py: the time-sharing bound under a wear budget is a mix that
+keeps to the budget and that no other mix of the settings beats; the docs quote the
+committed result (`python benchmarks/frontier_bench.py` rewrites it)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("frontier_bench",
+                                                  ROOT / "benchmarks/frontier_bench.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+frontier = _bench()
+
+
+def _pt(name: str, ppm: float, recirc_per_placed: float) -> dict:
+    return {"setting": name, "mean": ppm, "recirc_per_placed": recirc_per_placed,
+            "recirc_per_min": ppm * recirc_per_placed}
+
+
+def test_two_settings_mixed_to_sit_exactly_on_the_budget():
+    cheap, flood = _pt("cheap", 60.0, 1.0), _pt("flood", 80.0, 2.0)
+    got = frontier.time_sharing_bound([cheap, flood], 1.5)
+    # 4/7 of the time at 60/min (60 recirculated/min), 3/7 at 80/min (160/min)
+    assert got["first"] == "cheap" and got["second"] == "flood"
+    assert abs(got["share_first"] - 4 / 7) < 1e-3
+    assert abs(got["ppm"] - (4 * 60 + 3 * 80) / 7) < 0.01
+    # within the budget a single setting is the bound; over every budget, none is
+    assert frontier.time_sharing_bound([cheap, flood], 2.5)["ppm"] == 80.0
+    assert frontier.time_sharing_bound([flood], 1.5) is None
+
+
+point = st.tuples(st.floats(10.0, 120.0), st.floats(0.0, 5.0))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(point, min_size=1, max_size=8), st.floats(0.2, 4.0))
+def test_no_mix_of_two_settings_beats_the_bound_and_the_bound_keeps_the_budget(raw, budget):
+    pts = [_pt(f"s{i}", p, r) for i, (p, r) in enumerate(raw)]
+    got = frontier.time_sharing_bound(pts, budget)
+    feasible = [p for p in pts if p["recirc_per_placed"] <= budget]
+    if not feasible:
+        assert got is None
+        return
+    assert got is not None
+    by_name = {p["setting"]: p for p in pts}
+    a, b, s = by_name[got["first"]], by_name[got["second"]], got["share_first"]
+    placed = s * a["mean"] + (1 - s) * b["mean"]
+    recirc = s * a["recirc_per_min"] + (1 - s) * b["recirc_per_min"]
+    assert recirc <= budget * placed + 0.05 * placed          # the mix keeps to the budget
+    assert abs(placed - got["ppm"]) < 0.05 * max(1.0, placed)
+    for p in pts:                                               # and nothing beats it
+        for q in pts:
+            for k in range(11):
+                w = k / 10
+                pl = w * p["mean"] + (1 - w) * q["mean"]
+                rc = w * p["recirc_per_min"] + (1 - w) * q["recirc_per_min"]
+                if rc <= budget * pl:
+                    assert pl <= got["ppm"] + 0.01
+
+
+def test_the_envelope_drops_settings_under_the_chord_and_dominated_ones():
+    a, b, c = _pt("a", 50.0, 1.0), _pt("b", 55.0, 2.0), _pt("c", 70.0, 2.0)
+    worse = _pt("worse", 49.0, 1.5)
+    hull = frontier.envelope([c, worse, b, a])
+    assert [p["setting"] for p in hull] == ["a", "c"]   # b lies under a-c, worse costs more
+
+
+def test_the_docs_quote_the_committed_frontier():
+    result = json.loads((ROOT / "benchmarks/results/frontier.json").read_text())
+    text = (ROOT / "docs/performance.md").read_text()
+    best = result["best_fixed"]
+    bound = result["time_sharing_bound"]
+    m = re.search(r"best fixed setting within the budget \(frontier grid\): \*\*([\d.]+)\*\* "
+                  r"parts/min, ([\d.]+) recirculated per placed", text)
+    assert m, "docs/performance.md no longer quotes the frontier's best fixed setting"
+    assert float(m.group(1)) == best["mean"]
+    assert float(m.group(2)) == round(best["recirc_per_placed"], 2)
+    m = re.search(r"time-sharing bound at the budget: \*\*([\d.]+)\*\* parts/min", text)
+    assert m and float(m.group(1)) == bound["ppm"]
+    assert result["max_recirc"] == 1.5 and len(result["eval_seeds"]) == 5
