@@ -68,7 +68,10 @@ def summary(rows: list[dict]) -> dict:
             "recirc_per_placed": round(statistics.mean(rc), 3),
             "recirc_per_min": round(statistics.mean(p * r for p, r in zip(ppm, rc,
                                                                             strict=True)), 2),
-            "lost": sum(r.get("lost") or 0 for r in rows)}
+            "lost": sum(r.get("lost") or 0 for r in rows),
+            "robot_busy_pct": round(statistics.mean(r["robot_busy_pct"] for r in rows), 1),
+            "selection_bound_ppm": round(statistics.mean(r["robot_bound_selection_ppm"]
+                                                         for r in rows), 2)}
 
 
 def envelope(points: list[dict]) -> list[dict]:
@@ -172,12 +175,14 @@ def main() -> None:
     for e in sorted(evaluated, key=lambda e: -e["mean"]):
         flag = "" if e["recirc_per_placed"] <= args.max_recirc else "  (over the budget)"
         print(f"  {e['mean']:6.2f} parts/min (sd {e['sd']:.2f}), {e['recirc_per_placed']:.2f} "
-              f"recirculated per placed: {e['setting']}{flag}")
+              f"recirculated per placed, robot {e['robot_busy_pct']:.1f} % busy, selection "
+              f"bound {e['selection_bound_ppm']:.2f}: {e['setting']}{flag}")
     if best_fixed:
         print(f"best fixed within the budget: {best_fixed['mean']:.2f} ({best_fixed['setting']})")
     if bound:
-        print(f"time-sharing bound: {bound['ppm']:.2f} parts/min "
-              f"({bound['share_first']:.0%} {bound['first']}, rest {bound['second']})")
+        how = (bound["first"] if bound["share_first"] >= 1.0 else
+               f"{bound['share_first']:.0%} {bound['first']}, rest {bound['second']}")
+        print(f"time-sharing bound: {bound['ppm']:.2f} parts/min ({how})")
     print(f"wrote {args.out}")
 
 

@@ -92,3 +92,12 @@ def test_the_docs_quote_the_committed_frontier():
     m = re.search(r"time-sharing bound at the budget: \*\*([\d.]+)\*\* parts/min", text)
     assert m and float(m.group(1)) == bound["ppm"]
     assert result["max_recirc"] == 1.5 and len(result["eval_seeds"]) == 5
+    # the table: one row per setting run on the fresh seeds, its figures as measured
+    rows = re.findall(r"^\| (?:fixed|tuned)[^|]* \| \**([\d.]+)\** \(([\d.]+)\) \| ([\d.]+)"
+                      r"[^|]* \| ([\d.]+) % \| ([\d.]+) \|$", text, flags=re.M)
+    quoted = sorted((float(m), float(sd), float(r), float(b), float(sel))
+                    for m, sd, r, b, sel in rows)
+    measured = sorted((e["mean"], e["sd"], round(e["recirc_per_placed"], 2),
+                       e["robot_busy_pct"], e["selection_bound_ppm"])
+                      for e in result["evaluated"])
+    assert quoted == measured
