@@ -225,6 +225,9 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         [("incline_pct: 40", "incline_pct: .nan")], 21, "present.incline_pct", ["finite"]),
     "list_for_number": (
         [("tick_hz: 50", "tick_hz: [50]")], 3, "tick_hz", ["a list"]),
+    "part_beyond_any_size": (     # hypothesis found 2.4e153 mm overflow the area checks
+        [("diameter_mm: 50.8", "diameter_mm: 2.4e153")], 6,
+        "parts.lens.shape.disc.diameter_mm", ["beyond any part", "a unit mistake"]),
     "speed_above_cell_max": (
         [("horizontal_mm_s: 150", "horizontal_mm_s: 450")], 20, "present.horizontal_mm_s",
         ["max_mm_s 400", str(CELL)]),

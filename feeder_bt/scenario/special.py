@@ -76,6 +76,7 @@ def _build_shape(ctx: _Ctx, node: Node, path: str) -> Shape:
         if key not in given:
             g.fail(ctx.missing(kpath, key, inner))
     g.done()
+    _check_extent(ctx, kpath, values)
     if kind == "disc" and values["diameter_mm"] <= 0:
         raise ctx.error(_join(kpath, "diameter_mm"),
                         f"must be > 0, got {_num(values['diameter_mm'])}")
@@ -92,6 +93,30 @@ def _build_shape(ctx: _Ctx, node: Node, path: str) -> Shape:
         values["points_mm"], values["holes_mm"] = _recentre(
             ctx, values["points_mm"], values.get("holes_mm", []), kpath)
     return Shape(kind=kind, **values)
+
+
+#: no part outline reaches this far from its origin: a figure beyond it is a unit mistake
+#: (or garbage), refused here before the geometry's products overflow to inf and nan
+MAX_EXTENT_MM = 10_000.0
+
+
+def _check_extent(ctx: _Ctx, kpath: str, values: dict[str, Any]) -> None:
+    """Every length and coordinate of a shape within ``MAX_EXTENT_MM``."""
+    figures: list[tuple[str, float]] = []
+    for key in ("diameter_mm", "hole_mm"):
+        if key in values:
+            figures.append((_join(kpath, key), values[key]))
+    for i, v in enumerate(values.get("size_mm") or []):
+        figures.append((f"{kpath}.size_mm[{i}]", v))
+    for i, (x, y) in enumerate(values.get("points_mm") or []):
+        figures += [(f"{kpath}.points_mm[{i}]", x), (f"{kpath}.points_mm[{i}]", y)]
+    for h, hole in enumerate(values.get("holes_mm") or []):
+        for i, (x, y) in enumerate(hole):
+            figures += [(f"{kpath}.holes_mm[{h}][{i}]", x), (f"{kpath}.holes_mm[{h}][{i}]", y)]
+    for where, v in figures:
+        if not abs(v) <= MAX_EXTENT_MM:
+            raise ctx.error(where, f"{_num(v)} mm is beyond any part ({_num(MAX_EXTENT_MM)} mm "
+                                   f"at most): a unit mistake?")
 
 
 def _ring_area(pts: list[tuple[float, float]]) -> tuple[float, float, float]:
