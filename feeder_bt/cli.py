@@ -242,7 +242,8 @@ def _kits_line(report: dict) -> str:
     k = report.get("kits")
     if not k:
         return ""
-    kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items())
+    kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items()) + (
+        f", {k['open_kits']} open at once" if k.get("open_kits", 1) > 1 else "")
     which = next((name[:-len("_bound_kpm")] for name, v in k.items()
                   if name.endswith("_bound_kpm") and v == k.get("ceiling_kpm")), None)
     of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"

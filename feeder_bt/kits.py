@@ -4,6 +4,10 @@ retrieved and then a nut"): the parts of one kit, by type and count, placed in a
 
 The kit advances when a part is *placed*, not when it is chosen: a missed pick leaves the
 kit still wanting that part, so an assembly never goes without its washer.
+
+A station may hold several kits at once (``retrieve.open_kits``: trays, fixtures): a part
+goes to the fullest open kit that takes it, so a finished kit leaves as soon as it can, and
+the robot need not wait for the one type that a single open kit lacks.
 """
 
 from __future__ import annotations
@@ -17,55 +21,85 @@ from .supply_bound import inflow_bound_parts
 
 
 class KitTracker:
-    """What the kit being built still needs, from the parts placed so far."""
+    """What the open kits still need, from the parts placed so far."""
 
-    def __init__(self, counts: dict[str, int], order: Sequence[str] = ()) -> None:
+    def __init__(self, counts: dict[str, int], order: Sequence[str] = (),
+                 open_kits: int = 1) -> None:
         self.counts = dict(counts)
         self.order = list(order)
         self.size = sum(self.counts.values())
-        self.have: Counter[str] = Counter()
+        self.open_kits = max(1, int(open_kits))
+        self.kits: list[Counter[str]] = [Counter() for _ in range(self.open_kits)]
         self.completed = 0
 
     @classmethod
     def of(cls, retrieve: RetrieveParams) -> KitTracker | None:
         """The scenario's kit (a ``sequence`` is a kit in order); None without one."""
         if retrieve.sequence:
-            return cls(Counter(retrieve.sequence), retrieve.sequence)
+            return cls(Counter(retrieve.sequence), retrieve.sequence, retrieve.open_kits)
         if retrieve.kit:
-            return cls(retrieve.kit)
+            return cls(retrieve.kit, (), retrieve.open_kits)
+        return None
+
+    @property
+    def have(self) -> Counter[str]:
+        """The fullest open kit's parts (the one kit, with ``open_kits`` 1)."""
+        return self.kits[self._fullest()[0]]
+
+    def _fullest(self) -> list[int]:
+        """The open kits, fullest first (the first opened first among equals)."""
+        return sorted(range(len(self.kits)), key=lambda i: -sum(self.kits[i].values()))
+
+    def _takes(self, kit: Counter[str], ptype: str) -> bool:
+        if self.order:
+            i = sum(kit.values())
+            return i < self.size and self.order[i] == ptype
+        return kit[ptype] < self.counts.get(ptype, 0)
+
+    def _into(self, kits: list[Counter[str]], ptype: str) -> int | None:
+        """The fullest of ``kits`` that takes ``ptype`` next (None: none does)."""
+        for i in sorted(range(len(kits)), key=lambda i: -sum(kits[i].values())):
+            if self._takes(kits[i], ptype):
+                return i
         return None
 
     def wanted(self, in_flight: Counter[str] | None = None) -> set[str]:
-        """The part types the kit takes next: in order, the next one; else any it lacks.
-        ``in_flight``: parts handed out and not yet placed (robots of the part server),
-        already promised to the kit; empty when all it lacks are on their way."""
-        going = in_flight or Counter()
-        if self.order:
-            i = sum(self.have.values()) + sum(going.values())
-            return {self.order[i]} if i < self.size else set()
-        return {t for t, n in self.counts.items() if self.have[t] + going[t] < n}
+        """The part types some open kit takes next: in order, each kit's next one; else any
+        a kit lacks. ``in_flight``: parts handed out and not yet placed (robots of the part
+        server), already promised to the kits; empty when all they lack are on their way."""
+        kits = [Counter(k) for k in self.kits]
+        going = Counter(in_flight or ())
+        while going:                 # in a kit's order: a nut waits for its washer
+            took = False
+            for ptype in sorted(going):
+                i = self._into(kits, ptype)
+                if i is not None:
+                    kits[i][ptype] += 1
+                    going[ptype] -= 1
+                    took = True
+            going = +going
+            if not took:
+                break
+        return {t for t in self.counts for k in kits if self._takes(k, t)}
 
     def placed(self, ptype: str) -> bool:
-        """A part of ``ptype`` was placed; True when it completed a kit. A part the kit
-        did not want (one held from before a restart) is not counted into it."""
-        if ptype not in self.wanted():
+        """A part of ``ptype`` was placed; True when it completed a kit. A part no open kit
+        wanted (one held from before a restart) is not counted into one."""
+        i = self._into(self.kits, ptype)
+        if i is None:
             return False
-        self.have[ptype] += 1
-        if sum(self.have.values()) < self.size:
+        self.kits[i][ptype] += 1
+        if sum(self.kits[i].values()) < self.size:
             return False
-        self.have.clear()
+        self.kits[i] = Counter()
         self.completed += 1
         return True
-
-    def describe(self) -> str:
-        parts = " + ".join(f"{n} {t}" for t, n in self.counts.items())
-        return parts + (f" in order {', '.join(self.order)}" if self.order else "")
 
 
 def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: float,
                robot_ppm: float, inflow: dict[str, tuple[int, list[tuple[float, int]]]] | None,
-               span_s: float, lag_s: float = 0.0, selection_kits: int | None = None
-               ) -> dict[str, float]:
+               span_s: float, lag_s: float = 0.0, selection_kits: int | None = None,
+               open_kits: int = 1) -> dict[str, float]:
     """Kits per minute no feeder could beat: the robot's (``robot_ppm`` over the parts a
     kit holds), the supply's (each type's parts that came within reach, over the kit's
     count of it) and, when placed parts leave the cell, the inflow's.
@@ -74,7 +108,7 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
     each type had reached the robot by some time ``s`` (``A_t(s) / n_t``; an arrival
     counts ``lag_s`` after it, the ride to the robot) plus what the robot builds after
     ``s``: a kit takes ``size`` cycles, so ``robot_ppm / size`` kits a minute, plus the
-    one kit a part of which was placed before ``s``. ``selection_kits``: kits a
+    kits a part of which was placed before ``s`` (one per open kit, ``open_kits``). ``selection_kits``: kits a
     nearest-first robot completes from the run's passes, taking only the types the kit
     wants (``robot_bounds.selection_bound``; simulated runs only), a yardstick as the
     parts' selection bound is."""
@@ -86,7 +120,8 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
            "supply_bound_kpm": min(in_reach.get(t, 0) * per_min / n for t, n in counts.items())}
     if inflow is not None:
         out["inflow_bound_kpm"] = min(
-            _kit_inflow(*inflow.get(t, (0, [])), n, robot_ppm / size, span_s, lag_s) * per_min
+            _kit_inflow(*inflow.get(t, (0, [])), n, robot_ppm / size, span_s, lag_s,
+                        open_kits) * per_min
             for t, n in counts.items())
     if selection_kits is not None:
         out["selection_bound_kpm"] = selection_kits * per_min
@@ -96,11 +131,11 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
 
 
 def _kit_inflow(initial: int, arrivals: list[tuple[float, int]], n: int, kits_pm: float,
-                span_s: float, lag_s: float) -> float:
+                span_s: float, lag_s: float, open_kits: int = 1) -> float:
     """Kits a type's arrivals allow (``n`` of it a kit) with a robot building ``kits_pm``:
     the parts' inflow bound (``supply_bound.inflow_bound_parts``) counted in kits."""
     return inflow_bound_parts(initial / n, [(t, k / n) for t, k in arrivals], kits_pm,
-                              span_s, lag_s)
+                              span_s, lag_s, begun=open_kits)
 
 
 def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: float,
@@ -110,8 +145,9 @@ def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: flo
     """The report's ``kits``: the kit, how many were completed and how fast, its bounds."""
     kpm = tracker.completed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     bounds = kit_bounds(tracker.counts, in_reach, feed_seconds, robot_ppm, inflow, span_s,
-                        lag_s, selection_kits)
+                        lag_s, selection_kits, tracker.open_kits)
     ceil = bounds.get("ceiling_kpm", math.inf)
     return {"kit": tracker.counts, "order": tracker.order or "any",
+            "open_kits": tracker.open_kits,
             "completed": tracker.completed, "per_minute": round(kpm, 3), **bounds,
             "of_ceiling_pct": round(100.0 * kpm / ceil, 1) if 0 < ceil < math.inf else None}

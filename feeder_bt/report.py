@@ -102,7 +102,7 @@ def world_kit_selection(cell_spec: CellSpec, scenario: Scenario, world: Any, kit
     run's passes (``robot_bounds.selection_bound``); None where the replay cannot run."""
     if _record_since(world, sim_seconds) is not None or cell_spec.presentation == "plate":
         return None
-    replay = KitTracker(kit.counts, kit.order)
+    replay = KitTracker(kit.counts, kit.order, kit.open_kits)
     selection_bound(Pricing.of(world.robot_model, cell_spec, scenario), world.passlog,
                     tuple(cell_spec.robot.safe_mm), world.clock.now(), replay)
     return replay.completed

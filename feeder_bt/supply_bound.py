@@ -66,7 +66,8 @@ def supply_bound_ppm(located_in_reach: int, feed_seconds: float) -> float:
 
 
 def inflow_bound_parts(initial: float, arrivals: Sequence[tuple[float, float]],
-                       robot_ppm: float, span_s: float, lag_s: float = 0.0) -> float:
+                       robot_ppm: float, span_s: float, lag_s: float = 0.0,
+                       begun: float = 1.0) -> float:
     """The most parts any feeder could have placed in ``[0, span_s]`` when the cell held
     ``initial`` parts at 0 and ``arrivals`` (seconds, parts) came later, with a robot that
     places at most ``robot_ppm``: ``min over s of A(s) + R (span_s - s) + 1`` (the one
@@ -75,16 +76,17 @@ def inflow_bound_parts(initial: float, arrivals: Sequence[tuple[float, float]],
     arrives at ``t`` reaches the robot no sooner than ``t + lag_s`` (``transport_lag_s``:
     the ride up the incline and along the belt), so each arrival counts from then; the
     cell starts with every part in the hopper (the simulated world does), so nothing is
-    placed before ``lag_s``."""
+    placed before ``lag_s``. ``begun``: the units under way at ``s`` (1 for parts: the one
+    cycle; for kits, each kit open at once, ``kits._kit_inflow``)."""
     rate = robot_ppm / 60.0
     arrived = float(initial + sum(n for t, n in arrivals if t <= 0))
-    best = arrived + rate * span_s + 1
+    best = arrived + rate * span_s + begun
     if lag_s > 0:
-        best = min(best, rate * max(span_s - lag_s, 0.0) + 1)
+        best = min(best, rate * max(span_s - lag_s, 0.0) + begun)
     for t, n in sorted((t + lag_s, n) for t, n in arrivals if 0 < t):
         if t > span_s:
             break
-        best = min(best, arrived + rate * (span_s - t) + 1)      # just before it came
+        best = min(best, arrived + rate * (span_s - t) + begun)  # just before it came
         arrived += n
     return min(best, arrived)
 

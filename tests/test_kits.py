@@ -128,3 +128,82 @@ def test_a_kit_and_a_sequence_together_are_refused(tmp_path, capsys):
     p.write_text(p.read_text().replace("  kit:", "  sequence: [square, lens]\n  kit:"))
     assert main(["check", str(p)]) == 2
     assert "not both" in capsys.readouterr().err
+
+
+def test_two_open_kits_take_what_either_lacks_and_fill_the_fuller_first():
+    """retrieve.open_kits: two trays at the station; a lens need not wait for the square
+    the first tray lacks, and a part goes to the fuller tray, so kits leave sooner."""
+    kit = KitTracker({"square": 1, "lens": 3}, open_kits=2)
+    for _ in range(3):
+        assert kit.placed("lens") is False
+    assert kit.wanted() == {"square", "lens"}       # tray 1 lacks a square, tray 2 anything
+    assert kit.placed("lens") is False              # into tray 2: tray 1 has its lenses
+    assert [sorted(k.items()) for k in kit.kits] == [[("lens", 3)], [("lens", 1)]]
+    assert kit.placed("square") is True and kit.completed == 1   # the fuller tray first
+    assert kit.placed("square") is False and kit.wanted() == {"square", "lens"}
+    assert kit.have == Counter(square=1, lens=1)     # the fullest open kit
+    one = KitTracker({"square": 1, "lens": 3})
+    for _ in range(4):
+        one.placed("lens")
+    assert one.wanted() == {"square"} and one.have["lens"] == 3   # one tray: the lens waits
+
+
+def test_open_kits_in_order_each_want_their_next_and_count_promises():
+    seq = KitTracker({"washer": 1, "nut": 1}, ["washer", "nut"], open_kits=2)
+    assert seq.placed("nut") is False and seq.placed("washer") is False
+    assert seq.wanted() == {"washer", "nut"}         # kit 1 its nut, kit 2 its washer
+    assert seq.wanted(Counter(nut=1)) == {"washer"}
+    assert seq.wanted(Counter(nut=1, washer=1)) == {"nut"}
+    assert seq.placed("nut") is True and seq.completed == 1
+
+
+def test_the_kit_inflow_bound_allows_one_kit_begun_per_open_kit():
+    """Kits done by the end <= A(s)/n + R/size (T - s) + the kits open at s: with two
+    trays, two kits may be under way when the last part arrives."""
+    inflow = {"lens": (0, [(300.0, 30)]), "square": (30, [])}
+    one = kit_bounds({"square": 1, "lens": 3}, {}, 600.0, 60.0, inflow, 600.0)
+    two = kit_bounds({"square": 1, "lens": 3}, {}, 600.0, 60.0, inflow, 600.0, open_kits=2)
+    # nothing before 300 s, then 15 kits/min for 300 s (75) but 10 lens kits at most
+    assert one["inflow_bound_kpm"] == round(10 * 60 / 600, 3)
+    assert two["inflow_bound_kpm"] == one["inflow_bound_kpm"]  # the arrivals still decide
+    late = {"lens": (0, [(590.0, 300)]), "square": (300, [])}
+    one = kit_bounds({"square": 1, "lens": 3}, {}, 600.0, 60.0, late, 600.0)
+    two = kit_bounds({"square": 1, "lens": 3}, {}, 600.0, 60.0, late, 600.0, open_kits=2)
+    # 10 s before the end: 15 kits/min for 10 s = 2.5, plus the kits begun
+    assert one["inflow_bound_kpm"] == round(3.5 * 60 / 600, 3)
+    assert two["inflow_bound_kpm"] == round(4.5 * 60 / 600, 3)
+
+
+def test_a_second_open_kit_builds_more_kits(tmp_path):
+    """With one tray a lens waits while the tray lacks its square; with two it goes to the
+    second tray. Same seed, same setting: more kits, every placed part in a kit but those
+    of the trays still open, nothing lost."""
+    runs = {}
+    for n in (1, 2):
+        p = kit_scenario(tmp_path, "{square: 1, lens: 3}")
+        if n > 1:
+            p.write_text(p.read_text().replace("  kit:", f"  open_kits: {n}\n  kit:"))
+        runs[n] = run_job(RunOptions(scenario=str(p), duration=600.0, fast=True, seed=2,
+                                     view="none", db=None,
+                                     supply=str(ROOT / "supply" / "mix_drift.yaml")))
+    one, two = runs[1], runs[2]
+    assert two["kits"]["completed"] > one["kits"]["completed"]
+    assert two["kits"]["open_kits"] == 2 and two["parts"]["lost"] == 0
+    got, k = two["parts"]["retrieved"], two["kits"]["completed"]
+    assert k <= got["square"] <= k + 2 and 3 * k <= got["lens"] <= 3 * k + 6
+    assert "2 open at once" in summary(two)
+
+
+@pytest.mark.parametrize("edit, what", [
+    ("  open_kits: 0\n  kit:", "retrieve.open_kits"),
+    ("  open_kits: 2\n  kitx:", "retrieve.open_kits: open kits need a retrieve.kit"),
+])
+def test_bad_open_kits_are_one_line_and_exit_2(tmp_path, capsys, edit, what):
+    p = kit_scenario(tmp_path, "{square: 1, lens: 3}")
+    text = p.read_text().replace("  kit:", edit)
+    if "kitx" in edit:          # no kit at all: drop the kit line
+        text = "\n".join(x for x in text.splitlines() if not x.startswith("  kitx:")) + "\n"
+    p.write_text(text)
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert what in err and "Traceback" not in err and len(err.splitlines()) == 1

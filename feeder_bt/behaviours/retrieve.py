@@ -39,7 +39,7 @@ class NextPart(Leaf):
         kit = KitTracker.of(ctx.scenario.retrieve)
         stats = ctx.stats
         if kit is None or stats.kit is None or stats.kit.counts != kit.counts \
-                or stats.kit.order != kit.order:
+                or stats.kit.order != kit.order or stats.kit.open_kits != kit.open_kits:
             stats.kit = kit                 # kept across a restart: the kit half built
 
     def x_now(self, part: Part) -> float:

@@ -154,6 +154,10 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
     if sc.retrieve.kit and sc.retrieve.sequence:
         ctx.add_problem("retrieve.kit", "give a kit (any order) or a sequence (a kit in "
                                         "order), not both")
+    if sc.retrieve.open_kits > 1 and not (sc.retrieve.kit or sc.retrieve.sequence):
+        ctx.add_problem("retrieve.open_kits", "open kits need a retrieve.kit or a "
+                                              "retrieve.sequence to build",
+                        line=ctx.key_lines.get("retrieve.open_kits"))
     ctx.adjust_params = _check_adjust(sc.adjust, ctx)
 
 

@@ -195,6 +195,9 @@ class RetrieveParams:
     # a kit (thesis 8.2.1.5): part types and how many of each, placed in any order; the
     # retrieve tree takes what the kit lacks next and the report counts kits (kits.py)
     kit: dict[str, int] = field(default_factory=dict)
+    # kits built at once (trays at the station): a part goes to the fullest open kit that
+    # lacks it, so the robot need not wait for the one type the only open kit lacks
+    open_kits: int = 1
     leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the pick step
     # price picks with the robot model fitted online from measured move times
     # (feeder_bt/robot_fit.py); false: with the cell's nominal model (the fit is still reported)

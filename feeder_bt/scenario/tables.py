@@ -150,6 +150,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (RetrieveParams, "too_far_mm"): POSITIVE,
     (RetrieveParams, "reach_time_s"): NON_NEGATIVE,
     (RetrieveParams, "max_failed_picks"): Range(0, 1000),
+    (RetrieveParams, "open_kits"): Range(1, 16),
     (AdjustParams, "period_s"): POSITIVE,
     (ConveyorSpec, "length_mm"): POSITIVE,
     (ConveyorSpec, "width_mm"): POSITIVE,
