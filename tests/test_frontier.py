@@ -101,3 +101,16 @@ def test_the_docs_quote_the_committed_frontier():
                        e["robot_busy_pct"], e["selection_bound_ppm"])
                       for e in result["evaluated"])
     assert quoted == measured
+
+
+def test_the_docs_quote_the_committed_two_tray_kits():
+    """docs/performance.md's two-tray kit table is honest_kits_two_trays.json's."""
+    tuned = json.loads((ROOT / "benchmarks/results/honest_kits_two_trays.json").read_text())
+    text = (ROOT / "docs/performance.md").read_text()
+    i = text.index("| setting, two trays (same budget) |")
+    rows = re.findall(r"^\| [^|]+ \| \**([\d.]+)\** \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| "
+                      r"([\d.]+) % of ([\d.]+) \|", text[i:i + 2000], flags=re.M)
+    got = [(float(m), float(lo), float(hi), float(ib)) for m, lo, hi, _, _, ib in rows]
+    want = [(round(k["mean"], 2), k["min"], k["max"], k["inflow_bound_kpm"])
+            for k in (tuned["tuned"][s]["kits"] for s in ("ours", "watermarks", "fixed"))]
+    assert got == want
