@@ -5,8 +5,8 @@ frame, or the inverted frame; ``light``: the frame minus the golden image, or th
 its threshold (``threshold.method``: ``fixed``, ``otsu`` never below ``value``, or
 ``adaptive`` with OpenCV's ``C``), the morphology, and the contours of the mask, found only
 in the rectangles that hold foreground (``Segmenter._contours_holes``). Also where a
-contour's edge crosses the threshold between pixels (``Segmenter._edge_points``), for
-angles finer than a pixel.
+contour's edge crosses the threshold between pixels (``Segmenter._bright_source`` and
+``kernels.edge_points``), for angles finer than a pixel.
 
 ``Segmenter`` holds what one recipe needs for this and nothing of parts or calibration;
 ``Locator`` (``vision.locator``) is a ``Segmenter`` that also measures and classifies the
@@ -25,10 +25,7 @@ import numpy as np
 
 from ..scenario.model import VisionRecipe
 from .chains import _first, _runs, _with_holes
-
-# the four 4-neighbours of a pixel (u, v): where the outline may cross between them
-_DU = np.array([1, -1, 0, 0])
-_DV = np.array([0, 0, 1, -1])
+from .jit import kernels
 
 
 class Segmenter:
@@ -238,56 +235,33 @@ class Segmenter:
         out.sort(key=_first, reverse=True)
         return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
 
-    def _diff_at(self, img: np.ndarray, diff: np.ndarray | None, at: np.ndarray) -> np.ndarray:
-        """``_diff`` at flat pixel indices ``at`` (from the frame's if it was made)."""
+    def _bright_source(self, img: np.ndarray, diff: np.ndarray | None
+                       ) -> tuple[np.ndarray, np.ndarray, int]:
+        """How ``kernels.edge_points`` reads the image in which parts are bright (``_diff``)
+        at a pixel: (the frame's difference image if it was made, else the frame; the
+        golden image or a placeholder; ``kernels``' mode), the images flat.
+
+        Where the outline crosses the level between pixels, for angles finer than a pixel
+        (``Locator._faces``): a binary contour moves in whole pixels, which limits the angle
+        of a near-axis edge to about 1°; the grey levels say where the edge is. Between
+        each boundary pixel given (the vertices of each blob's pixel hull) and each of its
+        4-neighbours outside the level, the difference image (interpolated linearly, as a
+        bilinear image is along that line) crosses the level at one point. Only the blob's
+        own boundary is read, so a neighbour in its box is no trouble. Without a level
+        (adaptive threshold), or if a contour has too few such points, the contours'
+        pixels are used.
+        """
+        k = kernels()
         if diff is not None:
-            return diff.ravel()[at]
+            return diff.reshape(-1), _NO_GOLDEN, k.DIFF
+        flat = np.ascontiguousarray(img).reshape(-1)
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
-            g = golden.ravel()[at].astype(np.int16)
-            d = img.ravel()[at] - g if self._light else g - img.ravel()[at]
-            return np.maximum(d, 0).astype(np.uint8)
-        return img.ravel()[at] if self._light else 255 - img.ravel()[at]
+            return flat, golden.reshape(-1), k.GOLDEN_LIGHT if self._light else k.GOLDEN_DARK
+        return flat, _NO_GOLDEN, k.PLAIN_LIGHT if self._light else k.PLAIN_DARK
 
-    def _edge_points(self, contours: list[np.ndarray], img: np.ndarray,
-                     diff: np.ndarray | None, level: float | None
-                     ) -> tuple[np.ndarray, list[int]]:
-        """Points (pixels, ``(n, 2)``) on the outlines of ``contours`` to a fraction of a
-        pixel, all of them in one set of array operations, and how many each contour has
-        (in order).
 
-        A binary contour moves in whole pixels, which limits the angle of a near-axis edge
-        to about 1°. The grey levels say where the edge is: between each given boundary
-        pixel (the locator's faces give the vertices of each blob's pixel hull) and each of
-        its 4-neighbours outside the level, the difference image (interpolated linearly, as
-        a bilinear image is along that line) crosses the level at one point. Only the
-        blob's own boundary is read, so a neighbour in its box is no trouble. Without a
-        level (adaptive threshold), or if a contour has too few such points, the contours'
-        pixels are returned.
-        """
-        uv = np.concatenate(contours).reshape(-1, 2)
-        counts = [len(c) for c in contours]
-        pts: np.ndarray = uv
-        if level is not None:
-            w = img.shape[1]
-            # each boundary pixel and its 4-neighbours (inside the image: touching blobs
-            # are out), a row each, read in one gather
-            at = (uv[:, 1] * w + uv[:, 0])[:, None] + np.array([0, 1, -1, w, -w])
-            vals = self._diff_at(img, diff, at)
-            inside, around = vals[:, 0], vals[:, 1:]
-            cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
-            i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
-            last = np.searchsorted(i, np.cumsum(counts))     # crossings per contour
-            found = last.copy()
-            found[1:] -= last[:-1]
-            if found.min() >= 3:
-                a = inside[i].astype(np.float64)
-                t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
-                pts = np.empty((len(i), 2))
-                pts[:, 0] = uv[i, 0] + t * _DU[k]
-                pts[:, 1] = uv[i, 1] + t * _DV[k]
-                counts = found.tolist()
-        return pts, counts
+_NO_GOLDEN = np.zeros(1, np.uint8)
 
 
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
