@@ -67,17 +67,6 @@ def _boundary_steps(contours: list[np.ndarray], full: bool) -> list[int]:
     return [len(c) for c in contours] if full else _chain_steps(contours)
 
 
-def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
-    first, last = int(idx[0]), int(idx[-1])
-    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
-        return [(first, last)]
-    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
-    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
-    lasts = idx[cuts].tolist() + [int(idx[-1])]
-    return list(zip(firsts, lasts, strict=True))
-
-
 def _smooth_length(contour: np.ndarray, window: int = WINDOW) -> float:
     """Length of a closed pixel contour after a circular moving average of its points.
 

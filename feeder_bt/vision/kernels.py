@@ -156,9 +156,16 @@ def _monotone(P, order, m, out):
 @_jit
 def convex_hull(P, out):
     """The convex hull of the points P ((n, 2)) as indices into P (``_monotone``)."""
-    order = np.argsort(P[:, 1], kind="mergesort")
-    order = order[np.argsort(P[order, 0], kind="mergesort")]
-    return _monotone(P, order, len(P), out)
+    n = len(P)
+    order = np.argsort(P[:, 0])
+    for t in range(1, n):               # ties in u by v (few: the sort leaves them near)
+        i = order[t]
+        s = t
+        while s > 0 and P[order[s - 1], 0] == P[i, 0] and P[order[s - 1], 1] > P[i, 1]:
+            order[s] = order[s - 1]
+            s -= 1
+        order[s] = i
+    return _monotone(P, order, n, out)
 
 
 @_jit(inline="always")
@@ -373,9 +380,6 @@ def _hull_stats(pts, hull, a, b, row):
     row[HULL_LEN] = _arc(pts, hull, a, b)
 
 
-# the four 4-neighbours of a pixel: where the outline may cross between them
-_DU = (1, -1, 0, 0)
-_DV = (0, 0, 1, -1)
 
 # how ``faces`` reads the image in which parts are bright at a pixel (``Segmenter._diff_at``)
 DIFF, GOLDEN_LIGHT, GOLDEN_DARK, PLAIN_LIGHT, PLAIN_DARK = range(5)
@@ -419,12 +423,14 @@ def edge_points(pts, hull, hull_ends, sel, src, golden, mode, width, cut, fine):
                 inside = _bright(src, golden, mode, at)
                 if inside <= cut:
                     continue
-                for k in range(4):
-                    nb = _bright(src, golden, mode, at + _DU[k] + _DV[k] * width)
+                for k in range(4):            # the 4-neighbours: u + 1, u - 1, v + 1, v - 1
+                    du = 1 if k == 0 else (-1 if k == 1 else 0)
+                    dv = 1 if k == 2 else (-1 if k == 3 else 0)
+                    nb = _bright(src, golden, mode, at + du + dv * width)
                     if nb <= cut:
                         t = (inside - (cut + 0.5)) / (inside - nb)
-                        out[m, 0] = u + t * _DU[k]
-                        out[m, 1] = v + t * _DV[k]
+                        out[m, 0] = u + t * du
+                        out[m, 1] = v + t * dv
                         m += 1
             if m - start < 3:
                 few = True
@@ -441,8 +447,6 @@ def edge_points(pts, hull, hull_ends, sel, src, golden, mode, width, cut, fine):
     return out[:m], ends
 
 
-_CORNER_X = (1.0, -1.0, -1.0, 1.0)    # the rectangle's corners in half-sides
-_CORNER_Y = (1.0, 1.0, -1.0, -1.0)
 _TOL = 1.5                            # mm: a point this near a side is on it
 _SQRT2 = math.sqrt(2.0)
 
@@ -454,37 +458,41 @@ def signatures(xy, ends, hulled):
     n = len(ends)
     out = np.zeros((n, 6))
     idx = np.empty(2 * len(xy) + 1, np.int64)
+    qx = np.empty(len(xy))
+    qy = np.empty(len(xy))
     a = 0
     for i in range(n):
         b = ends[i]
         P = xy[a:b]
         k = convex_hull(P, idx)
         cx, cy, al, w, h = min_rect(P, idx, k, 0.0)
-        if hulled:
-            pu = P[:, 0].astype(np.float64)
-            pv = P[:, 1].astype(np.float64)
-        else:
-            pu = P[idx[:k], 0].astype(np.float64)
-            pv = P[idx[:k], 1].astype(np.float64)
         hx, hy = 0.5 * w, 0.5 * h
         ca, sa = math.cos(al), math.sin(al)
-        m = len(pu)
-        qx = np.empty(m)
-        qy = np.empty(m)
+        m = b - a if hulled else k
+        # each point in the rectangle's frame, and its squared distance to the nearest
+        # point of each corner (+, +), (-, +), (-, -), (+, -)
+        n0 = n1 = n2 = n3 = np.inf
         for j in range(m):
-            du, dv = pu[j] - cx, pv[j] - cy
-            qx[j] = du * ca + dv * sa                 # in the rectangle's frame
-            qy[j] = dv * ca - du * sa
-        far, kc = -1.0, 0
-        for c in range(4):                            # the corner farthest from the outline
-            near = np.inf
-            for j in range(m):
-                dx, dy = qx[j] - hx * _CORNER_X[c], qy[j] - hy * _CORNER_Y[c]
-                near = min(near, dx * dx + dy * dy)
-            if near > far:
-                far, kc = near, c
-        sx = np.sign(hx * _CORNER_X[kc])
-        sy = np.sign(hy * _CORNER_Y[kc])
+            t = j if hulled else idx[j]
+            du, dv = float(P[t, 0]) - cx, float(P[t, 1]) - cy
+            x = du * ca + dv * sa
+            y = dv * ca - du * sa
+            qx[j], qy[j] = x, y
+            xp, xm, yp, ym = (x - hx) ** 2, (x + hx) ** 2, (y - hy) ** 2, (y + hy) ** 2
+            n0 = min(n0, xp + yp)
+            n1 = min(n1, xm + yp)
+            n2 = min(n2, xm + ym)
+            n3 = min(n3, xp + ym)
+        # the corner farthest from the outline is the cut one
+        cxs, cys, far = 1.0, 1.0, n0
+        if n1 > far:
+            cxs, cys, far = -1.0, 1.0, n1
+        if n2 > far:
+            cxs, cys, far = -1.0, -1.0, n2
+        if n3 > far:
+            cxs, cys, far = 1.0, -1.0, n3
+        sx = np.sign(hx * cxs)
+        sy = np.sign(hy * cys)
         top = right = -np.inf
         for j in range(m):                            # cut corner now at (+, +)
             fx, fy = qx[j] * sx, qy[j] * sy
@@ -534,3 +542,74 @@ def warm() -> None:
     signatures(pts.astype(np.float32), ends, False)
     smooth_length(pts, 0, 4, 5)
     map_points(pts.astype(np.float64), SIMILARITY, cells, par)
+    foreground_rois(np.zeros((3, 1), np.uint64), 3, 8, 1)
+
+
+@_jit
+def _lit_rows(words, h):
+    """Which rows of a mask (8 pixels a word) have foreground."""
+    nw = words.shape[1]
+    lit = np.empty(h, np.bool_)
+    for v in range(h):
+        x = np.uint64(0)
+        for k in range(nw):
+            x |= words[v, k]
+        lit[v] = x != 0
+    return lit
+
+
+@_jit
+def _or_rows(words, a, b, acc):
+    """``acc``: the OR of rows a..b of a mask (8 pixels a word)."""
+    nw = words.shape[1]
+    acc[:] = 0
+    for r in range(a, b + 1):
+        for k in range(nw):
+            acc[k] |= words[r, k]
+
+
+@_jit
+def _column_runs(acc, w, gap, margin, v0, v1, res):
+    """Append to ``res`` a rectangle (v0, v1, u0, u1) per run of lit columns of ``acc`` (8
+    a word), runs parted by more than ``gap`` unlit ones, with ``margin``."""
+    c0 = c1 = -1
+    for u in range(w + gap + 2):             # the last run is closed past the end
+        on = u < w and (acc[u >> 3] >> np.uint64(8 * (u & 7))) & np.uint64(255) != 0
+        if c0 >= 0 and u - c1 > gap:         # more than gap columns since the run's last
+            res.append((v0, v1, max(c0 - margin, 0), min(c1 + margin + 1, w)))
+            c0 = -1
+        if on:
+            if c0 < 0:
+                c0 = u
+            c1 = u
+
+
+@_jit
+def foreground_rois(words, h, w, margin):
+    """``Segmenter._rois``: rectangles (v0, v1, u0, u1) holding all the foreground of a
+    mask (h rows, w columns, given as 8 pixels a word, rows padded with zeros to whole
+    words), each with ``margin`` empty pixels (or the image's edge) around it. Rows with
+    foreground are cut into bands where more than 2 ``margin`` empty rows part them, then
+    each band's columns likewise."""
+    gap = 2 * margin
+    res = [(0, 0, 0, 0)]
+    res.pop()
+    acc = np.empty(words.shape[1], np.uint64)
+    lit = _lit_rows(words, h)
+    v = 0
+    while v < h:
+        if not lit[v]:
+            v += 1
+            continue
+        a = b = v                            # a band: rows a..b, no gap wider than gap
+        v += 1
+        while v < h and v - b <= gap:
+            if lit[v]:
+                b = v
+            v += 1
+        _or_rows(words, a, b, acc)
+        _column_runs(acc, w, gap, margin, max(a - margin, 0), min(b + margin + 1, h), res)
+    out = np.empty((len(res), 4), np.int64)
+    for i in range(len(res)):
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = res[i]
+    return out

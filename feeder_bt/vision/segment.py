@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from ..scenario.model import VisionRecipe
-from .chains import _first, _runs, _with_holes
+from .chains import _first, _with_holes
 from .jit import kernels
 
 
@@ -74,15 +74,33 @@ class Segmenter:
         """A frame-sized uint8 scratch image of this thread's, reused from frame to frame.
 
         A fresh frame-sized array each frame costs more than the operation writing it when
-        the allocator hands the pages back and faults them in again (2-3x on the bench).
+        the allocator hands the pages back and faulted them in again (2-3x on the bench).
+        Its rows are padded with zero columns to whole 8-byte words (``_words``).
         """
         bufs: dict[str, np.ndarray] | None = getattr(self._scratch, "bufs", None)
         if bufs is None:
             bufs = self._scratch.bufs = {}
         buf = bufs.get(name)
         if buf is None or buf.shape != shape:
-            buf = bufs[name] = np.empty(shape, dtype=np.uint8)
+            h, w = shape
+            padded = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
+            buf = bufs[name] = padded[:, :w]
+            words = getattr(self._scratch, "words", None)
+            if words is None:
+                words = self._scratch.words = {}
+            words[id(buf)] = (buf, padded.view(np.uint64))
         return buf
+
+    def _words(self, mask: np.ndarray) -> np.ndarray:
+        """The mask as 8 pixels a word (``kernels.foreground_rois``): a scratch image's own
+        padded rows, else a padded copy."""
+        got = getattr(self._scratch, "words", {}).get(id(mask))
+        if got is not None and got[0] is mask:
+            return got[1]
+        h, w = mask.shape
+        padded = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
+        padded[:, :w] = mask
+        return padded.view(np.uint64)
 
     def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
         """The image in which parts are bright: for dark parts the golden image minus the
@@ -138,21 +156,12 @@ class Segmenter:
         empty pixels wider than the morphology reaches (or the image's edge).
 
         Rows with foreground are cut into bands where ``2 * margin`` empty rows part them,
-        then each band's columns likewise: most of a frame is empty belt.
+        then each band's columns likewise: most of a frame is empty belt. In one compiled
+        pass over the mask, 8 pixels a word (``kernels.foreground_rois``).
         """
         h, w = mask.shape
-        m = self._margin
-        rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel().nonzero()[0]
-        if len(rows) == 0:
-            return []
-        out = []
-        for a, b in _runs(rows, 2 * m):
-            cols = cv2.reduce(mask[a:b + 1], 0, cv2.REDUCE_SUM,
-                              dtype=cv2.CV_32S).ravel().nonzero()[0]
-            v0, v1 = max(a - m, 0), min(b + m + 1, h)
-            out += [(v0, v1, max(c0 - m, 0), min(c1 + m + 1, w))
-                    for c0, c1 in _runs(cols, 2 * m)]
-        return out
+        return [tuple(r) for r in kernels().foreground_rois(self._words(mask), h, w,
+                                                            self._margin).tolist()]
 
     def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
         """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
