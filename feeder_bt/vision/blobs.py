@@ -108,11 +108,13 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     s2 = calibration.mm2_per_px2
     min_px = 0.5 * min_area_mm2 / s2
     k = kernels()
-    pts = np.concatenate(contours).reshape(-1, 2)
+    pts, lens = getattr(contours, "pts", None), getattr(contours, "lens", None)
+    if pts is None:                    # else ``segment.Contours``: already one array
+        pts = np.concatenate(contours).reshape(-1, 2)
+        lens = np.fromiter(map(len, contours), np.int64, len(contours))
     kind, cells, par = (mapping or calibration)._kernel_table()
     boxes, stats, hull, hull_ends = k.blob_stats(
-        pts, np.fromiter(map(len, contours), np.int64, len(contours)), min_px, full,
-        length and full, hulls,
+        pts, lens, min_px, full, length and full, hulls,
         WINDOW, kind, cells, par)
     frame = Frame(pts, hull, hull_ends)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the

@@ -25,10 +25,6 @@ def _full_chain(contour: np.ndarray) -> np.ndarray:
     return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
 
 
-def _first(item: tuple) -> int:
-    return item[0]
-
-
 def _with_holes(contours: tuple[np.ndarray, ...], hierarchy: np.ndarray | None, holes: bool
                 ) -> list[tuple[np.ndarray, list[np.ndarray]]]:
     """``findContours``' outer contours, each with its holes' (``RETR_CCOMP``'s two levels:

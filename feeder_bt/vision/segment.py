@@ -16,7 +16,6 @@ read, never written), so one segmenter may serve several threads.
 
 from __future__ import annotations
 
-import bisect
 import math
 import threading
 
@@ -24,7 +23,7 @@ import cv2
 import numpy as np
 
 from ..scenario.model import VisionRecipe
-from .chains import _first, _with_holes
+from .chains import _with_holes
 from .jit import kernels
 
 
@@ -151,7 +150,7 @@ class Segmenter:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
         return mask
 
-    def _rois(self, mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+    def _rois(self, mask: np.ndarray) -> np.ndarray:
         """Rectangles (v0, v1, u0, u1) that hold all the foreground, each with a margin of
         empty pixels wider than the morphology reaches (or the image's edge).
 
@@ -160,8 +159,7 @@ class Segmenter:
         pass over the mask, 8 pixels a word (``kernels.foreground_rois``).
         """
         h, w = mask.shape
-        return [tuple(r) for r in kernels().foreground_rois(self._words(mask), h, w,
-                                                            self._margin).tolist()]
+        return kernels().foreground_rois(self._words(mask), h, w, self._margin)
 
     def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
         """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
@@ -184,65 +182,56 @@ class Segmenter:
         contour search (whose own border is empty, as at the image's edge).
         """
         h, w = mask.shape
+        k = kernels()
         rois = self._rois(mask)
-        if not rois:
-            return [], ([] if holes else None)
+        if not len(rois):
+            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
         mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
-        # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
-        # the morphology), which also keeps it one pixel clear of its neighbours
-        pad = self._margin if morph else 1
-        out: list[tuple[int, np.ndarray, list[np.ndarray]]] = []   # (whole frame's raster
-        # index of the 1st point, contour, its holes)
-        srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
-        starts: list[int] = []
-        shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
-        mirrors = []
-        x = height = 0
-        for v0, v1, u0, u1 in rois:
-            src = mask[v0:v1, u0:u1]
-            top = left = 0
-            if v0 == 0 or u0 == 0 or v1 == h or u1 == w:
-                top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
-                    pad * (u0 == 0), pad * (u1 == w)
-                if morph and not self._mirror:
-                    cs, hier = cv2.findContours(self._morph(src), mode, chain, offset=(u0, v0))
-                    out += [(c.item(1) * w + c.item(0), c, hs)
-                            for c, hs in _with_holes(cs, hier, holes)]
-                    continue
-                src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
-                mirrors.append((x, top, bottom, left, right, src.shape))
-            srcs.append((x, src))
-            starts.append(x)
-            shifts.append(u0 - x - left + ((v0 - top) << 32))
-            x += src.shape[1]
-            height = max(height, src.shape[0])
-        if srcs:
-            packed = np.zeros((height, x), dtype=np.uint8)
-            for x0, src in srcs:
-                packed[:src.shape[0], x0:x0 + src.shape[1]] = src
+        own: list[tuple[np.ndarray, list[np.ndarray]]] = []    # found in the frame's place
+        if morph and not self._mirror:
+            # an asymmetric kernel: rectangles at the image's edge get their own search
+            edge = (rois[:, 0] == 0) | (rois[:, 1] == h) | (rois[:, 2] == 0) | (rois[:, 3] == w)
+            for v0, v1, u0, u1 in rois[edge].tolist():
+                cs, hier = cv2.findContours(self._morph(mask[v0:v1, u0:u1]), mode, chain,
+                                            offset=(u0, v0))
+                own += _with_holes(cs, hier, holes)
+            rois = np.ascontiguousarray(rois[~edge])
+        found: list[tuple[np.ndarray, list[np.ndarray]]] = []
+        geo = _NO_GEO
+        if len(rois):
+            # a rectangle at the image's edge has no empty margin there: it gets a mirror
+            # (for the morphology), which also keeps it one pixel clear of its neighbours
+            packed, geo = k.pack_rois(mask, rois, self._margin if morph else 1)
             if morph:
                 packed = self._morph(packed)
-            for x0, top, bottom, left, right, (sh, sw) in mirrors:
-                if top:
-                    packed[:top, x0:x0 + sw] = 0
-                if bottom:
-                    packed[sh - bottom:sh, x0:x0 + sw] = 0
-                if left:
-                    packed[:, x0:x0 + left] = 0
-                if right:
-                    packed[:, x0 + sw - right:x0 + sw] = 0
+            if geo[:, 1:5].any():
+                k.clear_mirrors(packed, geo)
             cs, hier = cv2.findContours(packed, mode, chain)
-            for c, hs in _with_holes(cs, hier, holes):
-                shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
-                for k in (c, *hs):               # a blob's holes lie in its rectangle
-                    flat = k.view(np.int64)
-                    flat += shift
-                out.append((c.item(1) * w + c.item(0), c, hs))
-        # the whole frame's findContours lists contours by first point, last found first
-        out.sort(key=_first, reverse=True)
-        return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
+            found = _with_holes(cs, hier, holes)
+        n_packed = len(found)
+        found += own
+        if not found:
+            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
+        pts = np.concatenate([c for c, _ in found]).reshape(-1, 2)
+        lens = np.fromiter((len(c) for c, _ in found), np.int64, len(found))
+        # back to the frame; the whole frame's findContours lists contours by first
+        # point, last found first
+        pts, lens, order, moved = k.place_contours(pts, lens, n_packed, geo, w)
+        ends = np.cumsum(lens).tolist()
+        flat = pts.reshape(-1, 1, 2)
+        contours = Contours([flat[e - n:e] for e, n in zip(ends, lens.tolist(), strict=True)],
+                            pts, lens)
+        if not holes:
+            return contours, None
+        out_holes = []
+        for i, (du, dv) in zip(order.tolist(), moved[order].tolist(), strict=True):
+            hs = found[i][1]
+            for hole in hs:                   # a blob's holes lie in its rectangle
+                hole += np.array([du, dv], dtype=np.int32)
+            out_holes.append(hs)
+        return contours, out_holes
 
     def _bright_source(self, img: np.ndarray, diff: np.ndarray | None
                        ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -271,6 +260,18 @@ class Segmenter:
 
 
 _NO_GOLDEN = np.zeros(1, np.uint8)
+_NO_POINTS = np.zeros((0, 2), np.int32)
+_NO_LENS = np.zeros(0, np.int64)
+_NO_GEO = np.zeros((0, 9), np.int64)
+
+
+class Contours(list):
+    """Contours ((n, 1, 2) int32 each, in the frame), with the same points one after
+    another (``pts``, ``lens`` each): ``blobs.find_blobs`` measures them as they are."""
+
+    def __init__(self, contours: list[np.ndarray], pts: np.ndarray, lens: np.ndarray) -> None:
+        super().__init__(contours)
+        self.pts, self.lens = pts, lens
 
 
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
