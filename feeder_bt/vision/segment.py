@@ -48,6 +48,8 @@ class Segmenter:
                            and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
                            for k in (self._open, self._close) if k is not None)
         self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
+        self._golden_small: np.ndarray | None = None     # its subsample (``subsample``)
+        self._moved_by: dict[int, np.ndarray] = {}       # Otsu's levels: ``_moved``
         self._scratch = threading.local()         # per-thread frame-sized images, reused
 
     # -------------------------------------------------------------- images
@@ -55,6 +57,8 @@ class Segmenter:
     def set_golden(self, image: np.ndarray) -> None:
         """Remember the cleared belt; later frames are compared against it."""
         self._golden = to_grey(image).copy()
+        self._golden_small = subsample(self._golden).copy()
+        self._moved_by = {}
         th = self.recipe.threshold
         self._below = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
@@ -64,6 +68,18 @@ class Segmenter:
             else:
                 # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
                 self._below = cv2.subtract(self._golden, math.floor(th.value))
+
+    def _moved(self, t: int) -> np.ndarray:
+        """The golden image moved by a level t: below it (dark parts) or above it (light
+        parts) a frame's pixel differs from the golden image by more than t. A few levels
+        kept (Otsu's moves a grey level or two between frames)."""
+        moved = self._moved_by.get(t)
+        if moved is None:
+            if len(self._moved_by) >= 8:
+                self._moved_by.clear()
+            moved = self._moved_by[t] = (cv2.add(self._golden, t) if self._light
+                                         else cv2.subtract(self._golden, t))
+        return moved
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
@@ -125,12 +141,25 @@ class Segmenter:
             # the same mask as subtract-then-threshold, in one pass over the frame
             return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
                                 dst=mask), None, float(th.value))
+        golden = self._golden
+        if th.method == "otsu" and self.recipe.golden_image and golden is not None \
+                and golden.shape == img.shape:
+            # Otsu's level from the subsample's difference, then the mask in one pass
+            # against the golden image moved by the level, as for a fixed level: no
+            # frame-sized difference image (the faces read the grey from the frame and the
+            # golden image where they need it)
+            f, g = subsample(img), self._golden_small
+            level = max(otsu_level(cv2.subtract(f, g) if self._light else cv2.subtract(g, f)),
+                        float(th.value))
+            return (cv2.compare(img, self._moved(math.floor(level)),
+                                cv2.CMP_GT if self._light else cv2.CMP_LT, dst=mask),
+                    None, level)
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
             cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "otsu":
-            level = max(otsu_level(diff), float(th.value))
+            level = max(otsu_level(subsample(diff)), float(th.value))
             cv2.threshold(diff, level, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "adaptive":
             level = None
@@ -277,9 +306,15 @@ class Contours(list):
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
 
 
-def otsu_level(diff: np.ndarray) -> float:
-    """Otsu's level of ``diff`` from a regular subsample (every ``OTSU_STEP``-th pixel of
-    every ``OTSU_STEP``-th row).
+def subsample(img: np.ndarray) -> np.ndarray:
+    """Every ``OTSU_STEP``-th pixel of every ``OTSU_STEP``-th row (a view; a small image
+    whole), where Otsu's level is read."""
+    h, w = img.shape[:2]
+    return img if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else img[::OTSU_STEP, ::OTSU_STEP]
+
+
+def otsu_level(small: np.ndarray) -> float:
+    """Otsu's level of a difference image's regular subsample (``subsample``).
 
     The level is a property of the histogram's two modes, belt and parts, which a 1/16
     sample of a frame shows as well as the whole frame (the parts' smallest blobs still
@@ -287,8 +322,6 @@ def otsu_level(diff: np.ndarray) -> float:
     on a frame of squares (benchmarks/vision_bench.py). The mask is still cut from every
     pixel, at this level.
     """
-    h, w = diff.shape[:2]
-    small = diff if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else diff[::OTSU_STEP, ::OTSU_STEP]
     level, _ = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     return float(level)
 
