@@ -11,7 +11,10 @@ here: before these kernels half of the locator's time was that glue between call
   asked the smoothed length (``chains._smooth_length``'s tours, summed as ``cv2.arcLength``
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length.
-* ``faces``: for the blobs that need a face, the sub-pixel edge points of their hulls'
+* ``foreground_rois``, ``pack_rois``, ``clear_mirrors``, ``place_contours`` (in
+  ``contour_kernels``): the rectangles of foreground, packed, and their contours back in
+  the frame (``Segmenter._contours_holes``).
+* ``faces`` (in ``face_kernels``): for the blobs that need a face, the sub-pixel edge points of their hulls'
   vertices (``Segmenter._edge_points``' rule), those points in mm, and their cut-corner
   signatures (``corners._corner_signatures``' rule); ``signatures`` is that last step alone.
 
@@ -29,17 +32,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-
-def _jit(fn=None, **kw):
-    if fn is None:
-        return lambda f: _jit(f, **kw)
-    try:
-        return njit(cache=True, nogil=True, **kw)(fn)
-    except RuntimeError:            # numba found no writable cache directory
-        return njit(nogil=True, **kw)(fn)
-
+from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
+    clear_mirrors,
+    foreground_rois,
+    pack_rois,
+    place_contours,
+)
+from .jit import _jit
 
 _DB1_6 = 0.16666666666666666666666666666667          # cv2.moments' constant
 _FLT_EPSILON = 1.1920928955078125e-07
@@ -381,149 +381,17 @@ def _hull_stats(pts, hull, a, b, row):
 
 
 
-# how ``faces`` reads the image in which parts are bright at a pixel (``Segmenter._diff_at``)
-DIFF, GOLDEN_LIGHT, GOLDEN_DARK, PLAIN_LIGHT, PLAIN_DARK = range(5)
-
-
-@_jit(inline="always")
-def _bright(src, golden, mode, at):
-    x = np.int64(src[at])
-    if mode == DIFF or mode == PLAIN_LIGHT:
-        return x
-    if mode == PLAIN_DARK:
-        return 255 - x
-    g = np.int64(golden[at])
-    d = x - g if mode == GOLDEN_LIGHT else g - x
-    return d if d > 0 else 0
-
-
-@_jit
-def edge_points(pts, hull, hull_ends, sel, src, golden, mode, width, cut, fine):
-    """``Segmenter._edge_points`` rule on the hulls of the contours ``sel`` (contour i's
-    hull: pts[hull[hull_ends[i - 1]:hull_ends[i]]]): between each vertex and each
-    4-neighbour outside the level ``cut``, where the grey (``_bright``, interpolated
-    linearly) crosses it; (m, 2) pixels and the ends of each hull's points. If ``fine`` is
-    off (no level), or some hull has fewer than 3 such points, the vertices themselves."""
-    n = len(sel)
-    total = 0
-    for s in range(n):
-        i = sel[s]
-        total += hull_ends[i] - (hull_ends[i - 1] if i else 0)
-    out = np.empty((4 * total, 2))
-    ends = np.empty(n, np.int64)
-    m = 0
-    few = not fine
-    if fine:
-        for s in range(n):
-            i = sel[s]
-            start = m
-            for j in range(hull_ends[i - 1] if i else 0, hull_ends[i]):
-                u, v = pts[hull[j], 0], pts[hull[j], 1]
-                at = v * width + u
-                inside = _bright(src, golden, mode, at)
-                if inside <= cut:
-                    continue
-                for k in range(4):            # the 4-neighbours: u + 1, u - 1, v + 1, v - 1
-                    du = 1 if k == 0 else (-1 if k == 1 else 0)
-                    dv = 1 if k == 2 else (-1 if k == 3 else 0)
-                    nb = _bright(src, golden, mode, at + du + dv * width)
-                    if nb <= cut:
-                        t = (inside - (cut + 0.5)) / (inside - nb)
-                        out[m, 0] = u + t * du
-                        out[m, 1] = v + t * dv
-                        m += 1
-            if m - start < 3:
-                few = True
-                break
-            ends[s] = m
-    if few:
-        m = 0
-        for s in range(n):
-            i = sel[s]
-            for j in range(hull_ends[i - 1] if i else 0, hull_ends[i]):
-                out[m, 0], out[m, 1] = pts[hull[j], 0], pts[hull[j], 1]
-                m += 1
-            ends[s] = m
-    return out[:m], ends
-
-
-_TOL = 1.5                            # mm: a point this near a side is on it
-_SQRT2 = math.sqrt(2.0)
-
-
-@_jit
-def signatures(xy, ends, hulled):
-    """``corners._corner_signatures`` of the outlines xy[ends[i - 1]:ends[i]] (mm; float32
-    values): per outline a row valid (1/0), corner x, y, leg x, y, alpha (rad)."""
-    n = len(ends)
-    out = np.zeros((n, 6))
-    idx = np.empty(2 * len(xy) + 1, np.int64)
-    qx = np.empty(len(xy))
-    qy = np.empty(len(xy))
-    a = 0
-    for i in range(n):
-        b = ends[i]
-        P = xy[a:b]
-        k = convex_hull(P, idx)
-        cx, cy, al, w, h = min_rect(P, idx, k, 0.0)
-        hx, hy = 0.5 * w, 0.5 * h
-        ca, sa = math.cos(al), math.sin(al)
-        m = b - a if hulled else k
-        # each point in the rectangle's frame, and its squared distance to the nearest
-        # point of each corner (+, +), (-, +), (-, -), (+, -)
-        n0 = n1 = n2 = n3 = np.inf
-        for j in range(m):
-            t = j if hulled else idx[j]
-            du, dv = float(P[t, 0]) - cx, float(P[t, 1]) - cy
-            x = du * ca + dv * sa
-            y = dv * ca - du * sa
-            qx[j], qy[j] = x, y
-            xp, xm, yp, ym = (x - hx) ** 2, (x + hx) ** 2, (y - hy) ** 2, (y + hy) ** 2
-            n0 = min(n0, xp + yp)
-            n1 = min(n1, xm + yp)
-            n2 = min(n2, xm + ym)
-            n3 = min(n3, xp + ym)
-        # the corner farthest from the outline is the cut one
-        cxs, cys, far = 1.0, 1.0, n0
-        if n1 > far:
-            cxs, cys, far = -1.0, 1.0, n1
-        if n2 > far:
-            cxs, cys, far = -1.0, -1.0, n2
-        if n3 > far:
-            cxs, cys, far = 1.0, -1.0, n3
-        sx = np.sign(hx * cxs)
-        sy = np.sign(hy * cys)
-        top = right = -np.inf
-        for j in range(m):                            # cut corner now at (+, +)
-            fx, fy = qx[j] * sx, qy[j] * sy
-            if abs(fy - hy) < _TOL:
-                top = max(top, fx)
-            if abs(fx - hx) < _TOL:
-                right = max(right, fy)
-        a = b
-        if top == -np.inf or right == -np.inf:
-            continue
-        out[i, 0] = 1.0
-        vx, vy = sx / _SQRT2, sy / _SQRT2
-        out[i, 1], out[i, 2] = vx * ca - vy * sa, vx * sa + vy * ca
-        if hx - top >= hy - right:                    # the cut is longer along x
-            out[i, 3], out[i, 4] = -sx * ca, -sx * sa
-        else:
-            out[i, 3], out[i, 4] = sy * sa, -sy * ca
-        out[i, 5] = al
-    return out
-
-
-@_jit
-def faces(pts, hull, hull_ends, sel, src, golden, mode, width, cut, fine, kind, cells, par):
-    """``edge_points`` of the hulls of contours ``sel``, mapped to mm (``_to_mm``, rounded
-    to float32 as the signature always took them), and their ``signatures``."""
-    uv, ends = edge_points(pts, hull, hull_ends, sel, src, golden, mode, width, cut, fine)
-    xy = np.empty((len(uv), 2), np.float32)
-    for j in range(len(uv)):
-        x, y, _ = _to_mm(uv[j, 0], uv[j, 1], kind, cells, par)
-        xy[j, 0], xy[j, 1] = x, y
-    return signatures(xy, ends, True)
+# the faces' kernels use this module's mapping, hull and rectangle: imported last
+from .face_kernels import (  # noqa: E402, F401  (the locator reads them all here)
+    DIFF,
+    GOLDEN_DARK,
+    GOLDEN_LIGHT,
+    PLAIN_DARK,
+    PLAIN_LIGHT,
+    edge_points,
+    faces,
+    signatures,
+)
 
 
 def warm() -> None:
@@ -549,181 +417,3 @@ def warm() -> None:
         packed, geo = pack_rois(m, rois, 1)
         clear_mirrors(packed, geo)
     place_contours(pts.copy(), lens, 3, geo, 16)
-
-
-@_jit
-def _lit_rows(words, h):
-    """Which rows of a mask (8 pixels a word) have foreground."""
-    nw = words.shape[1]
-    lit = np.empty(h, np.bool_)
-    for v in range(h):
-        x = np.uint64(0)
-        for k in range(nw):
-            x |= words[v, k]
-        lit[v] = x != 0
-    return lit
-
-
-@_jit
-def _or_rows(words, a, b, acc):
-    """``acc``: the OR of rows a..b of a mask (8 pixels a word)."""
-    nw = words.shape[1]
-    acc[:] = 0
-    for r in range(a, b + 1):
-        for k in range(nw):
-            acc[k] |= words[r, k]
-
-
-@_jit
-def _column_runs(acc, w, gap, margin, v0, v1, res):
-    """Append to ``res`` a rectangle (v0, v1, u0, u1) per run of lit columns of ``acc`` (8
-    a word), runs parted by more than ``gap`` unlit ones, with ``margin``."""
-    c0 = c1 = -1
-    for u in range(w + gap + 2):             # the last run is closed past the end
-        on = u < w and (acc[u >> 3] >> np.uint64(8 * (u & 7))) & np.uint64(255) != 0
-        if c0 >= 0 and u - c1 > gap:         # more than gap columns since the run's last
-            res.append((v0, v1, max(c0 - margin, 0), min(c1 + margin + 1, w)))
-            c0 = -1
-        if on:
-            if c0 < 0:
-                c0 = u
-            c1 = u
-
-
-@_jit
-def foreground_rois(words, h, w, margin):
-    """``Segmenter._rois``: rectangles (v0, v1, u0, u1) holding all the foreground of a
-    mask (h rows, w columns, given as 8 pixels a word, rows padded with zeros to whole
-    words), each with ``margin`` empty pixels (or the image's edge) around it. Rows with
-    foreground are cut into bands where more than 2 ``margin`` empty rows part them, then
-    each band's columns likewise."""
-    gap = 2 * margin
-    res = [(0, 0, 0, 0)]
-    res.pop()
-    acc = np.empty(words.shape[1], np.uint64)
-    lit = _lit_rows(words, h)
-    v = 0
-    while v < h:
-        if not lit[v]:
-            v += 1
-            continue
-        a = b = v                            # a band: rows a..b, no gap wider than gap
-        v += 1
-        while v < h and v - b <= gap:
-            if lit[v]:
-                b = v
-            v += 1
-        _or_rows(words, a, b, acc)
-        _column_runs(acc, w, gap, margin, max(a - margin, 0), min(b + margin + 1, h), res)
-    out = np.empty((len(res), 4), np.int64)
-    for i in range(len(res)):
-        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = res[i]
-    return out
-
-
-@_jit(inline="always")
-def _reflect(i, n):
-    """Index i of a line of n pixels, mirrored at its ends without repeating them
-    (OpenCV's BORDER_REFLECT_101)."""
-    if n == 1:
-        return 0
-    while i < 0 or i >= n:
-        i = -i if i < 0 else 2 * n - 2 - i
-    return i
-
-
-@_jit
-def pack_rois(mask, rois, pad):
-    """The rectangles ``rois`` (v0, v1, u0, u1) of ``mask`` laid side by side in one image
-    (``Segmenter._contours_holes``), each padded by ``pad`` pixels of its own mirror image
-    (BORDER_REFLECT_101) on the sides where it meets the image's edge. Returns the image
-    and per rectangle: its x there, its padding top, bottom, left, right, its height and
-    width there, and the move (du, dv) that takes its pixels back to the frame's."""
-    h, w = mask.shape
-    n = len(rois)
-    geo = np.empty((n, 9), np.int64)
-    x = height = 0
-    for i in range(n):
-        v0, v1, u0, u1 = rois[i, 0], rois[i, 1], rois[i, 2], rois[i, 3]
-        top = pad if v0 == 0 else 0
-        bottom = pad if v1 == h else 0
-        left = pad if u0 == 0 else 0
-        right = pad if u1 == w else 0
-        sh, sw = v1 - v0 + top + bottom, u1 - u0 + left + right
-        geo[i, 0], geo[i, 1], geo[i, 2], geo[i, 3], geo[i, 4] = x, top, bottom, left, right
-        geo[i, 5], geo[i, 6], geo[i, 7], geo[i, 8] = sh, sw, u0 - x - left, v0 - top
-        x += sw
-        height = max(height, sh)
-    packed = np.zeros((height, x), np.uint8)
-    for i in range(n):
-        v0, v1, u0, u1 = rois[i, 0], rois[i, 1], rois[i, 2], rois[i, 3]
-        x0, top, left, sh, sw = geo[i, 0], geo[i, 1], geo[i, 3], geo[i, 5], geo[i, 6]
-        mirrored = geo[i, 1] + geo[i, 2] + geo[i, 3] + geo[i, 4] > 0
-        # unsigned indices: no check for negative ones, so the copy is vectorised
-        for r in range(sh):
-            dst = np.uintp(r)
-            src = np.uintp(v0 + _reflect(r - top, v1 - v0))
-            if mirrored:
-                for c in range(sw):
-                    packed[dst, np.uintp(x0 + c)] = \
-                        mask[src, np.uintp(u0 + _reflect(c - left, u1 - u0))]
-            else:
-                for c in range(sw):
-                    packed[dst, np.uintp(x0 + c)] = mask[src, np.uintp(u0 + c)]
-    return packed, geo
-
-
-@_jit
-def clear_mirrors(packed, geo):
-    """Empty the mirrored padding of ``pack_rois``' rectangles (after the morphology)."""
-    for i in range(len(geo)):
-        x0, top, bottom, left, right, sh, sw = (geo[i, 0], geo[i, 1], geo[i, 2], geo[i, 3],
-                                                 geo[i, 4], geo[i, 5], geo[i, 6])
-        if top + bottom + left + right == 0:
-            continue
-        for r in range(packed.shape[0]):
-            row = np.uintp(r)
-            if r < top or sh - bottom <= r < sh:
-                for c in range(sw):
-                    packed[row, np.uintp(x0 + c)] = 0
-            else:
-                for c in range(left):
-                    packed[row, np.uintp(x0 + c)] = 0
-                for c in range(sw - right, sw):
-                    packed[row, np.uintp(x0 + c)] = 0
-
-
-@_jit
-def place_contours(pts, lens, packed, geo, width):
-    """Contours (pts, ``lens[i]`` points each, one after another) back in the frame: the
-    first ``packed`` were found in ``pack_rois``' image and move by the (du, dv) of the
-    rectangle their first point lies in; then all in the whole frame's ``findContours``
-    order (by first point, last found first). Returns the points and lengths in that
-    order, each one's index in the input, and the move each input contour got."""
-    n = len(lens)
-    ends = np.cumsum(lens)
-    moved = np.zeros((n, 2), np.int64)
-    keys = np.empty(n, np.int64)
-    starts = geo[:, 0]
-    for i in range(n):
-        a = ends[i] - lens[i]
-        if i < packed:
-            j = np.searchsorted(starts, pts[a, 0], side="right") - 1
-            du, dv = geo[j, 7], geo[j, 8]
-            moved[i, 0], moved[i, 1] = du, dv
-            for q in range(a, ends[i]):
-                pts[q, 0] += du
-                pts[q, 1] += dv
-        keys[i] = -(pts[a, 1] * width + pts[a, 0])
-    order = np.argsort(keys)
-    out = np.empty_like(pts)
-    out_lens = np.empty(n, np.int64)
-    m = 0
-    for t in range(n):
-        i = order[t]
-        a = ends[i] - lens[i]
-        for q in range(lens[i]):
-            out[m + q, 0], out[m + q, 1] = pts[a + q, 0], pts[a + q, 1]
-        m += lens[i]
-        out_lens[t] = lens[i]
-    return out, out_lens, order, moved
