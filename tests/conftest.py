@@ -27,6 +27,16 @@ settings.register_profile("explore", parent=settings.get_profile("feeder"),
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "feeder"))
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile the locator's kernels (feeder_bt/vision/kernels.py) once, in xdist's
+    controller before the workers start: on a fresh clone each worker would compile them
+    at once (about 13 s alone, 45 s four at once on two cores) while tests wait on the
+    clock; from numba's cache each loads them in under a second."""
+    if not hasattr(config, "workerinput"):
+        from feeder_bt.vision.jit import warm
+        warm()
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption(UPDATE_SHOTS, action="store_true",
                      help="write the browser tests' screenshots into docs/ (otherwise they go "

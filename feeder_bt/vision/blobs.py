@@ -16,9 +16,13 @@ import numpy as np
 
 from ..geometry import wrap_deg
 from .calibration import Calibration, PixelGrid
-from .chains import _boundary_steps, _full_chain, _smooth_length
+from .chains import WINDOW, _boundary_steps, _full_chain, _smooth_length
 from .corners import _CornerSignature
 from .features import GROUP_OF
+from .jit import kernels
+
+# a similarity's table for ``kernels.blob_stats`` when only the hull is wanted
+_SIMILARITY = (0, np.zeros((1, 4, 3)), np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))
 
 
 @dataclass
@@ -45,85 +49,114 @@ class Detection:
 class Blob:
     """One contour on its way through the cascade: what has been measured so far."""
 
-    __slots__ = ("contour", "box", "mom", "area_px", "det", "full", "length", "hull", "faced",
-                 "face", "oriented", "holes", "scale")
+    __slots__ = ("contour", "box", "area_px", "det", "full", "length", "faced", "face",
+                 "oriented", "holes", "scale", "stats", "frame", "index")
 
     def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
-                 mom: dict[str, float], area_px: float, det: Detection, full: bool,
+                 area_px: float, det: Detection, full: bool,
                  holes: list[np.ndarray] | None = None) -> None:
         self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
         self.holes = holes                # its hole contours (None: not looked for)
         self.full = full                  # every boundary pixel (else the chain's corners)
         self.box = box                    # bounding box u, v, width, height
-        self.mom = mom                    # its moments (cv2.moments)
         self.area_px = area_px            # pixel count (Pick's theorem on the contour)
         self.det = det
         self.scale: float | None = None   # mm per px where it lies (``find_blobs``)
         self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
-        self.hull: np.ndarray | None = None         # convex hull (``hull``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
         # part -> angle, face (None: no face; a str: why not, ``orientation: outline``)
         self.oriented: dict[str, tuple[float, bool] | str | None] = {}
+        # ``kernels.blob_stats``' row, and the frame's arrays it came with (``Frame``) and
+        # its index there: its hull's vertices for the faces
+        self.stats: list[float] = []
+        self.frame: Frame | None = None
+        self.index = 0
+
+
+class Frame:
+    """What ``kernels.blob_stats`` measured of one call's contours, kept for the faces:
+    all the points (int32, ``(n, 2)``) and the hulls' vertices (indices, ends per
+    contour; empty if hulls were not asked for)."""
+
+    __slots__ = ("pts", "hull", "hull_ends")
+
+    def __init__(self, pts: np.ndarray, hull: np.ndarray, hull_ends: np.ndarray) -> None:
+        self.pts, self.hull, self.hull_ends = pts, hull, hull_ends
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
                min_area_mm2: float, full: bool = True,
                holes: list[list[np.ndarray]] | None = None,
-               mapping: Calibration | PixelGrid | None = None) -> list[Blob]:
+               mapping: Calibration | PixelGrid | None = None,
+               length: bool = False, hulls: bool = False) -> list[Blob]:
     """The contours worth reporting (not specks), measured as far as every blob is: area,
     centroid (mm), the border and size rules (``reason`` "touches border", "too small").
 
     ``shape``: the frame's (height, width). ``full``: the contours have every boundary
     pixel (else only the chain's corners). ``holes``: each contour's hole contours, if they
-    were looked for. The centroids go to mm in one call, through ``mapping`` (the
-    calibration's ``PixelGrid`` for this image size; default the calibration itself).
+    were looked for. The centroids go to mm through ``mapping`` (the calibration's
+    ``PixelGrid`` for this image size; default the calibration itself). ``length``, ``hulls``:
+    also measure every blob's smoothed length (``full`` contours only), its convex hull and
+    minimum-area rectangle now, in the same compiled pass (``kernels.blob_stats``) — what
+    the recipe's classes or faces will ask of most blobs; ``measure_feature`` measures them
+    one blob at a time otherwise.
     """
+    if not contours:
+        return []
     h, w = shape
     s2 = calibration.mm2_per_px2
     min_px = 0.5 * min_area_mm2 / s2
-    blobs: list[Blob] = []
-    centres = []
-    for i, c in enumerate(contours):
-        box = cv2.boundingRect(c)
-        bu, bv, bw, bh = box
-        if bw * bh < min_px:
-            continue
-        mom = cv2.moments(c)
-        m00 = mom["m00"]
-        if m00 != 0:
-            cu, cv = mom["m10"] / m00, mom["m01"] / m00
-        else:
-            cu, cv = (float(v) for v in c.reshape(-1, 2).mean(axis=0))
-        centres.append((cu, cv))
-        det = Detection(None, None, False, 0.0, 0.0, 0.0, cu, cv, {},
-                        "touches border" if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h
-                        else "")
-        # The contour runs through the centres of the boundary pixels; by Pick's theorem
-        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1 (the
-        # boundary pixels below).
-        blobs.append(Blob(c, box, mom, abs(m00) + 1.0, det, full,
-                          None if holes is None else holes[i]))
-    if not blobs:
-        return blobs
-    steps = _boundary_steps([b.contour for b in blobs], full)
-    xy, scales = (mapping or calibration).px_to_mm_scale(np.array(centres))
+    k = kernels()
+    pts, lens = getattr(contours, "pts", None), getattr(contours, "lens", None)
+    if pts is None:                    # else ``segment.Contours``: already one array
+        pts = np.concatenate(contours).reshape(-1, 2)
+        lens = np.fromiter(map(len, contours), np.int64, len(contours))
+    kind, cells, par = (mapping or calibration)._kernel_table()
+    boxes, stats, hull, hull_ends = k.blob_stats(
+        pts, lens, min_px, full, length and full, hulls,
+        WINDOW, kind, cells, par)
+    frame = Frame(pts, hull, hull_ends)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
     # calibration's mm_per_px over the window), for areas and lengths
     local = not calibration.linear
-    for b, n, (x, y), sc in zip(blobs, steps, xy.tolist(), scales.tolist(), strict=True):
-        b.area_px += 0.5 * n
-        det = b.det
-        det.x_mm, det.y_mm = x, y
+    blobs: list[Blob] = []
+    for i, (c, box, row) in enumerate(zip(contours, boxes.tolist(), stats.tolist(),
+                                          strict=True)):
+        bu, bv, bw, bh = box
+        if bw < 0:                          # a speck
+            continue
+        # The contour runs through the centres of the boundary pixels; by Pick's theorem
+        # the blob's pixel count is the polygon's area + boundary pixels / 2 + 1.
+        area_px = row[k.M00] + 1.0 + 0.5 * row[k.STEPS]
+        sc = row[k.SCALE]
+        area = area_px * sc * sc if local else area_px * s2
+        reason = "touches border" if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h \
+            else ("too small" if area < min_area_mm2 else "")
+        det = Detection(None, None, False, row[k.X], row[k.Y], 0.0, row[k.CU], row[k.CV],
+                        {"area_mm2": area}, reason)
+        b = Blob(c, tuple(box), area_px, det, full, None if holes is None else holes[i])
         if local:
             b.scale = sc
-            area = b.area_px * sc * sc
-        else:
-            area = b.area_px * s2
-        det.features["area_mm2"] = area
-        if not det.reason and area < min_area_mm2:
-            det.reason = "too small"
+        if row[k.LENGTH] == row[k.LENGTH]:          # measured (not NaN)
+            b.length = row[k.LENGTH]
+        b.stats, b.frame, b.index = row, frame, i
+        blobs.append(b)
     return blobs
+
+
+def _hull_stats(b: Blob) -> list[float]:
+    """The blob's stats row with its hull's columns (measured now if ``find_blobs`` was not
+    asked for hulls)."""
+    k = kernels()
+    if b.stats[k.RECT_W] != b.stats[k.RECT_W]:          # NaN: not measured yet
+        pts = np.ascontiguousarray(b.contour.reshape(-1, 2))
+        _, stats, hull, hull_ends = k.blob_stats(
+            pts, np.array([len(pts)], dtype=np.int64), 0.0, b.full, False, True, WINDOW,
+            *_SIMILARITY)
+        b.stats = b.stats[:k.RECT_W] + stats[0, k.RECT_W:].tolist()
+        b.frame, b.index = Frame(pts, hull, hull_ends), 0
+    return b.stats
 
 
 def measure_feature(b: Blob, name: str, calibration: Calibration,
@@ -156,7 +189,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         feats["hole_area_mm2"] = float(sum(big))
     elif group == GROUP_OF["hu1"]:
         # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
-        mom = b.mom
+        mom = cv2.moments(c)
         if mom["m00"] != 0:
             n20, n02, n11 = mom["nu20"], mom["nu02"], mom["nu11"]
             feats["hu1"] = float(n20 + n02)
@@ -174,23 +207,19 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         feats["circularity"] = (4 * math.pi * area_px / (perim * perim)
                                 if perim > 0 else 0.0)
     elif group == GROUP_OF["aspect"]:
-        # the rectangle of the hull is the contour's (the hull is kept for the solidity)
-        (_, _), (rw, rh), _ = cv2.minAreaRect(hull(b))
-        rw, rh = rw + 1.0, rh + 1.0
+        # the minimum-area rectangle of the hull (the contour's), as cv2.minAreaRect
+        k = kernels()
+        row = _hull_stats(b)
+        rw, rh = row[k.RECT_W] + 1.0, row[k.RECT_H] + 1.0
         feats["aspect"] = max(rw, rh) / min(rw, rh) if min(rw, rh) > 0 else 0.0
         feats["rectangularity"] = area_px / (rw * rh) if rw * rh > 0 else 0.0
     elif group == GROUP_OF["solidity"]:
-        hl = hull(b)
-        hull_area = cv2.contourArea(hl) + 0.5 * cv2.arcLength(hl, True) + 1.0
+        k = kernels()
+        row = _hull_stats(b)
+        # cv2.contourArea and cv2.arcLength of the hull
+        hull_area = row[k.HULL_AREA] + 0.5 * row[k.HULL_LEN] + 1.0
         feats["solidity"] = min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0
     return feats[name]
-
-
-def hull(b: Blob) -> np.ndarray:
-    """The contour's convex hull, (k, 1, 2) pixels (measured once per blob)."""
-    if b.hull is None:
-        b.hull = cv2.convexHull(b.contour)
-    return b.hull
 
 
 def contour_mm(b: Blob, calibration: Calibration | PixelGrid) -> np.ndarray:

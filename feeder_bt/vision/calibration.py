@@ -137,11 +137,23 @@ class Calibration:
             return _apply(self._h, uv)
         return uv @ self._fwd.T + self._origin
 
+    def _kernel_table(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """How ``vision.kernels`` maps pixels with this calibration: only a similarity can
+        be (``linear``); others go through their ``PixelGrid``."""
+        if not self.linear:
+            raise ValueError("a lens or homography maps through its PixelGrid")
+        f = self._fwd
+        return 0, _NO_CELLS, np.array([f[0, 0], f[0, 1], f[1, 0], f[1, 1], *self._origin,
+                                       self._s])
+
     def mm_to_px(self, xy: np.ndarray) -> np.ndarray:
         """``(N, 2)`` belt ``(x, y)`` mm -> ``(N, 2)`` pixel ``(u, v)``."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
         uv = _apply(self._hinv, xy) if self._h is not None else (xy - self._origin) @ self._inv.T
         return self.distort(uv)
+
+
+_NO_CELLS = np.zeros((1, 4, 3))      # a similarity's (unused) table for the kernels
 
 
 def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -168,8 +180,6 @@ class PixelGrid:
         self.step = float(step)
         us = np.arange(-2 * step, w + 2 * step + 1, step, dtype=float)
         vs = np.arange(-2 * step, h + 2 * step + 1, step, dtype=float)
-        self._origin = np.array([us[0], vs[0]])
-        self._n = np.array([len(us) - 2, len(vs) - 2])       # last cell index, u and v
         uu, vv = np.meshgrid(us, vs)
         xy, scale = calibration.px_to_mm_scale(np.column_stack([uu.ravel(), vv.ravel()]))
         t = np.column_stack([xy, scale]).reshape(len(vs), len(us), 3)
@@ -178,22 +188,20 @@ class PixelGrid:
         # and one product a point
         cells = np.stack([a, b - a, c - a, a - b - c + d], axis=2)    # (nv-1, nu-1, 4, 3)
         self._cells = np.ascontiguousarray(cells.reshape(-1, 4, 3))
-        self._stride = np.array([1, len(us) - 1], dtype=np.intp)
-        self._inv = 1.0 / step
+        self._par = np.array([us[0], vs[0], 1.0 / step, len(us) - 2, len(vs) - 2,
+                              len(us) - 1], dtype=float)
+
+    def _kernel_table(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """The table as ``vision.kernels`` reads it (``kernels._to_mm``)."""
+        return 1, self._cells, self._par
 
     def px_to_mm_scale(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(N, 2)`` pixels -> belt mm ``(N, 2)`` and mm per px ``(N,)`` (as
-        ``Calibration.px_to_mm_scale``; points off the table are extrapolated linearly)."""
-        g = np.asarray(uv, dtype=float).reshape(-1, 2) - self._origin
-        g *= self._inv
-        cell = np.floor(g).astype(np.intp)
-        np.maximum(cell, 0, out=cell)
-        np.minimum(cell, self._n, out=cell)
-        w = np.empty((len(g), 1, 4))
-        w[:, 0, 0] = 1.0
-        w[:, 0, 1:3] = g - cell                                   # fu, fv
-        w[:, 0, 3] = w[:, 0, 1] * w[:, 0, 2]
-        out = np.matmul(w, self._cells[cell @ self._stride])[:, 0]
+        ``Calibration.px_to_mm_scale``; points off the table are extrapolated linearly).
+        Each point: its cell's bilinear form's coefficients of 1, fu, fv and fu·fv."""
+        from .jit import kernels
+        uv = np.ascontiguousarray(np.asarray(uv, dtype=float).reshape(-1, 2))
+        out = kernels().map_points(uv, 1, self._cells, self._par)
         return out[:, :2], out[:, 2]
 
     def px_to_mm(self, uv: np.ndarray) -> np.ndarray:

@@ -5,8 +5,9 @@ Helpers of ``feeder_bt.vision`` (segmentation, blobs) that need no recipe.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
+
+from .jit import kernels
 
 WINDOW = 5                     # points in the moving average of the smoothed perimeter
 
@@ -22,10 +23,6 @@ def _full_chain(contour: np.ndarray) -> np.ndarray:
     at = np.repeat(np.arange(len(pts)), n)
     k = np.arange(len(at)) - np.repeat(np.cumsum(n) - n, n)       # steps into the segment
     return (pts[at] + k[:, None] * (step // n[:, None])[at]).astype(np.int32).reshape(-1, 1, 2)
-
-
-def _first(item: tuple) -> int:
-    return item[0]
 
 
 def _with_holes(contours: tuple[np.ndarray, ...], hierarchy: np.ndarray | None, holes: bool
@@ -66,21 +63,6 @@ def _boundary_steps(contours: list[np.ndarray], full: bool) -> list[int]:
     return [len(c) for c in contours] if full else _chain_steps(contours)
 
 
-def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """First and last of each run of sorted indices, runs parted by more than ``gap``."""
-    first, last = int(idx[0]), int(idx[-1])
-    if last - first - (len(idx) - 1) < gap:     # too few missing for a gap wider than gap
-        return [(first, last)]
-    cuts = ((idx[1:] - idx[:-1]) > gap).nonzero()[0]
-    firsts = [int(idx[0])] + idx[cuts + 1].tolist()
-    lasts = idx[cuts].tolist() + [int(idx[-1])]
-    return list(zip(firsts, lasts, strict=True))
-
-
-_STRIDES: dict[int, np.ndarray] = {}        # n -> the order visiting a closed n-chain by
-                                            # steps of WINDOW points
-
-
 def _smooth_length(contour: np.ndarray, window: int = WINDOW) -> float:
     """Length of a closed pixel contour after a circular moving average of its points.
 
@@ -88,23 +70,9 @@ def _smooth_length(contour: np.ndarray, window: int = WINDOW) -> float:
     differ by one point in, one out), so the length is the sum of the distances between
     points ``window`` apart: the perimeter of the polygon that visits the contour
     ``window`` points at a time (one closed tour when n and ``window`` are coprime, else
-    ``window`` of them), which ``cv2.arcLength`` measures in one call. A contour shorter
-    than two windows keeps its plain length.
+    ``window`` of them), summed as ``cv2.arcLength`` sums (``kernels.smooth_length``; the
+    locator measures a frame's blobs in one call, ``kernels.blob_stats``). A contour
+    shorter than two windows keeps its plain length.
     """
-    uv = contour.reshape(-1, 2)
-    n = len(uv)
-    if n < 2 * window:
-        return float(cv2.arcLength(uv, True))
-    order = _STRIDES.get(n)
-    if order is None:
-        if len(_STRIDES) > 4096:
-            _STRIDES.clear()
-        if n % window:
-            order = _STRIDES[n] = np.arange(n) * window % n
-        else:                               # window tours, one a row
-            order = _STRIDES[n] = np.arange(n).reshape(-1, window).T.copy()
-    # gather (u, v) pairs as one int64 each: numpy's gather of rows is far slower
-    tours = uv.view(np.int64).ravel()[order].view(np.int32)
-    if order.ndim == 1:
-        return float(cv2.arcLength(tours.reshape(-1, 2), True)) / window
-    return sum(float(cv2.arcLength(t.reshape(-1, 2), True)) for t in tours) / window
+    uv = np.ascontiguousarray(contour.reshape(-1, 2), dtype=np.int32)
+    return float(kernels().smooth_length(uv, 0, len(uv), window))

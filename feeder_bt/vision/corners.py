@@ -10,11 +10,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from ..geometry import pose_outline, wrap_deg
 from ..scenario.model import PartSpec
+from .jit import kernels
 
 
 @dataclass
@@ -31,21 +31,9 @@ class _CornerSignature:
     alpha: float
 
 
-def _from_frame(vx: float, vy: float, c: float, s: float) -> tuple[float, float]:
-    """A vector in the rectangle's frame (cos ``c``, sin ``s`` of its angle) -> outline frame."""
-    return vx * c - vy * s, vx * s + vy * c
-
-
-_SQRT2 = math.sqrt(2.0)
-
-
 def _corner_signature(pts: np.ndarray) -> _CornerSignature | None:
     """Cut-corner signature of one closed outline given as points in mm."""
     return _corner_signatures([np.asarray(pts, dtype=np.float32).reshape(-1, 2)])[0]
-
-
-_CORNER_X = np.array([1.0, -1.0, -1.0, 1.0])   # the minimum-area rectangle's corners,
-_CORNER_Y = np.array([1.0, 1.0, -1.0, -1.0])   # in half-sides, in cv2.boxPoints' turn
 
 
 def _corner_signatures(outlines: list[np.ndarray], hulled: bool = False
@@ -59,52 +47,17 @@ def _corner_signatures(outlines: list[np.ndarray], hulled: bool = False
     from the outline is the cut one; the cut is longer along one side than the other,
     which tells the faces apart. All of it reads only the outline's convex hull (the
     rectangle, the points nearest the rectangle's corners and at the ends of its sides),
-    and all the hulls go through one set of array operations (numpy's per-call cost
-    dominates when done one by one; each point gathers its outline's row once).
+    all the outlines in one compiled call (``kernels.signatures``).
     """
-    hulls = outlines if hulled else [cv2.convexHull(o).reshape(-1, 2) for o in outlines]
-    n = len(hulls)
-    counts = [len(hl) for hl in hulls]
-    # per outline: centre, angle, half-sides
-    par = np.array([(cx, cy, a, w, h) for (cx, cy), (w, h), a in map(cv2.minAreaRect, hulls)]
-                   ).reshape(n, 5)
-    par[:, 2] = np.radians(par[:, 2])
-    par[:, 3:] *= 0.5
-    seg = np.repeat(np.arange(n), counts)                       # each point's outline
-    starts = np.cumsum([0] + counts[:-1])
-    ps = par[seg]                                               # its outline's, a row each
-    z = np.concatenate(hulls).astype(np.float64).view(np.complex128).ravel()
-    q = (z - (ps[:, 0] + 1j * ps[:, 1])) * np.exp(-1j * ps[:, 2])   # in the rectangle's frame
-    hx, hy = ps[:, 3], ps[:, 4]
-    qx, qy = q.real, q.imag
-    # squared distance of each point to each rectangle corner (a column each, in
-    # _CORNER_X / _CORNER_Y's turn), the nearest point's per outline, the farthest corner
-    xp, xm, yp, ym = (qx - hx) ** 2, (qx + hx) ** 2, (qy - hy) ** 2, (qy + hy) ** 2
-    k = np.minimum.reduceat(np.stack([xp + yp, xm + yp, xm + ym, xp + ym], axis=1),
-                            starts).argmax(axis=1)
-    sx = np.sign(par[:, 3] * _CORNER_X[k])
-    sy = np.sign(par[:, 4] * _CORNER_Y[k])
-    fx, fy = qx * sx[seg], qy * sy[seg]                   # cut corner now at (+, +)
-    tol = 1.5
-    # the far end of the side parallel to x (y) short of the cut: the top (right) side's
-    # points within tol of it, their largest x (y); -inf if it has none
-    top = np.maximum.reduceat(np.where(np.abs(fy - hy) < tol, fx, -np.inf), starts)
-    right = np.maximum.reduceat(np.where(np.abs(fx - hx) < tol, fy, -np.inf), starts)
-    out: list[_CornerSignature | None] = []
-    for (_, _, aj, hxj, hyj), sxj, syj, tj, rj in zip(par.tolist(), sx.tolist(), sy.tolist(),
-                                                      top.tolist(), right.tolist(),
-                                                      strict=True):
-        if tj == -math.inf or rj == -math.inf:
-            out.append(None)
-            continue
-        cj, sj = math.cos(aj), math.sin(aj)
-        leg_x = hxj - tj                     # cut length along the side parallel to x
-        leg_y = hyj - rj
-        corner = _from_frame(sxj / _SQRT2, syj / _SQRT2, cj, sj)
-        leg = (_from_frame(-sxj, 0.0, cj, sj) if leg_x >= leg_y
-               else _from_frame(0.0, -syj, cj, sj))
-        out.append(_CornerSignature(corner=corner, leg=leg, alpha=aj))
-    return out
+    xy = np.ascontiguousarray(np.concatenate(outlines).reshape(-1, 2), dtype=np.float32)
+    ends = np.cumsum([len(o) for o in outlines])
+    return _signature_rows(kernels().signatures(xy, ends, hulled))
+
+
+def _signature_rows(rows: np.ndarray) -> list[_CornerSignature | None]:
+    """``kernels.signatures``' rows as signatures (None: no cut corner seen)."""
+    return [_CornerSignature(corner=(cx, cy), leg=(lx, ly), alpha=a) if ok else None
+            for ok, cx, cy, lx, ly, a in rows.tolist()]
 
 
 def _densify(outline: np.ndarray, step: float = 0.25) -> np.ndarray:

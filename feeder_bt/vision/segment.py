@@ -5,8 +5,8 @@ frame, or the inverted frame; ``light``: the frame minus the golden image, or th
 its threshold (``threshold.method``: ``fixed``, ``otsu`` never below ``value``, or
 ``adaptive`` with OpenCV's ``C``), the morphology, and the contours of the mask, found only
 in the rectangles that hold foreground (``Segmenter._contours_holes``). Also where a
-contour's edge crosses the threshold between pixels (``Segmenter._edge_points``), for
-angles finer than a pixel.
+contour's edge crosses the threshold between pixels (``Segmenter._bright_source`` and
+``kernels.edge_points``), for angles finer than a pixel.
 
 ``Segmenter`` holds what one recipe needs for this and nothing of parts or calibration;
 ``Locator`` (``vision.locator``) is a ``Segmenter`` that also measures and classifies the
@@ -16,7 +16,6 @@ read, never written), so one segmenter may serve several threads.
 
 from __future__ import annotations
 
-import bisect
 import math
 import threading
 
@@ -24,11 +23,8 @@ import cv2
 import numpy as np
 
 from ..scenario.model import VisionRecipe
-from .chains import _first, _runs, _with_holes
-
-# the four 4-neighbours of a pixel (u, v): where the outline may cross between them
-_DU = np.array([1, -1, 0, 0])
-_DV = np.array([0, 0, 1, -1])
+from .chains import _with_holes
+from .jit import kernels
 
 
 class Segmenter:
@@ -52,6 +48,8 @@ class Segmenter:
                            and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
                            for k in (self._open, self._close) if k is not None)
         self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
+        self._golden_small: np.ndarray | None = None     # its subsample (``subsample``)
+        self._moved_by: dict[int, np.ndarray] = {}       # Otsu's levels: ``_moved``
         self._scratch = threading.local()         # per-thread frame-sized images, reused
 
     # -------------------------------------------------------------- images
@@ -59,6 +57,8 @@ class Segmenter:
     def set_golden(self, image: np.ndarray) -> None:
         """Remember the cleared belt; later frames are compared against it."""
         self._golden = to_grey(image).copy()
+        self._golden_small = subsample(self._golden).copy()
+        self._moved_by = {}
         th = self.recipe.threshold
         self._below = None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
@@ -69,6 +69,18 @@ class Segmenter:
                 # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
                 self._below = cv2.subtract(self._golden, math.floor(th.value))
 
+    def _moved(self, t: int) -> np.ndarray:
+        """The golden image moved by a level t: below it (dark parts) or above it (light
+        parts) a frame's pixel differs from the golden image by more than t. A few levels
+        kept (Otsu's moves a grey level or two between frames)."""
+        moved = self._moved_by.get(t)
+        if moved is None:
+            if len(self._moved_by) >= 8:
+                self._moved_by.clear()
+            moved = self._moved_by[t] = (cv2.add(self._golden, t) if self._light
+                                         else cv2.subtract(self._golden, t))
+        return moved
+
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
         return self._morph(self._threshold(to_grey(image))[0].copy())
@@ -77,15 +89,33 @@ class Segmenter:
         """A frame-sized uint8 scratch image of this thread's, reused from frame to frame.
 
         A fresh frame-sized array each frame costs more than the operation writing it when
-        the allocator hands the pages back and faults them in again (2-3x on the bench).
+        the allocator hands the pages back and faulted them in again (2-3x on the bench).
+        Its rows are padded with zero columns to whole 8-byte words (``_words``).
         """
         bufs: dict[str, np.ndarray] | None = getattr(self._scratch, "bufs", None)
         if bufs is None:
             bufs = self._scratch.bufs = {}
         buf = bufs.get(name)
         if buf is None or buf.shape != shape:
-            buf = bufs[name] = np.empty(shape, dtype=np.uint8)
+            h, w = shape
+            padded = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
+            buf = bufs[name] = padded[:, :w]
+            words = getattr(self._scratch, "words", None)
+            if words is None:
+                words = self._scratch.words = {}
+            words[id(buf)] = (buf, padded.view(np.uint64))
         return buf
+
+    def _words(self, mask: np.ndarray) -> np.ndarray:
+        """The mask as 8 pixels a word (``kernels.foreground_rois``): a scratch image's own
+        padded rows, else a padded copy."""
+        got = getattr(self._scratch, "words", {}).get(id(mask))
+        if got is not None and got[0] is mask:
+            return got[1]
+        h, w = mask.shape
+        padded = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
+        padded[:, :w] = mask
+        return padded.view(np.uint64)
 
     def _diff(self, img: np.ndarray, dst: np.ndarray | None = None) -> np.ndarray:
         """The image in which parts are bright: for dark parts the golden image minus the
@@ -111,12 +141,25 @@ class Segmenter:
             # the same mask as subtract-then-threshold, in one pass over the frame
             return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
                                 dst=mask), None, float(th.value))
+        golden = self._golden
+        if th.method == "otsu" and self.recipe.golden_image and golden is not None \
+                and golden.shape == img.shape:
+            # Otsu's level from the subsample's difference, then the mask in one pass
+            # against the golden image moved by the level, as for a fixed level: no
+            # frame-sized difference image (the faces read the grey from the frame and the
+            # golden image where they need it)
+            f, g = subsample(img), self._golden_small
+            level = max(otsu_level(cv2.subtract(f, g) if self._light else cv2.subtract(g, f)),
+                        float(th.value))
+            return (cv2.compare(img, self._moved(math.floor(level)),
+                                cv2.CMP_GT if self._light else cv2.CMP_LT, dst=mask),
+                    None, level)
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
             cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "otsu":
-            level = max(otsu_level(diff), float(th.value))
+            level = max(otsu_level(subsample(diff)), float(th.value))
             cv2.threshold(diff, level, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "adaptive":
             level = None
@@ -136,26 +179,16 @@ class Segmenter:
             mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._close)
         return mask
 
-    def _rois(self, mask: np.ndarray) -> list[tuple[int, int, int, int]]:
+    def _rois(self, mask: np.ndarray) -> np.ndarray:
         """Rectangles (v0, v1, u0, u1) that hold all the foreground, each with a margin of
         empty pixels wider than the morphology reaches (or the image's edge).
 
         Rows with foreground are cut into bands where ``2 * margin`` empty rows part them,
-        then each band's columns likewise: most of a frame is empty belt.
+        then each band's columns likewise: most of a frame is empty belt. In one compiled
+        pass over the mask, 8 pixels a word (``kernels.foreground_rois``).
         """
         h, w = mask.shape
-        m = self._margin
-        rows = cv2.reduce(mask, 1, cv2.REDUCE_SUM, dtype=cv2.CV_32S).ravel().nonzero()[0]
-        if len(rows) == 0:
-            return []
-        out = []
-        for a, b in _runs(rows, 2 * m):
-            cols = cv2.reduce(mask[a:b + 1], 0, cv2.REDUCE_SUM,
-                              dtype=cv2.CV_32S).ravel().nonzero()[0]
-            v0, v1 = max(a - m, 0), min(b + m + 1, h)
-            out += [(v0, v1, max(c0 - m, 0), min(c1 + m + 1, w))
-                    for c0, c1 in _runs(cols, 2 * m)]
-        return out
+        return kernels().foreground_rois(self._words(mask), h, w, self._margin)
 
     def _contours(self, mask: np.ndarray, full: bool) -> list[np.ndarray]:
         """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
@@ -178,124 +211,110 @@ class Segmenter:
         contour search (whose own border is empty, as at the image's edge).
         """
         h, w = mask.shape
+        k = kernels()
         rois = self._rois(mask)
-        if not rois:
-            return [], ([] if holes else None)
+        if not len(rois):
+            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
         mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
-        # a rectangle at the image's edge has no empty margin there: it gets a mirror (for
-        # the morphology), which also keeps it one pixel clear of its neighbours
-        pad = self._margin if morph else 1
-        out: list[tuple[int, np.ndarray, list[np.ndarray]]] = []   # (whole frame's raster
-        # index of the 1st point, contour, its holes)
-        srcs: list[tuple[int, np.ndarray]] = []   # (x in the packed image, pixels)
-        starts: list[int] = []
-        shifts: list[int] = []                    # packed -> frame, u + (v << 32): an int64 add
-        mirrors = []
-        x = height = 0
-        for v0, v1, u0, u1 in rois:
-            src = mask[v0:v1, u0:u1]
-            top = left = 0
-            if v0 == 0 or u0 == 0 or v1 == h or u1 == w:
-                top, bottom, left, right = pad * (v0 == 0), pad * (v1 == h), \
-                    pad * (u0 == 0), pad * (u1 == w)
-                if morph and not self._mirror:
-                    cs, hier = cv2.findContours(self._morph(src), mode, chain, offset=(u0, v0))
-                    out += [(c.item(1) * w + c.item(0), c, hs)
-                            for c, hs in _with_holes(cs, hier, holes)]
-                    continue
-                src = cv2.copyMakeBorder(src, top, bottom, left, right, cv2.BORDER_REFLECT_101)
-                mirrors.append((x, top, bottom, left, right, src.shape))
-            srcs.append((x, src))
-            starts.append(x)
-            shifts.append(u0 - x - left + ((v0 - top) << 32))
-            x += src.shape[1]
-            height = max(height, src.shape[0])
-        if srcs:
-            packed = np.zeros((height, x), dtype=np.uint8)
-            for x0, src in srcs:
-                packed[:src.shape[0], x0:x0 + src.shape[1]] = src
+        own: list[tuple[np.ndarray, list[np.ndarray]]] = []    # found in the frame's place
+        if morph and not self._mirror:
+            # an asymmetric kernel: rectangles at the image's edge get their own search
+            edge = (rois[:, 0] == 0) | (rois[:, 1] == h) | (rois[:, 2] == 0) | (rois[:, 3] == w)
+            for v0, v1, u0, u1 in rois[edge].tolist():
+                cs, hier = cv2.findContours(self._morph(mask[v0:v1, u0:u1]), mode, chain,
+                                            offset=(u0, v0))
+                own += _with_holes(cs, hier, holes)
+            rois = np.ascontiguousarray(rois[~edge])
+        found: list[tuple[np.ndarray, list[np.ndarray]]] = []
+        geo = _NO_GEO
+        if len(rois):
+            # a rectangle at the image's edge has no empty margin there: it gets a mirror
+            # (for the morphology), which also keeps it one pixel clear of its neighbours
+            packed, geo = k.pack_rois(mask, rois, self._margin if morph else 1)
             if morph:
                 packed = self._morph(packed)
-            for x0, top, bottom, left, right, (sh, sw) in mirrors:
-                if top:
-                    packed[:top, x0:x0 + sw] = 0
-                if bottom:
-                    packed[sh - bottom:sh, x0:x0 + sw] = 0
-                if left:
-                    packed[:, x0:x0 + left] = 0
-                if right:
-                    packed[:, x0 + sw - right:x0 + sw] = 0
+            if geo[:, 1:5].any():
+                k.clear_mirrors(packed, geo)
             cs, hier = cv2.findContours(packed, mode, chain)
-            for c, hs in _with_holes(cs, hier, holes):
-                shift = shifts[bisect.bisect_right(starts, c.item(0)) - 1]
-                for k in (c, *hs):               # a blob's holes lie in its rectangle
-                    flat = k.view(np.int64)
-                    flat += shift
-                out.append((c.item(1) * w + c.item(0), c, hs))
-        # the whole frame's findContours lists contours by first point, last found first
-        out.sort(key=_first, reverse=True)
-        return [c for _, c, _ in out], ([hs for _, _, hs in out] if holes else None)
+            found = _with_holes(cs, hier, holes)
+        n_packed = len(found)
+        found += own
+        if not found:
+            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
+        pts = np.concatenate([c for c, _ in found]).reshape(-1, 2)
+        lens = np.fromiter((len(c) for c, _ in found), np.int64, len(found))
+        # back to the frame; the whole frame's findContours lists contours by first
+        # point, last found first
+        pts, lens, order, moved = k.place_contours(pts, lens, n_packed, geo, w)
+        ends = np.cumsum(lens).tolist()
+        flat = pts.reshape(-1, 1, 2)
+        contours = Contours([flat[e - n:e] for e, n in zip(ends, lens.tolist(), strict=True)],
+                            pts, lens)
+        if not holes:
+            return contours, None
+        out_holes = []
+        for i, (du, dv) in zip(order.tolist(), moved[order].tolist(), strict=True):
+            hs = found[i][1]
+            for hole in hs:                   # a blob's holes lie in its rectangle
+                hole += np.array([du, dv], dtype=np.int32)
+            out_holes.append(hs)
+        return contours, out_holes
 
-    def _diff_at(self, img: np.ndarray, diff: np.ndarray | None, at: np.ndarray) -> np.ndarray:
-        """``_diff`` at flat pixel indices ``at`` (from the frame's if it was made)."""
+    def _bright_source(self, img: np.ndarray, diff: np.ndarray | None
+                       ) -> tuple[np.ndarray, np.ndarray, int]:
+        """How ``kernels.edge_points`` reads the image in which parts are bright (``_diff``)
+        at a pixel: (the frame's difference image if it was made, else the frame; the
+        golden image or a placeholder; ``kernels``' mode), the images flat.
+
+        Where the outline crosses the level between pixels, for angles finer than a pixel
+        (``Locator._faces``): a binary contour moves in whole pixels, which limits the angle
+        of a near-axis edge to about 1°; the grey levels say where the edge is. Between
+        each boundary pixel given (the vertices of each blob's pixel hull) and each of its
+        4-neighbours outside the level, the difference image (interpolated linearly, as a
+        bilinear image is along that line) crosses the level at one point. Only the blob's
+        own boundary is read, so a neighbour in its box is no trouble. Without a level
+        (adaptive threshold), or if a contour has too few such points, the contours'
+        pixels are used.
+        """
+        k = kernels()
         if diff is not None:
-            return diff.ravel()[at]
+            return diff.reshape(-1), _NO_GOLDEN, k.DIFF
+        flat = np.ascontiguousarray(img).reshape(-1)
         golden = self._golden
         if self.recipe.golden_image and golden is not None:
-            g = golden.ravel()[at].astype(np.int16)
-            d = img.ravel()[at] - g if self._light else g - img.ravel()[at]
-            return np.maximum(d, 0).astype(np.uint8)
-        return img.ravel()[at] if self._light else 255 - img.ravel()[at]
+            return flat, golden.reshape(-1), k.GOLDEN_LIGHT if self._light else k.GOLDEN_DARK
+        return flat, _NO_GOLDEN, k.PLAIN_LIGHT if self._light else k.PLAIN_DARK
 
-    def _edge_points(self, contours: list[np.ndarray], img: np.ndarray,
-                     diff: np.ndarray | None, level: float | None
-                     ) -> tuple[np.ndarray, list[int]]:
-        """Points (pixels, ``(n, 2)``) on the outlines of ``contours`` to a fraction of a
-        pixel, all of them in one set of array operations, and how many each contour has
-        (in order).
 
-        A binary contour moves in whole pixels, which limits the angle of a near-axis edge
-        to about 1°. The grey levels say where the edge is: between each given boundary
-        pixel (the locator's faces give the vertices of each blob's pixel hull) and each of
-        its 4-neighbours outside the level, the difference image (interpolated linearly, as
-        a bilinear image is along that line) crosses the level at one point. Only the
-        blob's own boundary is read, so a neighbour in its box is no trouble. Without a
-        level (adaptive threshold), or if a contour has too few such points, the contours'
-        pixels are returned.
-        """
-        uv = np.concatenate(contours).reshape(-1, 2)
-        counts = [len(c) for c in contours]
-        pts: np.ndarray = uv
-        if level is not None:
-            w = img.shape[1]
-            # each boundary pixel and its 4-neighbours (inside the image: touching blobs
-            # are out), a row each, read in one gather
-            at = (uv[:, 1] * w + uv[:, 0])[:, None] + np.array([0, 1, -1, w, -w])
-            vals = self._diff_at(img, diff, at)
-            inside, around = vals[:, 0], vals[:, 1:]
-            cut = math.floor(level)              # THRESH_BINARY: value > floor(level) is in
-            i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()    # i ascending
-            last = np.searchsorted(i, np.cumsum(counts))     # crossings per contour
-            found = last.copy()
-            found[1:] -= last[:-1]
-            if found.min() >= 3:
-                a = inside[i].astype(np.float64)
-                t = (a - (cut + 0.5)) / (a - around[i, k])  # the level between grey steps
-                pts = np.empty((len(i), 2))
-                pts[:, 0] = uv[i, 0] + t * _DU[k]
-                pts[:, 1] = uv[i, 1] + t * _DV[k]
-                counts = found.tolist()
-        return pts, counts
+_NO_GOLDEN = np.zeros(1, np.uint8)
+_NO_POINTS = np.zeros((0, 2), np.int32)
+_NO_LENS = np.zeros(0, np.int64)
+_NO_GEO = np.zeros((0, 9), np.int64)
+
+
+class Contours(list):
+    """Contours ((n, 1, 2) int32 each, in the frame), with the same points one after
+    another (``pts``, ``lens`` each): ``blobs.find_blobs`` measures them as they are."""
+
+    def __init__(self, contours: list[np.ndarray], pts: np.ndarray, lens: np.ndarray) -> None:
+        super().__init__(contours)
+        self.pts, self.lens = pts, lens
 
 
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
 
 
-def otsu_level(diff: np.ndarray) -> float:
-    """Otsu's level of ``diff`` from a regular subsample (every ``OTSU_STEP``-th pixel of
-    every ``OTSU_STEP``-th row).
+def subsample(img: np.ndarray) -> np.ndarray:
+    """Every ``OTSU_STEP``-th pixel of every ``OTSU_STEP``-th row (a view; a small image
+    whole), where Otsu's level is read."""
+    h, w = img.shape[:2]
+    return img if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else img[::OTSU_STEP, ::OTSU_STEP]
+
+
+def otsu_level(small: np.ndarray) -> float:
+    """Otsu's level of a difference image's regular subsample (``subsample``).
 
     The level is a property of the histogram's two modes, belt and parts, which a 1/16
     sample of a frame shows as well as the whole frame (the parts' smallest blobs still
@@ -303,8 +322,6 @@ def otsu_level(diff: np.ndarray) -> float:
     on a frame of squares (benchmarks/vision_bench.py). The mask is still cut from every
     pixel, at this level.
     """
-    h, w = diff.shape[:2]
-    small = diff if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else diff[::OTSU_STEP, ::OTSU_STEP]
     level, _ = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
     return float(level)
 

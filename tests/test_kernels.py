@@ -1,0 +1,235 @@
+"""The locator's compiled kernels (feeder_bt/vision/kernels.py) against the OpenCV calls and
+numpy rules they replaced, on random inputs; and numba's import and cache behaviour."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.chains import WINDOW, _chain_steps
+from feeder_bt.vision.jit import kernels
+
+K = kernels()
+_SIM = (K.SIMILARITY, np.zeros((1, 4, 3)), np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))
+
+
+def _mask(seed: int, h: int = 90, w: int = 130) -> np.ndarray:
+    """Discs, bars and specks, some cut by the edges, with noise."""
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((h, w), np.uint8)
+    for _ in range(int(rng.integers(1, 7))):
+        centre = (int(rng.integers(-5, w + 5)), int(rng.integers(-5, h + 5)))
+        if rng.random() < 0.5:
+            cv2.circle(mask, centre, int(rng.integers(1, 25)), 255, -1)
+        else:
+            size = (int(rng.integers(1, 40)), int(rng.integers(1, 20)))
+            box = cv2.boxPoints((centre, size, float(rng.uniform(0, 180))))
+            cv2.fillPoly(mask, [box.astype(np.int32)], 255)
+    noise = rng.random((h, w))
+    mask[noise < 0.005] = 255
+    mask[noise > 0.997] = 0
+    return mask
+
+
+def _stats(contours, full=True, length=True, hulls=True, min_px=0.0, table=_SIM):
+    pts = np.ascontiguousarray(np.concatenate(contours).reshape(-1, 2))
+    lens = np.array([len(c) for c in contours], dtype=np.int64)
+    return pts, K.blob_stats(pts, lens, min_px, full, length, hulls, WINDOW, *table)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6))
+def test_blob_stats_are_opencvs_box_moments_hull_and_rectangle(seed):
+    mask = _mask(seed)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return
+    pts, (boxes, stats, hull, hull_ends) = _stats(contours)
+    for i, c in enumerate(contours):
+        assert tuple(boxes[i]) == cv2.boundingRect(c)
+        m = cv2.moments(c)
+        row = stats[i]
+        assert row[K.M00] == pytest.approx(m["m00"], rel=1e-12, abs=1e-12)
+        if m["m00"]:
+            assert row[K.CU] == pytest.approx(m["m10"] / m["m00"], rel=1e-12)
+            assert row[K.CV] == pytest.approx(m["m01"] / m["m00"], rel=1e-12)
+        else:
+            assert (row[K.CU], row[K.CV]) == pytest.approx(tuple(c.reshape(-1, 2).mean(0)))
+        assert row[K.STEPS] == len(c)
+        # the hull: OpenCV's vertices (no collinear points)
+        mine = pts[hull[(hull_ends[i - 1] if i else 0):hull_ends[i]]]
+        theirs = cv2.convexHull(c).reshape(-1, 2)
+        assert sorted(map(tuple, mine.tolist())) == sorted(map(tuple, theirs.tolist()))
+        assert row[K.HULL_AREA] == cv2.contourArea(theirs)
+        assert row[K.HULL_LEN] == pytest.approx(cv2.arcLength(theirs, True), rel=1e-9)
+        # the minimum-area rectangle: the same area (its sides as the features use them)
+        (_, _), (w, h), _ = cv2.minAreaRect(theirs)
+        assert (row[K.RECT_W] + 1) * (row[K.RECT_H] + 1) == pytest.approx((w + 1) * (h + 1),
+                                                                          rel=1e-5)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10**6))
+def test_blob_stats_count_a_corner_chains_boundary_pixels(seed):
+    corners, _ = cv2.findContours(_mask(seed), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if not corners:
+        return
+    _, (_, stats, _, _) = _stats(corners, full=False, length=False, hulls=False)
+    assert stats[:, K.STEPS].astype(int).tolist() == _chain_steps(list(corners))
+    assert np.isnan(stats[:, K.LENGTH]).all() and np.isnan(stats[:, K.RECT_W]).all()
+
+
+def test_blob_stats_leave_specks_unmeasured():
+    contours = [np.array([[[5, 5]], [[6, 5]]], np.int32), np.array([[[0, 0]]], np.int32)]
+    _, (boxes, stats, _, _) = _stats(contours, min_px=2.5)
+    assert boxes[0, 2] == -1 and boxes[1, 2] == -1 and np.isnan(stats).all()
+
+
+@given(st.lists(st.tuples(st.floats(-50, 700), st.floats(-50, 530)), min_size=1, max_size=40))
+def test_points_to_mm_through_a_similarity_are_the_calibrations(uv):
+    from feeder_bt.scenario.model import CameraCalibration
+    cal = Calibration(CameraCalibration(origin_mm=(80.3, -14.6), mm_per_px=0.9994,
+                                        rotation_deg=-2.5))
+    uv = np.array(uv, dtype=float)
+    got = K.map_points(uv, *cal._kernel_table())
+    assert np.allclose(got[:, :2], cal.px_to_mm(uv), rtol=0, atol=1e-9)
+    assert np.all(got[:, 2] == cal.mm_per_px)
+
+
+def _rois_reference(mask: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
+    """``Segmenter._rois``' rule, in numpy: bands of rows, then each band's columns, runs
+    parted by more than 2 margin empty lines."""
+    def runs(idx):
+        cuts = np.flatnonzero(np.diff(idx) > 2 * margin)
+        return list(zip(np.r_[idx[0], idx[cuts + 1]], np.r_[idx[cuts], idx[-1]], strict=True))
+    h, w = mask.shape
+    rows = np.flatnonzero(mask.any(axis=1))
+    out = []
+    for a, b in (runs(rows) if len(rows) else []):
+        cols = np.flatnonzero(mask[a:b + 1].any(axis=0))
+        out += [(max(a - margin, 0), min(b + margin + 1, h), max(c0 - margin, 0),
+                 min(c1 + margin + 1, w)) for c0, c1 in runs(cols)]
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6), st.integers(1, 6), st.integers(60, 140))
+def test_foreground_rectangles_follow_the_rule(seed, margin, width):
+    from feeder_bt.scenario.model import VisionRecipe
+    from feeder_bt.vision.segment import Segmenter
+    mask = _mask(seed, w=width)
+    seg = Segmenter(VisionRecipe())
+    seg._margin = margin
+    assert [tuple(r) for r in seg._rois(mask).tolist()] == _rois_reference(mask, margin)
+    # the scratch mask (rows padded to whole words) gives the same as a copy
+    own = seg._buffer("mask", mask.shape)
+    own[:] = mask
+    assert [tuple(r) for r in seg._rois(own).tolist()] == _rois_reference(mask, margin)
+
+
+def _edge_reference(hulls, diff, cut):
+    """``Segmenter._edge_points``' rule in numpy (as before the kernels)."""
+    du, dv = np.array([1, -1, 0, 0]), np.array([0, 0, 1, -1])
+    w = diff.shape[1]
+    uv = np.concatenate(hulls).reshape(-1, 2)
+    counts = [len(c) for c in hulls]
+    at = (uv[:, 1] * w + uv[:, 0])[:, None] + np.array([0, 1, -1, w, -w])
+    vals = diff.ravel()[at]
+    inside, around = vals[:, 0], vals[:, 1:]
+    i, k = ((around <= cut) & (inside > cut)[:, None]).nonzero()
+    last = np.searchsorted(i, np.cumsum(counts))
+    found = last.copy()
+    found[1:] -= last[:-1]
+    if found.min() < 3:
+        return uv.astype(float), counts
+    a = inside[i].astype(np.float64)
+    t = (a - (cut + 0.5)) / (a - around[i, k])
+    return np.column_stack([uv[i, 0] + t * du[k], uv[i, 1] + t * dv[k]]), found.tolist()
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10**6), st.integers(40, 200))
+def test_edge_points_follow_the_rule(seed, cut):
+    rng = np.random.default_rng(seed)
+    diff = cv2.GaussianBlur(_mask(seed), (7, 7), 1.5)
+    diff = np.clip(diff.astype(int) + rng.integers(-8, 9, diff.shape), 0, 255).astype(np.uint8)
+    inner = np.zeros_like(diff)
+    inner[1:-1, 1:-1] = (diff[1:-1, 1:-1] > cut) * 255
+    contours, _ = cv2.findContours(inner, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    contours = [c for c in contours if len(c) > 4]
+    if not contours:
+        return
+    pts, (_, _, hull, hull_ends) = _stats(contours, length=False)
+    sel = np.arange(len(contours), dtype=np.int64)
+    got, ends = K.edge_points(pts, hull, hull_ends, sel, diff.reshape(-1),
+                              np.zeros(1, np.uint8), K.DIFF, diff.shape[1], cut, True)
+    hulls = [pts[hull[(hull_ends[i - 1] if i else 0):hull_ends[i]]] for i in sel]
+    want, counts = _edge_reference(hulls, diff, cut)
+    assert np.diff(np.r_[0, ends]).tolist() == list(counts)
+    assert np.allclose(got, want, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6), st.integers(3, 60))
+def test_minimum_area_rectangle_of_points_is_opencvs(seed, n):
+    rng = np.random.default_rng(seed)
+    pts = (rng.normal(0, 1, (n, 2)) * rng.uniform(1, 40, 2)).astype(np.float32)
+    idx = np.empty(2 * n + 1, np.int64)
+    k = K.convex_hull(pts, idx)
+    assert sorted(map(tuple, pts[idx[:k]].tolist())) == \
+        sorted(map(tuple, cv2.convexHull(pts).reshape(-1, 2).tolist()))
+    cu, cv, angle, w, h = K.min_rect(pts, idx, k, 0.0)
+    (_, _), (ow, oh), _ = cv2.minAreaRect(pts)
+    assert w * h == pytest.approx(ow * oh, rel=1e-4, abs=1e-4)
+    # every point inside the rectangle
+    c, s = math.cos(angle), math.sin(angle)
+    d = pts.astype(float) - (cu, cv)
+    assert np.all(np.abs(d @ (c, s)) <= w / 2 + 1e-4)
+    assert np.all(np.abs(d @ (-s, c)) <= h / 2 + 1e-4)
+
+
+def _run(code: str, **env: str) -> str:
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, **env}, timeout=300, check=True)
+    return out.stdout
+
+
+def test_commands_that_never_locate_do_not_import_numba():
+    code = ("import sys, contextlib, io\n"
+            "from feeder_bt.cli import main\n"
+            "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+            "    main(['--help'])\n"
+            "import feeder_bt.vision.locator, feeder_bt.vision.calibration\n"
+            "print('numba' in sys.modules)\n")
+    assert _run(code).strip() == "False"
+
+
+def test_kernels_compile_into_a_fresh_cache_from_several_processes_at_once(tmp_path):
+    code = "from feeder_bt.vision.jit import warm; warm(); print('ok')"
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(3)]
+    for p in procs:
+        out, err = p.communicate(timeout=600)
+        assert p.returncode == 0, err
+        assert out.strip() == "ok"
+    assert any(f.suffix == ".nbi" for f in tmp_path.rglob("*"))
+    assert _run(code, NUMBA_CACHE_DIR=str(tmp_path)).strip() == "ok"     # read back
+
+
+def test_a_kernel_with_nowhere_to_cache_is_compiled_in_memory():
+    # numba refuses cache=True where it finds no writable cache directory (here: code with
+    # no source file); the kernels' decorator then compiles without a cache
+    from feeder_bt.vision import kernels as mod
+    scope: dict = {}
+    exec("def twice(x):\n    return 2 * x\n", scope)
+    assert mod._jit(scope["twice"])(21) == 42
