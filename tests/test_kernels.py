@@ -7,6 +7,7 @@ import math
 import os
 import subprocess
 import sys
+import threading
 
 import cv2
 import numpy as np
@@ -213,6 +214,7 @@ def test_commands_that_never_locate_do_not_import_numba():
     assert _run(code).strip() == "False"
 
 
+@pytest.mark.soak          # minutes of CPU: three cold compiles at once on two cores (70 s)
 def test_kernels_compile_into_a_fresh_cache_from_several_processes_at_once(tmp_path):
     code = "from feeder_bt.vision.jit import warm; warm(); print('ok')"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
@@ -233,3 +235,36 @@ def test_a_kernel_with_nowhere_to_cache_is_compiled_in_memory():
     scope: dict = {}
     exec("def twice(x):\n    return 2 * x\n", scope)
     assert mod._jit(scope["twice"])(21) == 42
+
+
+def test_a_compile_that_takes_long_says_why_on_stderr(monkeypatch):
+    # a fresh install compiles the kernels for 13-25 s before anything else is on the
+    # screen: a line says so (here the compile waits for it; no clock is judged)
+    from feeder_bt.vision import jit
+    said: list[str] = []
+    printed = threading.Event()
+
+    def fake_print(*args, **kw):
+        said.append(" ".join(args))
+        assert kw.get("file") is sys.stderr
+        printed.set()
+
+    class SlowKernels:
+        @staticmethod
+        def warm():
+            assert printed.wait(30)
+
+    monkeypatch.setattr(jit, "print", fake_print, raising=False)
+    monkeypatch.setattr(jit, "NOTICE_AFTER_S", 0.0)
+    monkeypatch.setattr(jit, "_mod", SlowKernels)
+    jit.warm()
+    assert said == [jit.NOTICE]
+
+
+def test_kernels_loaded_from_the_cache_say_nothing(monkeypatch):
+    from feeder_bt.vision import jit
+    said: list[str] = []
+    monkeypatch.setattr(jit, "print", lambda *a, **k: said.append(a), raising=False)
+    monkeypatch.setattr(jit, "NOTICE_AFTER_S", 3600.0)
+    jit.warm()
+    assert said == []

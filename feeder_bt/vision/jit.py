@@ -4,6 +4,8 @@ about 0.3 s, which no command that never locates a part should pay (``feeder --h
 
 from __future__ import annotations
 
+import sys
+import threading
 from types import ModuleType
 
 _mod: ModuleType | None = None
@@ -31,6 +33,21 @@ def _jit(fn=None, **kw):
         return njit(nogil=True, **kw)(fn)
 
 
+NOTICE_AFTER_S = 1.0
+NOTICE = ("feeder: compiling the locator's kernels (numba), once after installing or "
+          "upgrading: about 20 s; later runs load them from the cache")
+
+
 def warm() -> None:
-    """Import the kernels and compile them (or load them from numba's cache)."""
-    kernels().warm()
+    """Import the kernels and compile them (or load them from numba's cache).
+
+    Loading takes well under a second; compiling (a fresh install) 13-25 s, with nothing
+    else on the screen yet: past ``NOTICE_AFTER_S`` a line on stderr says why."""
+    timer = threading.Timer(NOTICE_AFTER_S, lambda: print(NOTICE, file=sys.stderr,
+                                                          flush=True))
+    timer.daemon = True
+    timer.start()
+    try:
+        kernels().warm()
+    finally:
+        timer.cancel()
