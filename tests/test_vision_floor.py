@@ -53,3 +53,23 @@ def test_the_docs_quote_the_committed_floor():
         assert float(cv_ratio) == got["ours_opencv_over_blob"]
         assert float(ratio) == got["ours_over_blob"]
         assert float(glue) == round(100 * got["glue_share_of_ours"], 1)
+
+
+def test_the_docs_quote_the_committed_bench():
+    # docs/performance.md's third-round bench table against benchmarks/results/vision.json
+    # (`python benchmarks/vision_bench.py --repeats 5` rewrites it)
+    result = json.loads((ROOT / "benchmarks/results/vision.json").read_text())["scenarios"]
+    text = (ROOT / "docs/performance.md").read_text()
+    keys = {"with scikit-image's frames between": "timing",
+            "ours and the detector alone": "timing_ours_and_blob_alone"}
+    rows = re.findall(r"^\| ([^|]+?) \| ([\d.]+) / ([\d.]+) \| ([\d.]+) \| ([\d.]+) / ([\d.]+) "
+                      r"\| ([\d.]+) \|$", text, flags=re.M)
+    rows = [r for r in rows if r[0] in keys]
+    assert [r[0] for r in rows] == list(keys)
+    for label, *figures in rows:
+        for name, (ours, blob, ratio) in zip(("lenses", "squares"),
+                                             (figures[:3], figures[3:]), strict=True):
+            t = result[name][keys[label]]
+            o, b = t["ours"]["p50_ms"], t["blob"]["p50_ms"]
+            assert (float(ours), float(blob), float(ratio)) == \
+                (round(o, 2), round(b, 2), round(o / b, 2)), (label, name)
