@@ -4,7 +4,8 @@ recirculation cost, and what switching between them could reach under a budget.
     python benchmarks/frontier_bench.py [--scenario scenarios/lenses.yaml]
         [--belts 80,120,...] [--inclines 70,85,...] [--policies fifo,...]
         [--screen-seeds 2] [--eval-seeds 5] [--duration 600] [--max-recirc 1.5]
-        [--points benchmarks/results/honest_budget.json] [--workers 2] [--out PATH]
+        [--points benchmarks/results/honest_budget.json] [--supply PLAN.yaml]
+        [--workers 2] [--out PATH]
 
 1. Screen: every fixed setting of a grid (belt mm/s x incline mm/s x pick policy, at the
    scenario's frame spacing, no adjuster) on the tuning seeds (1..N). A 2-D space wants a
@@ -20,6 +21,10 @@ recirculation cost, and what switching between them could reach under a budget.
    under a budget of R recirculations per placed part it reaches at most the best mix of
    two settings with recirc/min = R x parts/min (a small linear programme; the optimum of
    one with two constraints sits on at most two settings). Fresh-seed figures.
+
+A kit scenario (``retrieve.kit``, fed by a supply plan: ``--supply``) is judged in kits per
+minute instead: each setting's "mean" is its kits/min, beside its kit inflow and selection
+bounds (``--max-recirc`` large to leave wear out).
 
 What the bound does not cover, it says so: a controller that reacts within a pass (the
 pick policy does; all four are in the grid) or to transients of the belt. Those are the
@@ -59,15 +64,24 @@ def fixed_overlay(belt: float, incline_mm_s: float, policy: str) -> dict:
 
 
 def summary(rows: list[dict]) -> dict:
-    """Mean parts/min and recirculations over a setting's seeds (per seed kept)."""
-    ppm = [r["ppm"] for r in rows]
+    """Mean parts/min (kits/min for a kit scenario) and recirculations over a setting's
+    seeds (per seed kept)."""
+    kits = all("kpm" in r for r in rows)
+    ppm = [r["kpm"] if kits else r["ppm"] for r in rows]
     rc = [r["recirc_per_placed"] for r in rows]
-    return {"seeds": [r["seed"] for r in rows], "ppm": ppm,
+    extra = {}
+    if kits:
+        extra = {"unit": "kits/min", "parts_per_min": round(statistics.mean(
+                     r["ppm"] for r in rows), 2),
+                 **{f"kit_{k}_bound_kpm": round(statistics.mean(r["kit_bounds_kpm"][k]
+                                                                for r in rows), 2)
+                    for k in ("inflow", "selection")}}
+    return {"seeds": [r["seed"] for r in rows], "ppm": ppm, **extra,
             "mean": round(statistics.mean(ppm), 2),
             "sd": round(statistics.stdev(ppm), 2) if len(ppm) > 1 else 0.0,
             "recirc_per_placed": round(statistics.mean(rc), 3),
-            "recirc_per_min": round(statistics.mean(p * r for p, r in zip(ppm, rc,
-                                                                            strict=True)), 2),
+            "recirc_per_min": round(statistics.mean(r["ppm"] * r["recirc_per_placed"]
+                                                    for r in rows), 2),
             "lost": sum(r.get("lost") or 0 for r in rows),
             "robot_busy_pct": round(statistics.mean(r["robot_busy_pct"] for r in rows), 1),
             "selection_bound_ppm": round(statistics.mean(r["robot_bound_selection_ppm"]
@@ -122,10 +136,12 @@ def main() -> None:
     ap.add_argument("--max-recirc", type=float, default=1.5)
     ap.add_argument("--points", default=str(ROOT / "benchmarks" / "results" /
                                             "honest_budget.json"))
+    ap.add_argument("--supply", default=None, help="a supply plan (docs/supply.md)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "frontier.json"))
     args = ap.parse_args()
     scenario = str(Path(args.scenario).resolve())
+    supply = str(Path(args.supply).resolve()) if args.supply else None
     floats = lambda s: [float(v) for v in s.split(",")]          # noqa: E731
     grid = [fixed_overlay(b, i, p) for b, i, p in product(
         floats(args.belts), floats(args.inclines), args.policies.split(","))
@@ -134,7 +150,7 @@ def main() -> None:
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
         screen_seeds = range(1, args.screen_seeds + 1)
-        rows = run_all(pool, [Job(scenario, ov, s, args.duration)
+        rows = run_all(pool, [Job(scenario, ov, s, args.duration, supply=supply)
                               for ov in grid for s in screen_seeds])
         n = args.screen_seeds
         screened = [{"setting": describe(ov), "overlay": ov, **summary(rows[k * n:(k + 1) * n])}
@@ -152,7 +168,7 @@ def main() -> None:
                  if isinstance(v, dict) and "overlay" in v}
         fresh = range(FRESH_SEED0 + 1, FRESH_SEED0 + args.eval_seeds + 1)
         todo = [(s["setting"], s["overlay"]) for s in chosen.values()] + list(named.items())
-        rows = run_all(pool, [Job(scenario, ov, sd, args.duration)
+        rows = run_all(pool, [Job(scenario, ov, sd, args.duration, supply=supply)
                               for _, ov in todo for sd in fresh])
     k = args.eval_seeds
     evaluated = [{"setting": name, "overlay": ov, **summary(rows[i * k:(i + 1) * k])}
@@ -160,9 +176,12 @@ def main() -> None:
     fixed = [e for e in evaluated if not e["setting"].startswith("tuned ")]
     best_fixed = max((e for e in fixed if e["recirc_per_placed"] <= args.max_recirc),
                      key=lambda e: e["mean"], default=None)
-    bound = time_sharing_bound(fixed, args.max_recirc)
+    # kits/min mixed with recirculations per part: no such LP (and no wear budget asked)
+    bound = None if supply and fixed and "unit" in fixed[0] else \
+        time_sharing_bound(fixed, args.max_recirc)
     out = {"machine": platform.machine(), "python": platform.python_version(),
            "command": " ".join(["python", *sys.argv]), "scenario": args.scenario,
+           "supply": args.supply,
            "duration_s": args.duration, "max_recirc": args.max_recirc,
            "screen_seeds": list(screen_seeds), "eval_seeds": list(fresh),
            "screened": screened, "evaluated": evaluated,
@@ -172,17 +191,21 @@ def main() -> None:
     Path(args.out).write_text(json.dumps(out, indent=1) + "\n")
     print(f"\nfresh seeds {list(fresh)}, {args.duration:g} s, budget {args.max_recirc:g} "
           f"recirculations per placed part:")
+    unit = evaluated[0].get("unit", "parts/min") if evaluated else "parts/min"
     for e in sorted(evaluated, key=lambda e: -e["mean"]):
         flag = "" if e["recirc_per_placed"] <= args.max_recirc else "  (over the budget)"
-        print(f"  {e['mean']:6.2f} parts/min (sd {e['sd']:.2f}), {e['recirc_per_placed']:.2f} "
+        kit = (f", kit bounds: inflow {e['kit_inflow_bound_kpm']:.2f}, selection "
+               f"{e['kit_selection_bound_kpm']:.2f}" if "unit" in e else "")
+        print(f"  {e['mean']:6.2f} {unit} (sd {e['sd']:.2f}), {e['recirc_per_placed']:.2f} "
               f"recirculated per placed, robot {e['robot_busy_pct']:.1f} % busy, selection "
-              f"bound {e['selection_bound_ppm']:.2f}: {e['setting']}{flag}")
+              f"bound {e['selection_bound_ppm']:.2f} parts/min{kit}: {e['setting']}{flag}")
     if best_fixed:
-        print(f"best fixed within the budget: {best_fixed['mean']:.2f} ({best_fixed['setting']})")
+        print(f"best fixed within the budget: {best_fixed['mean']:.2f} {unit} "
+              f"({best_fixed['setting']})")
     if bound:
         how = (bound["first"] if bound["share_first"] >= 1.0 else
                f"{bound['share_first']:.0%} {bound['first']}, rest {bound['second']}")
-        print(f"time-sharing bound: {bound['ppm']:.2f} parts/min ({how})")
+        print(f"time-sharing bound: {bound['ppm']:.2f} {unit} ({how})")
     print(f"wrote {args.out}")
 
 

@@ -114,3 +114,18 @@ def test_the_docs_quote_the_committed_two_tray_kits():
     want = [(round(k["mean"], 2), k["min"], k["max"], k["inflow_bound_kpm"])
             for k in (tuned["tuned"][s]["kits"] for s in ("ours", "watermarks", "fixed"))]
     assert got == want
+
+
+def test_a_kit_scenario_is_summed_up_in_kits_per_minute():
+    rows = [{"seed": s, "ppm": 4.0 * k + 1.0, "kpm": k, "recirc_per_placed": 2.0,
+             "robot_busy_pct": 90.0, "robot_bound_selection_ppm": 80.0, "lost": 0,
+             "kit_bounds_kpm": {"inflow": 19.0, "selection": sel}}
+            for s, k, sel in ((101, 16.0, 18.0), (102, 17.0, 18.5))]
+    got = frontier.summary(rows)
+    assert got["unit"] == "kits/min" and got["mean"] == 16.5 and got["ppm"] == [16.0, 17.0]
+    assert got["parts_per_min"] == 67.0
+    assert got["kit_inflow_bound_kpm"] == 19.0 and got["kit_selection_bound_kpm"] == 18.25
+    # recirculations are per part whatever is counted: 2 per placed part at 67 parts/min
+    assert got["recirc_per_min"] == 134.0
+    plain = frontier.summary([{k: v for k, v in r.items() if k != "kpm"} for r in rows])
+    assert "unit" not in plain and plain["mean"] == 67.0
