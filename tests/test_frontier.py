@@ -129,3 +129,19 @@ def test_a_kit_scenario_is_summed_up_in_kits_per_minute():
     assert got["recirc_per_min"] == 134.0
     plain = frontier.summary([{k: v for k, v in r.items() if k != "kpm"} for r in rows])
     assert "unit" not in plain and plain["mean"] == 67.0
+
+
+def test_the_docs_quote_the_committed_kit_grid():
+    """docs/performance.md's kit grid table is frontier_kits.json's, row for row."""
+    result = json.loads((ROOT / "benchmarks/results/frontier_kits.json").read_text())
+    text = (ROOT / "docs/performance.md").read_text()
+    i = text.index("| setting (fresh seeds 101–105, 600 s) |")
+    rows = re.findall(r"^\| ([^|]+) \| ([\d.]+) \(sd ([\d.]+)\) \| ([\d.]+) % of ([\d.]+) \| "
+                      r"([\d.]+) % of ([\d.]+) \| ([\d.]+) % \|$", text[i:i + 3000], flags=re.M)
+    quoted = [(name, *map(float, figs)) for name, *figs in rows]
+    want = [(e["setting"], e["mean"], e["sd"],
+             round(100 * e["mean"] / e["kit_inflow_bound_kpm"], 1), e["kit_inflow_bound_kpm"],
+             round(100 * e["mean"] / e["kit_selection_bound_kpm"], 1),
+             e["kit_selection_bound_kpm"], e["robot_busy_pct"])
+            for e in sorted(result["evaluated"], key=lambda e: -e["mean"])]
+    assert quoted == want
