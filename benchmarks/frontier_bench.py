@@ -63,6 +63,26 @@ def fixed_overlay(belt: float, incline_mm_s: float, policy: str) -> dict:
             "adjust": {"algorithm": "none"}, "retrieve": {"policy": policy}}
 
 
+def preflight(scenario: str, overlays: list[dict]) -> None:
+    """Every setting of the grid loaded and checked before the first run: a setting the
+    cell refuses (an incline above its conveyor's limit) stops the bench in one line now,
+    not after the screen's other runs."""
+    import tempfile
+
+    from feeder_bt.errors import FeederError
+    from feeder_bt.scenario import load_scenario
+    from feeder_bt.scenario.overlay import write_overlay
+    with tempfile.TemporaryDirectory(prefix="frontier-") as d:
+        path = Path(d) / "overlay.yaml"
+        for ov in overlays:
+            write_overlay(path, ov)
+            try:
+                load_scenario(scenario, overlay=path)
+            except FeederError as e:
+                raise SystemExit(f"frontier_bench: {describe(ov)}: "
+                                 f"{str(e).replace(str(path), 'overlay')}") from None
+
+
 def summary(rows: list[dict]) -> dict:
     """Mean parts/min (kits/min for a kit scenario) and recirculations over a setting's
     seeds (per seed kept)."""
@@ -146,6 +166,7 @@ def main() -> None:
     grid = [fixed_overlay(b, i, p) for b, i, p in product(
         floats(args.belts), floats(args.inclines), args.policies.split(","))
         if i <= b * MAX_INCLINE_PCT / 100.0]
+    preflight(scenario, grid)
     t0 = time.monotonic()
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:

@@ -145,3 +145,17 @@ def test_the_docs_quote_the_committed_kit_grid():
              e["kit_selection_bound_kpm"], e["robot_busy_pct"])
             for e in sorted(result["evaluated"], key=lambda e: -e["mean"])]
     assert quoted == want
+
+
+def test_a_setting_the_cell_refuses_stops_the_bench_before_any_run():
+    # 400 mm/s of incline on a 260 mm/s belt rounds to 153.85 %: 400.01 mm/s, above the
+    # conveyor's 400 (found after a nine-minute screen before the check)
+    import pytest
+    ok = frontier.fixed_overlay(260.0, 390.0, "lookahead")
+    frontier.preflight(str(ROOT / "scenarios/lenses.yaml"), [ok])
+    bad = frontier.fixed_overlay(260.0, 400.0, "fifo")
+    with pytest.raises(SystemExit) as e:
+        frontier.preflight(str(ROOT / "scenarios/lenses.yaml"), [ok, bad])
+    msg = str(e.value)
+    assert "belt 260 mm/s, incline 153.85 %" in msg and "max_mm_s 400" in msg
+    assert "\n" not in msg
