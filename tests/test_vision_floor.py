@@ -73,3 +73,18 @@ def test_the_docs_quote_the_committed_bench():
             o, b = t["ours"]["p50_ms"], t["blob"]["p50_ms"]
             assert (float(ours), float(blob), float(ratio)) == \
                 (round(o, 2), round(b, 2), round(o / b, 2)), (label, name)
+
+
+def test_the_docs_quote_the_committed_simulator_speed_side_by_side():
+    # docs/performance.md's "Simulator speed" paragraph on the kernels against its JSON
+    result = json.loads((ROOT / "benchmarks/results/simspeed_vision_kernels.json").read_text())
+    text = (ROOT / "docs/performance.md").read_text()
+    m = re.search(r"before\s+([\d×, ]+?)\s+real time \(median of two runs each\), after\s+"
+                  r"([\d×, ]+?);", text)
+    assert m, "the paragraph is gone"
+    quoted = {code: [int(v) for v in re.findall(r"\d+", group)]
+              for code, group in (("before", m.group(1)), ("after", m.group(2)))}
+    runs = result["runs"]
+    assert quoted["before"] == [round(r["sim_per_wall"]) for r in runs if r["code"] != "after"]
+    assert quoted["after"] == [round(r["sim_per_wall"]) for r in runs if r["code"] == "after"]
+    assert len({(r["parts_per_minute"], r["located"], r["lost"]) for r in runs}) == 1
