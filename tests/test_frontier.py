@@ -103,13 +103,20 @@ def test_the_docs_quote_the_committed_frontier():
     assert quoted == measured
 
 
+def _table(result: str, heading: str, row: str) -> tuple[dict, list[tuple[str, ...]]]:
+    """A committed result's JSON, and the rows (``row``'s groups) of the docs/performance.md
+    table that starts with ``heading``, up to its end."""
+    text = (ROOT / "docs/performance.md").read_text()
+    table = text[text.index(heading):].split("\n\n")[0]
+    return (json.loads((ROOT / "benchmarks/results" / result).read_text()),
+            re.findall(row, table, flags=re.M))
+
+
 def test_the_docs_quote_the_committed_two_tray_kits():
     """docs/performance.md's two-tray kit table is honest_kits_two_trays.json's."""
-    tuned = json.loads((ROOT / "benchmarks/results/honest_kits_two_trays.json").read_text())
-    text = (ROOT / "docs/performance.md").read_text()
-    i = text.index("| setting, two trays (same budget) |")
-    rows = re.findall(r"^\| [^|]+ \| \**([\d.]+)\** \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| "
-                      r"([\d.]+) % of ([\d.]+) \|", text[i:i + 2000], flags=re.M)
+    tuned, rows = _table("honest_kits_two_trays.json", "| setting, two trays (same budget) |",
+                         r"^\| [^|]+ \| \**([\d.]+)\** \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| "
+                         r"([\d.]+) % of ([\d.]+) \|")
     got = [(float(m), float(lo), float(hi), float(ib)) for m, lo, hi, _, _, ib in rows]
     want = [(round(k["mean"], 2), k["min"], k["max"], k["inflow_bound_kpm"])
             for k in (tuned["tuned"][s]["kits"] for s in ("ours", "watermarks", "fixed"))]
@@ -133,11 +140,9 @@ def test_a_kit_scenario_is_summed_up_in_kits_per_minute():
 
 def test_the_docs_quote_the_committed_kit_grid():
     """docs/performance.md's kit grid table is frontier_kits.json's, row for row."""
-    result = json.loads((ROOT / "benchmarks/results/frontier_kits.json").read_text())
-    text = (ROOT / "docs/performance.md").read_text()
-    i = text.index("| setting (fresh seeds 101–105, 600 s) |")
-    rows = re.findall(r"^\| ([^|]+) \| ([\d.]+) \(sd ([\d.]+)\) \| ([\d.]+) % of ([\d.]+) \| "
-                      r"([\d.]+) % of ([\d.]+) \| ([\d.]+) % \|$", text[i:i + 3000], flags=re.M)
+    result, rows = _table("frontier_kits.json", "| setting (fresh seeds 101–105, 600 s) |",
+                          r"^\| ([^|]+) \| ([\d.]+) \(sd ([\d.]+)\) \| ([\d.]+) % of "
+                          r"([\d.]+) \| ([\d.]+) % of ([\d.]+) \| ([\d.]+) % \|$")
     quoted = [(name, *map(float, figs)) for name, *figs in rows]
     want = [(e["setting"], e["mean"], e["sd"],
              round(100 * e["mean"] / e["kit_inflow_bound_kpm"], 1), e["kit_inflow_bound_kpm"],

@@ -216,6 +216,18 @@ def pixel_hull(pts, a, b, u0, width, cols, out, su, sv):
     return k
 
 
+@_jit(inline="always")
+def _walk(P, idx, h, j, a, b):
+    """From vertex j of the convex polygon P[idx[:h]], onwards while each step goes further
+    in the direction (a, b): where a caliper of ``min_rect`` comes to rest."""
+    for _ in range(h):
+        n1 = j + 1 if j + 1 < h else 0
+        if (P[idx[n1], 0] - P[idx[j], 0]) * a + (P[idx[n1], 1] - P[idx[j], 1]) * b <= 0:
+            break
+        j = n1
+    return j
+
+
 _TIE = 1e-6         # areas this close (relative) are one: cv2.minAreaRect works in float32
 
 
@@ -243,25 +255,13 @@ def min_rect(P, idx, h, tie):
         eu, ev = float(P[idx[i1], 0]) - pu, float(P[idx[i1], 1]) - pv
         if i == 0:
             ahead = i1
-        for _ in range(h):                                  # farthest along the edge
-            n1 = ahead + 1 if ahead + 1 < h else 0
-            if (P[idx[n1], 0] - P[idx[ahead], 0]) * eu + (P[idx[n1], 1] - P[idx[ahead], 1]) * ev <= 0:
-                break
-            ahead = n1
+        ahead = _walk(P, idx, h, ahead, eu, ev)             # farthest along the edge
         if i == 0:
             k = ahead
-        for _ in range(h):                                  # farthest from the edge
-            n1 = k + 1 if k + 1 < h else 0
-            if (P[idx[n1], 1] - P[idx[k], 1]) * eu - (P[idx[n1], 0] - P[idx[k], 0]) * ev <= 0:
-                break
-            k = n1
+        k = _walk(P, idx, h, k, -ev, eu)                    # farthest from the edge
         if i == 0:
             back = k
-        for _ in range(h):                                  # farthest back along it
-            n1 = back + 1 if back + 1 < h else 0
-            if (P[idx[n1], 0] - P[idx[back], 0]) * eu + (P[idx[n1], 1] - P[idx[back], 1]) * ev >= 0:
-                break
-            back = n1
+        back = _walk(P, idx, h, back, -eu, -ev)             # farthest back along it
         along = (P[idx[ahead], 0] - P[idx[back], 0]) * eu + (P[idx[ahead], 1] - P[idx[back], 1]) * ev
         across = (P[idx[k], 1] - pv) * eu - (P[idx[k], 0] - pu) * ev
         areas[i] = along * across / (eu * eu + ev * ev)
