@@ -239,17 +239,9 @@ def _fit_line(report: dict) -> str:
 
 def _kits_line(report: dict) -> str:
     """Kits (retrieve.kit or sequence): how many, how fast, against the kit ceiling."""
+    from .kits import describe_kits
     k = report.get("kits")
-    if not k:
-        return ""
-    kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items()) + (
-        f", {k['open_kits']} open at once" if k.get("open_kits", 1) > 1 else "")
-    which = next((name[:-len("_bound_kpm")] for name, v in k.items()
-                  if name.endswith("_bound_kpm") and v == k.get("ceiling_kpm")), None)
-    of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"
-          + (f" ({which} bound)" if which else "")
-          if k.get("of_ceiling_pct") is not None else "")
-    return f"\n  kits {k['completed']} ({kit}): {k['per_minute']:.1f} kits/min{of}"
+    return f"\n  {describe_kits(k)}" if k else ""
 
 
 def _robots_line(report: dict) -> str:

@@ -151,3 +151,16 @@ def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: flo
             "open_kits": tracker.open_kits,
             "completed": tracker.completed, "per_minute": round(kpm, 3), **bounds,
             "of_ceiling_pct": round(100.0 * kpm / ceil, 1) if 0 < ceil < math.inf else None}
+
+
+def describe_kits(k: dict) -> str:
+    """A report's ``kits``: how many, how fast, against the kit ceiling (and which bound
+    it is), as the run's summary and ``feeder report`` say it."""
+    kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items()) + (
+        f", {k['open_kits']} open at once" if k.get("open_kits", 1) > 1 else "")
+    which = next((name[:-len("_bound_kpm")] for name, v in k.items()
+                  if name.endswith("_bound_kpm") and v == k.get("ceiling_kpm")), None)
+    of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"
+          + (f" ({which} bound)" if which else "")
+          if k.get("of_ceiling_pct") is not None else "")
+    return f"kits {k['completed']} ({kit}): {k['per_minute']:.1f} kits/min{of}"

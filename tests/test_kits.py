@@ -4,6 +4,7 @@ the report counts kits and bounds them."""
 
 from __future__ import annotations
 
+import json
 from collections import Counter
 from pathlib import Path
 
@@ -207,3 +208,24 @@ def test_bad_open_kits_are_one_line_and_exit_2(tmp_path, capsys, edit, what):
     assert main(["check", str(p)]) == 2
     err = capsys.readouterr().err.strip()
     assert what in err and "Traceback" not in err and len(err.splitlines()) == 1
+
+
+def test_feeder_report_gives_a_kit_runs_kits_minute_by_minute(tmp_path, capsys):
+    db = tmp_path / "k.db"
+    kits = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "kits_lenses_squares.yaml"),
+                              duration=150.0, fast=True, seed=3, view="none", db=str(db),
+                              supply=str(ROOT / "supply" / "mix_drift.yaml")))
+    run_job(RunOptions(scenario=str(ROOT / "scenarios" / "lenses.yaml"), duration=30.0,
+                       fast=True, seed=3, view="none", db=str(db)))
+    capsys.readouterr()
+    assert main(["report", str(db)]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if " kits " in ln]
+    (line,) = lines                              # the kit run's, not the lenses run's
+    said = summary(kits).split("\n  kits ", 1)[1].split("\n", 1)[0]
+    assert line.startswith(f"run 1 kits {said}; by minute of feeding: ")
+    by_minute = [int(n) for n in line.split("feeding: ")[1].split(" (")[0].split()]
+    assert len(by_minute) == 3 and line.endswith("(the last over 30 s)")
+    assert sum(by_minute) == kits["kits"]["completed"] > 0
+    assert main(["report", str(db), "--run", "1", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["kits"]
+    assert got["by_minute"] == by_minute and got["last_minute_s"] == 30.0

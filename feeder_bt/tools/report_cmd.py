@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..eventlog import ACCESS_KINDS, EventLogError, open_readonly
+from ..kits import describe_kits
 from .runs_db import run_ids, summary
 
 COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
@@ -57,6 +58,8 @@ def cmd_report(args: argparse.Namespace) -> int:
             for row in rows:                  # faults, misses, alarms: vocabulary.py
                 if row["story"] != ["faults 0"]:      # a clean run: the table says it all
                     print(f"run {row['run']}: " + "; ".join(row["story"]))
+                if row.get("kits"):
+                    print(kits_line(row))
             for line in access_lines(conn, rows, getattr(args, "access", False)):
                 print(line)
         if args.plot:
@@ -65,6 +68,15 @@ def cmd_report(args: argparse.Namespace) -> int:
     finally:
         conn.close()
     return 0
+
+
+def kits_line(row: dict[str, Any]) -> str:
+    """A kit run's kits as its summary said them, and minute by minute."""
+    k = row["kits"]
+    last = k["last_minute_s"]
+    part = f" (the last over {last:g} s)" if last < 59.999 else ""
+    return (f"run {row['run']} {describe_kits(k)}; by minute of feeding: "
+            f"{' '.join(map(str, k['by_minute']))}{part}")
 
 
 def access_counts(conn: Any, run_id: int) -> dict[str, int]:

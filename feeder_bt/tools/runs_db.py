@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 from dataclasses import dataclass
 from typing import Any
@@ -64,6 +65,9 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
                        faults=split(report["faults"])[0],
                        misses={**split(report["faults"])[1], **(report.get("misses") or {})},
                        story=story(report))
+            if report.get("kits"):
+                out["kits"] = {**report["kits"], **kits_by_minute(conn, run_id,
+                                                                  report["feed_seconds"])}
             return out
         by_type = dict(conn.execute(
             "SELECT json_extract(data, '$.type'), count(*) FROM events "
@@ -85,6 +89,21 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
                misses=split(faults)[1],
                story=story({"faults": faults}))
     return out
+
+
+def kits_by_minute(conn: sqlite3.Connection, run_id: int, feed_s: float
+                   ) -> dict[str, Any]:
+    """Kits completed in each minute of feeding (from the run's RUNNING), the last minute
+    perhaps shorter (``last_minute_s``): where a kit run lost its pace, at the start (the
+    scarce type not yet come round) or later."""
+    start = conn.execute("SELECT min(t) FROM events WHERE run_id=? AND kind='state' AND "
+                         "json_extract(data, '$.new')='RUNNING'", (run_id,)).fetchone()[0]
+    start = float(start or 0.0)
+    n = max(1, math.ceil(feed_s / 60.0 - 1e-9))
+    counts = [0] * n
+    for (t,) in conn.execute("SELECT t FROM events WHERE run_id=? AND kind='kit'", (run_id,)):
+        counts[min(n - 1, max(0, int((t - start) // 60.0)))] += 1
+    return {"by_minute": counts, "last_minute_s": round(feed_s - 60.0 * (n - 1), 3)}
 
 
 def series(conn: sqlite3.Connection, run_id: int) -> Series:
