@@ -152,6 +152,14 @@ def test_the_docs_quote_the_committed_kit_grid():
     assert quoted == want
 
 
+def test_the_kit_grids_best_setting_ships_as_an_example_overlay():
+    """examples/kits_grid_best.yaml (docs/supply.md runs it) is the grid's best_fixed."""
+    import yaml
+    result = json.loads((ROOT / "benchmarks" / "results" / "frontier_kits.json").read_text())
+    shipped = yaml.safe_load((ROOT / "examples" / "kits_grid_best.yaml").read_text())
+    assert shipped == result["best_fixed"]["overlay"]
+
+
 def test_a_setting_the_cell_refuses_stops_the_bench_before_any_run():
     # 400 mm/s of incline on a 260 mm/s belt rounds to 153.85 %: 400.01 mm/s, above the
     # conveyor's 400 (found after a nine-minute screen before the check)
