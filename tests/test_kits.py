@@ -228,4 +228,20 @@ def test_feeder_report_gives_a_kit_runs_kits_minute_by_minute(tmp_path, capsys):
     assert sum(by_minute) == kits["kits"]["completed"] > 0
     assert main(["report", str(db), "--run", "1", "--json"]) == 0
     got = json.loads(capsys.readouterr().out)["kits"]
-    assert got["by_minute"] == by_minute and got["last_minute_s"] == 30.0
+    assert got["by_bin"] == by_minute and got["bin_s"] == 60.0 and got["last_bin_s"] == 30.0
+    # a long run's pace in at most 30 bins of whole minutes; a damaged length: no bins
+    import sqlite3
+    conn = sqlite3.connect(db)
+    rep = json.loads(conn.execute("SELECT report FROM runs WHERE id=1").fetchone()[0])
+    for feed, want in ((7200.0, "; by 4 minutes of feeding: "), ("x", None), (1e300, None)):
+        rep["feed_seconds"] = feed
+        conn.execute("UPDATE runs SET report=? WHERE id=1", (json.dumps(rep),))
+        conn.commit()
+        code = main(["report", str(db), "--run", "1"])
+        out, err = capsys.readouterr()
+        if want is None:
+            assert "by " not in out and "Traceback" not in err
+        else:
+            assert code == 0 and want in out
+            assert len(out.split(want)[1].split("\n")[0].split(" (")[0].split()) == 30
+    conn.close()

@@ -71,12 +71,17 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def kits_line(row: dict[str, Any]) -> str:
-    """A kit run's kits as its summary said them, and minute by minute."""
+    """A kit run's kits as its summary said them, and minute by minute (or each few
+    minutes, ``runs_db.kits_by_minute``)."""
     k = row["kits"]
-    last = k["last_minute_s"]
-    part = f" (the last over {last:g} s)" if last < 59.999 else ""
-    return (f"run {row['run']} {describe_kits(k)}; by minute of feeding: "
-            f"{' '.join(map(str, k['by_minute']))}{part}")
+    line = f"run {row['run']} {describe_kits(k)}"
+    if not k.get("by_bin"):
+        return line
+    mins = round(k["bin_s"] / 60.0)
+    per = "minute" if mins == 1 else f"{mins} minutes"
+    last = k["last_bin_s"]
+    part = f" (the last over {last:g} s)" if last < k["bin_s"] - 1e-3 else ""
+    return f"{line}; by {per} of feeding: {' '.join(map(str, k['by_bin']))}{part}"
 
 
 def access_counts(conn: Any, run_id: int) -> dict[str, int]:

@@ -91,19 +91,26 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
     return out
 
 
+MAX_BINS = 30          # a kit run's pace in at most this many bins of whole minutes
+
+
 def kits_by_minute(conn: sqlite3.Connection, run_id: int, feed_s: float
                    ) -> dict[str, Any]:
-    """Kits completed in each minute of feeding (from the run's RUNNING), the last minute
-    perhaps shorter (``last_minute_s``): where a kit run lost its pace, at the start (the
-    scarce type not yet come round) or later."""
+    """Kits completed in each minute of feeding (from the run's RUNNING), or each few
+    minutes past ``MAX_BINS`` minutes (``bin_s``), the last bin perhaps shorter
+    (``last_bin_s``): where a kit run lost its pace, at the start (the scarce type not yet
+    come round) or later. Nothing for a run with no feeding time."""
+    if not isinstance(feed_s, (int, float)) or not 0.0 < feed_s < 1e9:
+        return {}
     start = conn.execute("SELECT min(t) FROM events WHERE run_id=? AND kind='state' AND "
                          "json_extract(data, '$.new')='RUNNING'", (run_id,)).fetchone()[0]
     start = float(start or 0.0)
-    n = max(1, math.ceil(feed_s / 60.0 - 1e-9))
+    bin_s = 60.0 * max(1, math.ceil(feed_s / 60.0 / MAX_BINS - 1e-9))
+    n = max(1, math.ceil(feed_s / bin_s - 1e-9))
     counts = [0] * n
     for (t,) in conn.execute("SELECT t FROM events WHERE run_id=? AND kind='kit'", (run_id,)):
-        counts[min(n - 1, max(0, int((t - start) // 60.0)))] += 1
-    return {"by_minute": counts, "last_minute_s": round(feed_s - 60.0 * (n - 1), 3)}
+        counts[min(n - 1, max(0, int((t - start) // bin_s)))] += 1
+    return {"bin_s": bin_s, "by_bin": counts, "last_bin_s": round(feed_s - bin_s * (n - 1), 3)}
 
 
 def series(conn: sqlite3.Connection, run_id: int) -> Series:
