@@ -49,13 +49,13 @@ class Detection:
 class Blob:
     """One contour on its way through the cascade: what has been measured so far."""
 
-    __slots__ = ("contour", "box", "area_px", "det", "full", "length", "faced", "face",
+    __slots__ = ("_contour", "box", "area_px", "det", "full", "length", "faced", "face",
                  "oriented", "holes", "scale", "stats", "frame", "index")
 
-    def __init__(self, contour: np.ndarray, box: tuple[int, int, int, int],
+    def __init__(self, contour: np.ndarray | None, box: tuple[int, int, int, int],
                  area_px: float, det: Detection, full: bool,
                  holes: list[np.ndarray] | None = None) -> None:
-        self.contour = contour            # (n, 1, 2) int32, whole-frame pixels
+        self._contour = contour           # None: its frame's points, sliced when asked
         self.holes = holes                # its hole contours (None: not looked for)
         self.full = full                  # every boundary pixel (else the chain's corners)
         self.box = box                    # bounding box u, v, width, height
@@ -73,16 +73,35 @@ class Blob:
         self.frame: Frame | None = None
         self.index = 0
 
+    @property
+    def contour(self) -> np.ndarray:
+        """(n, 1, 2) int32, whole-frame pixels: a view of its frame's points, made the
+        first time it is asked for (most blobs of most frames never are)."""
+        c = self._contour
+        if c is None:
+            c = self._contour = self.frame.contour(self.index)
+        return c
+
 
 class Frame:
     """What ``kernels.blob_stats`` measured of one call's contours, kept for the faces:
     all the points (int32, ``(n, 2)``) and the hulls' vertices (indices, ends per
     contour; empty if hulls were not asked for)."""
 
-    __slots__ = ("pts", "hull", "hull_ends")
+    __slots__ = ("pts", "hull", "hull_ends", "lens", "_starts")
 
-    def __init__(self, pts: np.ndarray, hull: np.ndarray, hull_ends: np.ndarray) -> None:
+    def __init__(self, pts: np.ndarray, hull: np.ndarray, hull_ends: np.ndarray,
+                 lens: np.ndarray | None = None) -> None:
         self.pts, self.hull, self.hull_ends = pts, hull, hull_ends
+        self.lens = lens                  # points of each contour, one after another
+        self._starts: list[int] | None = None
+
+    def contour(self, i: int) -> np.ndarray:
+        """Contour ``i`` as OpenCV gives contours: a (n, 1, 2) view of the points."""
+        if self._starts is None:
+            self._starts = (np.cumsum(self.lens) - self.lens).tolist()
+        a = self._starts[i]
+        return self.pts[a:a + int(self.lens[i])].reshape(-1, 1, 2)
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
@@ -109,20 +128,20 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     min_px = 0.5 * min_area_mm2 / s2
     k = kernels()
     pts, lens = getattr(contours, "pts", None), getattr(contours, "lens", None)
-    if pts is None:                    # else ``segment.Contours``: already one array
+    given = pts is None                # else ``segment.Contours``: already one array
+    if given:
         pts = np.concatenate(contours).reshape(-1, 2)
         lens = np.fromiter(map(len, contours), np.int64, len(contours))
     kind, cells, par = (mapping or calibration)._kernel_table()
     boxes, stats, hull, hull_ends = k.blob_stats(
         pts, lens, min_px, full, length and full, hulls,
         WINDOW, kind, cells, par)
-    frame = Frame(pts, hull, hull_ends)
+    frame = Frame(pts, hull, hull_ends, lens)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
     # calibration's mm_per_px over the window), for areas and lengths
     local = not calibration.linear
     blobs: list[Blob] = []
-    for i, (c, box, row) in enumerate(zip(contours, boxes.tolist(), stats.tolist(),
-                                          strict=True)):
+    for i, (box, row) in enumerate(zip(boxes.tolist(), stats.tolist(), strict=True)):
         bu, bv, bw, bh = box
         if bw < 0:                          # a speck
             continue
@@ -135,7 +154,8 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
             else ("too small" if area < min_area_mm2 else "")
         det = Detection(None, None, False, row[k.X], row[k.Y], 0.0, row[k.CU], row[k.CV],
                         {"area_mm2": area}, reason)
-        b = Blob(c, tuple(box), area_px, det, full, None if holes is None else holes[i])
+        b = Blob(contours[i] if given else None, tuple(box), area_px, det, full,
+                 None if holes is None else holes[i])
         if local:
             b.scale = sc
         if row[k.LENGTH] == row[k.LENGTH]:          # measured (not NaN)
@@ -173,7 +193,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
     if v is not None:
         return v
     s = b.scale or calibration.mm_per_px
-    c, area_px = b.contour, b.area_px
+    area_px = b.area_px
     group = GROUP_OF[name]
     if group == GROUP_OF["holes"]:
         # A hole contour runs through the blob's pixels around the hole: by Pick's
@@ -189,7 +209,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         feats["hole_area_mm2"] = float(sum(big))
     elif group == GROUP_OF["hu1"]:
         # the first two Hu invariants, as cv2.HuMoments computes them (same operations)
-        mom = cv2.moments(c)
+        mom = cv2.moments(b.contour)
         if mom["m00"] != 0:
             n20, n02, n11 = mom["nu20"], mom["nu02"], mom["nu11"]
             feats["hu1"] = float(n20 + n02)
@@ -198,6 +218,7 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
             feats["hu1"] = feats["hu2"] = 0.0
     elif group == GROUP_OF["perimeter_mm"]:
         if b.length is None:
+            c = b.contour
             b.length = _smooth_length(c if b.full else _full_chain(c))
         # A pixel staircase is up to 8 % longer than the edge it follows: measure the
         # contour smoothed along itself instead, then move it out the half pixel to the

@@ -80,7 +80,12 @@ class LocateResult:
     parts: list[Detection]
     rejected: list[Detection]
     ms: float
-    contours: list[np.ndarray] = field(default_factory=list, repr=False)  # parts + rejected, px
+    blobs: list[Blob] = field(default_factory=list, repr=False)   # parts + rejected
+
+    @property
+    def contours(self) -> list[np.ndarray]:
+        """The blobs' contours (px), for drawing: made only when asked for."""
+        return [b.contour for b in self.blobs]
 
 
 # ---------------------------------------------------------------------------- locator
@@ -174,8 +179,7 @@ class Locator(Segmenter):
         for b in blobs:
             (rejected if b.det.reason else parts).append(b.det)
         ms = (time.perf_counter() - t0) * 1e3
-        return LocateResult(parts=parts, rejected=rejected, ms=ms,
-                            contours=[b.contour for b in blobs])
+        return LocateResult(parts=parts, rejected=rejected, ms=ms, blobs=blobs)
 
     def measure_blobs(self, image: np.ndarray) -> list[Detection]:
         """Every blob's features, unclassified, measured exactly as ``locate`` measures them

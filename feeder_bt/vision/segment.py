@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -224,7 +225,7 @@ class Segmenter:
         k = kernels()
         rois = self._rois(mask)
         if not len(rois):
-            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
+            return Contours(_NO_POINTS, _NO_LENS), ([] if holes else None)
         mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
@@ -252,16 +253,13 @@ class Segmenter:
         n_packed = len(found)
         found += own
         if not found:
-            return Contours([], _NO_POINTS, _NO_LENS), ([] if holes else None)
+            return Contours(_NO_POINTS, _NO_LENS), ([] if holes else None)
         pts = np.concatenate([c for c, _ in found]).reshape(-1, 2)
         lens = np.fromiter((len(c) for c, _ in found), np.int64, len(found))
         # back to the frame; the whole frame's findContours lists contours by first
         # point, last found first
         pts, lens, order, moved = k.place_contours(pts, lens, n_packed, geo, w)
-        ends = np.cumsum(lens).tolist()
-        flat = pts.reshape(-1, 1, 2)
-        contours = Contours([flat[e - n:e] for e, n in zip(ends, lens.tolist(), strict=True)],
-                            pts, lens)
+        contours = Contours(pts, lens)
         if not holes:
             return contours, None
         out_holes = []
@@ -304,13 +302,28 @@ _NO_LENS = np.zeros(0, np.int64)
 _NO_GEO = np.zeros((0, 9), np.int64)
 
 
-class Contours(list):
-    """Contours ((n, 1, 2) int32 each, in the frame), with the same points one after
-    another (``pts``, ``lens`` each): ``blobs.find_blobs`` measures them as they are."""
+class Contours(Sequence):
+    """Contours in the frame, their points one after another (``pts``, ``lens`` each):
+    ``blobs.find_blobs`` measures them as they are; as (n, 1, 2) int32 arrays, as
+    ``findContours`` gives them, only when one is asked for."""
 
-    def __init__(self, contours: list[np.ndarray], pts: np.ndarray, lens: np.ndarray) -> None:
-        super().__init__(contours)
+    def __init__(self, pts: np.ndarray, lens: np.ndarray) -> None:
         self.pts, self.lens = pts, lens
+        self._views: list[np.ndarray] | None = None
+
+    def _list(self) -> list[np.ndarray]:
+        if self._views is None:
+            ends = np.cumsum(self.lens).tolist()
+            flat = self.pts.reshape(-1, 1, 2)
+            self._views = [flat[e - n:e] for e, n in zip(ends, self.lens.tolist(),
+                                                         strict=True)]
+        return self._views
+
+    def __len__(self) -> int:
+        return len(self.lens)
+
+    def __getitem__(self, i):  # an index or a slice, as a list's
+        return self._list()[i]
 
 
 MOVED_BUDGET_BYTES = 16 << 20    # the golden images moved by recent levels (``_moved``)
