@@ -88,3 +88,28 @@ def test_the_docs_quote_the_committed_simulator_speed_side_by_side():
     assert quoted["before"] == [round(r["sim_per_wall"]) for r in runs if r["code"] != "after"]
     assert quoted["after"] == [round(r["sim_per_wall"]) for r in runs if r["code"] == "after"]
     assert len({(r["parts_per_minute"], r["located"], r["lost"]) for r in runs}) == 1
+
+
+def test_the_docs_quote_the_lazy_contours_side_by_side():
+    # docs/performance.md's sentence on the contours made when asked for, against the
+    # side-by-side JSON (benchmarks/side_by_side.py over vision_bench.py, squares)
+    import statistics
+    result = json.loads((ROOT / "benchmarks/results/vision_lazy_contours.json").read_text())
+
+    def mean_ratio(code: str, key: str) -> float:
+        tables = [r["report"]["scenarios"]["squares"][key] for r in result["runs"]
+                  if r["code"] == code]
+        return round(statistics.mean(t["ours"]["p50_ms"] / t["blob"]["p50_ms"]
+                                     for t in tables), 3)
+
+    text = " ".join((ROOT / "docs/performance.md").read_text().split())
+    m = re.search(r"over (\w+) alternating pairs of bench runs this took squares' three-way "
+                  r"ratio from ([\d.]+) to ([\d.]+) on average, and alone from ([\d.]+) to "
+                  r"([\d.]+)", text)
+    assert m, "the sentence is gone"
+    words = {"three": 3, "four": 4, "five": 5, "six": 6}
+    assert words[m.group(1)] == result["passes"]
+    assert tuple(map(float, m.groups()[1:])) == (
+        mean_ratio("before", "timing"), mean_ratio("after", "timing"),
+        mean_ratio("before", "timing_ours_and_blob_alone"),
+        mean_ratio("after", "timing_ours_and_blob_alone"))
