@@ -146,6 +146,12 @@ class Locator(Segmenter):
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
+        # what ``_classify`` needs of each class, looked up once: its checks and how its
+        # face is told (an outline model, a cut-corner signature, or neither)
+        cut = recipe.orientation == "cut_corner"
+        self._plan = [(cls, checks, self._outlines.get(cls.part),
+                       self._signatures.get(cls.part) if cut else None)
+                      for cls, checks in self._checks]
         self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
         super().__init__(recipe)       # the segmentation, once the classes are known good
 
@@ -247,17 +253,6 @@ class Locator(Segmenter):
         """One feature of the blob (``blobs.measure_feature``), measured once."""
         return measure_feature(b, name, self.calibration, self.recipe.min_hole_mm2)
 
-    def _in_ranges(self, b: Blob, checks: list[tuple[str, float, float]]) -> bool:
-        """Whether every range of a class holds, measuring features only as far as needed."""
-        feats = b.det.features
-        for name, lo, hi in checks:
-            v = feats.get(name)
-            if v is None:
-                v = self._feature(b, name)
-            if not lo <= v <= hi:
-                return False
-        return True
-
     def _faces(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
                level: float | None) -> None:
         """Measure each blob's cut-corner signature (``Blob.face``) on its outline to a
@@ -316,53 +311,56 @@ class Locator(Segmenter):
         is measured only when a class still fits without it.
         """
         det = b.det
+        feats = det.features
         chosen: VisionClass | None = None
         looked = False                       # a face was asked for
         why = ""                             # the outline match's reason, if it failed
-        for cls, checks in self._checks:
-            if not self._in_ranges(b, checks):
-                continue
-            outline = self._outlines.get(cls.part)
-            if outline is not None:
+        for cls, checks, outline, model in self._plan:
+            for name, lo, hi in checks:      # the ranges, cheapest feature first
+                v = feats.get(name)
+                if v is None:
+                    v = self._feature(b, name)
+                if not lo <= v <= hi:
+                    break
+            else:
+                if outline is not None:
+                    looked = True
+                    oriented = b.oriented.get(cls.part, False)
+                    if oriented is False:
+                        oriented = b.oriented[cls.part] = orient_outline(
+                            outline, contour_mm(b, self.calibration),
+                            (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
+                    if isinstance(oriented, str):
+                        why = oriented
+                        continue
+                    angle, mirrored = oriented
+                    feats["mirrored"] = 1.0 if mirrored else 0.0
+                    if cls.mirrored is None or mirrored == cls.mirrored:
+                        chosen = cls
+                        det.angle_deg = angle
+                        break
+                    continue
+                if cls.mirrored is None:
+                    chosen = cls
+                    det.angle_deg = self._symmetric_angle(b)
+                    break
+                if model is None:
+                    chosen = cls              # no way to tell the faces apart: trust the class
+                    break
+                if not b.faced:
+                    return False
                 looked = True
                 oriented = b.oriented.get(cls.part, False)
                 if oriented is False:
-                    oriented = b.oriented[cls.part] = orient_outline(
-                        outline, contour_mm(b, self.calibration),
-                        (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
-                if isinstance(oriented, str):
-                    why = oriented
+                    oriented = b.oriented[cls.part] = _orient(model, b.face)
+                if oriented is None:
                     continue
                 angle, mirrored = oriented
-                det.features["mirrored"] = 1.0 if mirrored else 0.0
-                if cls.mirrored is None or mirrored == cls.mirrored:
+                feats["mirrored"] = 1.0 if mirrored else 0.0
+                if mirrored == cls.mirrored:
                     chosen = cls
                     det.angle_deg = angle
                     break
-                continue
-            if cls.mirrored is None:
-                chosen = cls
-                det.angle_deg = self._symmetric_angle(b)
-                break
-            model = self._signatures.get(cls.part) if self.recipe.orientation == "cut_corner" \
-                else None
-            if model is None:
-                chosen = cls                  # no way to tell the faces apart: trust the class
-                break
-            if not b.faced:
-                return False
-            looked = True
-            oriented = b.oriented.get(cls.part, False)
-            if oriented is False:
-                oriented = b.oriented[cls.part] = _orient(model, b.face)
-            if oriented is None:
-                continue
-            angle, mirrored = oriented
-            det.features["mirrored"] = 1.0 if mirrored else 0.0
-            if mirrored == cls.mirrored:
-                chosen = cls
-                det.angle_deg = angle
-                break
         if chosen is None:
             det.reason = (f"no class ({why})" if why else "no class (face)") if looked \
                 else self._no_class(b)
