@@ -107,19 +107,41 @@ def test_points_to_mm_through_a_similarity_are_the_calibrations(uv):
 
 
 def _rois_reference(mask: np.ndarray, margin: int) -> list[tuple[int, int, int, int]]:
-    """``Segmenter._rois``' rule, in numpy: bands of rows, then each band's columns, runs
-    parted by more than 2 margin empty lines."""
+    """``Segmenter._rois``' rule, in numpy: an XY-cut, rows then columns then rows..., runs
+    parted by more than 2 margin empty lines, each piece trimmed to its foreground, until
+    neither way cuts; first pieces first."""
     def runs(idx):
         cuts = np.flatnonzero(np.diff(idx) > 2 * margin)
         return list(zip(np.r_[idx[0], idx[cuts + 1]], np.r_[idx[cuts], idx[-1]], strict=True))
     h, w = mask.shape
-    rows = np.flatnonzero(mask.any(axis=1))
     out = []
-    for a, b in (runs(rows) if len(rows) else []):
-        cols = np.flatnonzero(mask[a:b + 1].any(axis=0))
-        out += [(max(a - margin, 0), min(b + margin + 1, h), max(c0 - margin, 0),
-                 min(c1 + margin + 1, w)) for c0, c1 in runs(cols)]
+
+    def cut(v0, v1, u0, u1, axis, stuck):
+        lit = np.flatnonzero(mask[v0:v1, u0:u1].any(axis=1 - axis))
+        pieces = runs(lit) if len(lit) else []
+        for a, b in pieces:
+            box = (v0 + a, v0 + b + 1, u0, u1) if axis == 0 else (v0, v1, u0 + a, u0 + b + 1)
+            if stuck and len(pieces) == 1:
+                out.append((max(box[0] - margin, 0), min(box[1] + margin, h),
+                            max(box[2] - margin, 0), min(box[3] + margin, w)))
+            else:
+                cut(*box, 1 - axis, len(pieces) == 1)
+    cut(0, h, 0, w, 0, False)
     return out
+
+
+def test_foreground_rectangles_are_cut_until_tight():
+    # two discs side by side, one tall and one short: one band of rows, two column runs;
+    # the short one's rectangle is its own height, not the band's
+    mask = np.zeros((80, 100), np.uint8)
+    mask[10:70, 10:30] = 255
+    mask[20:30, 60:80] = 255
+    from feeder_bt.scenario.model import VisionRecipe
+    from feeder_bt.vision.segment import Segmenter
+    seg = Segmenter(VisionRecipe())
+    seg._margin = 3
+    assert [tuple(r) for r in seg._rois(mask).tolist()] == [(7, 73, 7, 33), (17, 33, 57, 83)]
+    assert seg._rois(np.zeros((80, 100), np.uint8)).shape == (0, 4)
 
 
 @settings(max_examples=60, deadline=None)

@@ -9,71 +9,106 @@ import numpy as np
 
 from .jit import _jit
 
-
-@_jit
-def _lit_rows(words, h):
-    """Which rows of a mask (8 pixels a word) have foreground."""
-    nw = words.shape[1]
-    lit = np.empty(h, np.bool_)
-    for v in range(h):
-        x = np.uint64(0)
-        for k in range(nw):
-            x |= words[v, k]
-        lit[v] = x != 0
-    return lit
+_ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 
 
 @_jit
-def _or_rows(words, a, b, acc):
-    """``acc``: the OR of rows a..b of a mask (8 pixels a word)."""
-    nw = words.shape[1]
-    acc[:] = 0
-    for r in range(a, b + 1):
-        for k in range(nw):
-            acc[k] |= words[r, k]
+def _lit_rows(words, v0, v1, u0, u1, lit):
+    """``lit[v - v0]``: whether row v of a mask (8 pixels a word) has foreground in columns
+    u0..u1 - 1."""
+    k0, k1 = u0 >> 3, (u1 - 1) >> 3
+    m0 = _ALL << np.uint64(8 * (u0 & 7))
+    m1 = _ALL >> np.uint64(8 * (7 - ((u1 - 1) & 7)))
+    if k0 == k1:
+        m0 &= m1
+    for v in range(v0, v1):
+        x = words[v, k0] & m0
+        if k1 > k0:
+            for k in range(k0 + 1, k1):
+                x |= words[v, k]
+            x |= words[v, k1] & m1
+        lit[v - v0] = x != 0
 
 
 @_jit
-def _column_runs(acc, w, gap, margin, v0, v1, res):
-    """Append to ``res`` a rectangle (v0, v1, u0, u1) per run of lit columns of ``acc`` (8
-    a word), runs parted by more than ``gap`` unlit ones, with ``margin``."""
-    c0 = c1 = -1
-    for u in range(w + gap + 2):             # the last run is closed past the end
-        on = u < w and (acc[u >> 3] >> np.uint64(8 * (u & 7))) & np.uint64(255) != 0
-        if c0 >= 0 and u - c1 > gap:         # more than gap columns since the run's last
-            res.append((v0, v1, max(c0 - margin, 0), min(c1 + margin + 1, w)))
-            c0 = -1
-        if on:
-            if c0 < 0:
-                c0 = u
-            c1 = u
+def _lit_columns(words, v0, v1, u0, u1, acc, lit):
+    """``lit[u - u0]``: whether column u of a mask (8 pixels a word) has foreground in rows
+    v0..v1 - 1 (``acc``: scratch, a row of words)."""
+    k0, k1 = u0 >> 3, (u1 - 1) >> 3
+    acc[k0:k1 + 1] = 0
+    for v in range(v0, v1):
+        for k in range(k0, k1 + 1):
+            acc[k] |= words[v, k]
+    for u in range(u0, u1):
+        lit[u - u0] = (acc[u >> 3] >> np.uint64(8 * (u & 7))) & np.uint64(255) != 0
+
+
+@_jit
+def _runs(lit, n, gap, starts, ends):
+    """The runs of ``lit[:n]`` parted by more than ``gap`` unlit places: how many, their
+    first and last places in ``starts``, ``ends``."""
+    k = 0
+    first = last = -1
+    for i in range(n):
+        if not lit[i]:
+            continue
+        if first >= 0 and i - last > gap:
+            starts[k], ends[k] = first, last
+            k += 1
+            first = -1
+        if first < 0:
+            first = i
+        last = i
+    if first >= 0:
+        starts[k], ends[k] = first, last
+        k += 1
+    return k
 
 
 @_jit
 def foreground_rois(words, h, w, margin):
     """``Segmenter._rois``: rectangles (v0, v1, u0, u1) holding all the foreground of a
     mask (h rows, w columns, given as 8 pixels a word, rows padded with zeros to whole
-    words), each with ``margin`` empty pixels (or the image's edge) around it. Rows with
-    foreground are cut into bands where more than 2 ``margin`` empty rows part them, then
-    each band's columns likewise."""
+    words), each with ``margin`` empty pixels (or the image's edge) around it.
+
+    Cut as an XY-cut: a rectangle's rows with foreground are cut where more than
+    2 ``margin`` empty rows part them, each piece's columns likewise, and so on, each
+    piece trimmed to its foreground, until neither way cuts. So foreground in two
+    rectangles is more than 2 ``margin`` apart along a row or a column, and a rectangle is
+    no taller or wider than its own foreground (a band's rows cut only once, then its
+    columns, left a short part as tall as the tallest beside it: a third more pixels on
+    the bench's frames)."""
     gap = 2 * margin
     res = [(0, 0, 0, 0)]
     res.pop()
+    n = max(h, w)
     acc = np.empty(words.shape[1], np.uint64)
-    lit = _lit_rows(words, h)
-    v = 0
-    while v < h:
-        if not lit[v]:
-            v += 1
+    lit = np.empty(n, np.bool_)
+    starts = np.empty(n, np.int64)
+    ends = np.empty(n, np.int64)
+    # (v0, v1, u0, u1, axis: 0 rows / 1 columns, whether the other way did not cut)
+    stack = [(0, h, 0, w, 0, 0)]
+    while len(stack):
+        v0, v1, u0, u1, axis, stuck = stack.pop()
+        if axis == 0:
+            _lit_rows(words, v0, v1, u0, u1, lit)
+            k = _runs(lit, v1 - v0, gap, starts, ends)
+        else:
+            _lit_columns(words, v0, v1, u0, u1, acc, lit)
+            k = _runs(lit, u1 - u0, gap, starts, ends)
+        if k == 1 and stuck:
+            if axis == 0:
+                v0, v1 = v0 + starts[0], v0 + ends[0] + 1
+            else:
+                u0, u1 = u0 + starts[0], u0 + ends[0] + 1
+            res.append((max(v0 - margin, 0), min(v1 + margin, h), max(u0 - margin, 0),
+                        min(u1 + margin, w)))
             continue
-        a = b = v                            # a band: rows a..b, no gap wider than gap
-        v += 1
-        while v < h and v - b <= gap:
-            if lit[v]:
-                b = v
-            v += 1
-        _or_rows(words, a, b, acc)
-        _column_runs(acc, w, gap, margin, max(a - margin, 0), min(b + margin + 1, h), res)
+        for i in range(k - 1, -1, -1):         # the first piece on top: cut first
+            if axis == 0:
+                stack.append((v0 + starts[i], v0 + ends[i] + 1, u0, u1, 1, 1 if k == 1 else 0))
+            else:
+                stack.append((v0, v1, u0 + starts[i], u0 + ends[i] + 1, 0, 1 if k == 1 else 0))
     out = np.empty((len(res), 4), np.int64)
     for i in range(len(res)):
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = res[i]
