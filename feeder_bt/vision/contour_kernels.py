@@ -15,32 +15,35 @@ _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 @_jit
 def _lit_rows(words, v0, v1, u0, u1, lit):
     """``lit[v - v0]``: whether row v of a mask (8 pixels a word) has foreground in columns
-    u0..u1 - 1."""
-    k0, k1 = u0 >> 3, (u1 - 1) >> 3
+    u0..u1 - 1. (Unsigned indices: no check for negative ones, so the loops vectorise.)"""
+    k0, k1 = np.uintp(u0 >> 3), np.uintp((u1 - 1) >> 3)
     m0 = _ALL << np.uint64(8 * (u0 & 7))
     m1 = _ALL >> np.uint64(8 * (7 - ((u1 - 1) & 7)))
     if k0 == k1:
         m0 &= m1
+        m1 = np.uint64(0)
     for v in range(v0, v1):
-        x = words[v, k0] & m0
-        if k1 > k0:
-            for k in range(k0 + 1, k1):
-                x |= words[v, k]
-            x |= words[v, k1] & m1
-        lit[v - v0] = x != 0
+        row = words[np.uintp(v)]
+        x = (row[k0] & m0) | (row[k1] & m1)
+        for k in range(k0 + np.uintp(1), k1):
+            x |= row[k]
+        lit[np.uintp(v - v0)] = x != 0
 
 
 @_jit
 def _lit_columns(words, v0, v1, u0, u1, acc, lit):
     """``lit[u - u0]``: whether column u of a mask (8 pixels a word) has foreground in rows
     v0..v1 - 1 (``acc``: scratch, a row of words)."""
-    k0, k1 = u0 >> 3, (u1 - 1) >> 3
-    acc[k0:k1 + 1] = 0
+    k0, k1 = np.uintp(u0 >> 3), np.uintp(((u1 - 1) >> 3) + 1)
+    for k in range(k0, k1):
+        acc[k] = 0
     for v in range(v0, v1):
-        for k in range(k0, k1 + 1):
-            acc[k] |= words[v, k]
+        row = words[np.uintp(v)]
+        for k in range(k0, k1):
+            acc[k] |= row[k]
     for u in range(u0, u1):
-        lit[u - u0] = (acc[u >> 3] >> np.uint64(8 * (u & 7))) & np.uint64(255) != 0
+        lit[np.uintp(u - u0)] = (acc[np.uintp(u >> 3)] >> np.uint64(8 * (u & 7))) \
+            & np.uint64(255) != 0
 
 
 @_jit
@@ -76,8 +79,8 @@ def foreground_rois(words, h, w, margin):
     piece trimmed to its foreground, until neither way cuts. So foreground in two
     rectangles is more than 2 ``margin`` apart along a row or a column, and a rectangle is
     no taller or wider than its own foreground (a band's rows cut only once, then its
-    columns, left a short part as tall as the tallest beside it: a third more pixels on
-    the bench's frames)."""
+    columns, left a short part as tall as the tallest beside it: more pixels to pack,
+    open, close and search)."""
     gap = 2 * margin
     res = [(0, 0, 0, 0)]
     res.pop()

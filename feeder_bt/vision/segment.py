@@ -194,9 +194,10 @@ class Segmenter:
         """Rectangles (v0, v1, u0, u1) that hold all the foreground, each with a margin of
         empty pixels wider than the morphology reaches (or the image's edge).
 
-        Rows with foreground are cut into bands where ``2 * margin`` empty rows part them,
-        then each band's columns likewise: most of a frame is empty belt. In one compiled
-        pass over the mask, 8 pixels a word (``kernels.foreground_rois``).
+        Cut where more than ``2 * margin`` empty rows part the foreground, then each
+        piece's columns likewise, and so on, each piece trimmed to its foreground (an
+        XY-cut): most of a frame is empty belt. Compiled, reading the mask 8 pixels a word
+        (``kernels.foreground_rois``).
         """
         h, w = mask.shape
         return kernels().foreground_rois(self._words(mask), h, w, self._margin)
