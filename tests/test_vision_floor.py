@@ -10,6 +10,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -90,11 +91,13 @@ def test_the_docs_quote_the_committed_simulator_speed_side_by_side():
     assert len({(r["parts_per_minute"], r["located"], r["lost"]) for r in runs}) == 1
 
 
-def test_the_docs_quote_the_lazy_contours_side_by_side():
-    # docs/performance.md's sentence on the contours made when asked for, against the
-    # side-by-side JSON (benchmarks/side_by_side.py over vision_bench.py, squares)
+@pytest.mark.parametrize("name,what", [
+    ("vision_lazy_contours.json", "this took"), ("vision_xycut.json", "the XY-cut took")])
+def test_the_docs_quote_the_vision_side_by_sides(name, what):
+    # docs/performance.md's sentences on a change to the locator, against its side-by-side
+    # JSON (benchmarks/side_by_side.py over vision_bench.py, squares)
     import statistics
-    result = json.loads((ROOT / "benchmarks/results/vision_lazy_contours.json").read_text())
+    result = json.loads((ROOT / "benchmarks/results" / name).read_text())
 
     def mean_ratio(code: str, key: str) -> float:
         tables = [r["report"]["scenarios"]["squares"][key] for r in result["runs"]
@@ -103,7 +106,7 @@ def test_the_docs_quote_the_lazy_contours_side_by_side():
                                      for t in tables), 3)
 
     text = " ".join((ROOT / "docs/performance.md").read_text().split())
-    m = re.search(r"over (\w+) alternating pairs of bench runs this took squares' three-way "
+    m = re.search(rf"over (\w+) alternating pairs of bench runs {what} squares' three-way "
                   r"ratio from ([\d.]+) to ([\d.]+) on average, and alone from ([\d.]+) to "
                   r"([\d.]+)", text)
     assert m, "the sentence is gone"
@@ -113,3 +116,6 @@ def test_the_docs_quote_the_lazy_contours_side_by_side():
         mean_ratio("before", "timing"), mean_ratio("after", "timing"),
         mean_ratio("before", "timing_ours_and_blob_alone"),
         mean_ratio("after", "timing_ours_and_blob_alone"))
+    answers = {json.dumps(r["report"]["scenarios"][sc]["answers"], sort_keys=True)
+               for r in result["runs"] for sc in ("squares",)}
+    assert len(answers) == 1                       # the same answers, before and after
