@@ -290,3 +290,17 @@ def test_kernels_loaded_from_the_cache_say_nothing(monkeypatch):
     monkeypatch.setattr(jit, "NOTICE_AFTER_S", 3600.0)
     jit.warm()
     assert said == []
+
+
+def test_contours_over_one_array_are_opencvs_contours_as_views():
+    from feeder_bt.vision.chains import Contours
+    mask = _mask(7)
+    want, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    pts = np.concatenate(want).reshape(-1, 2)
+    got = Contours(pts, np.array([len(c) for c in want], dtype=np.int64))
+    assert len(got) == len(want) > 1
+    assert all(np.array_equal(g, w) for g, w in zip(got, want, strict=True))
+    assert np.array_equal(got[-1], want[-1]) and len(got[1:]) == len(want) - 1
+    assert np.shares_memory(got[0], pts)              # a view, not a copy
+    with pytest.raises(IndexError):
+        got[len(want)]

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..geometry import wrap_deg
 from .calibration import Calibration, PixelGrid
-from .chains import WINDOW, _boundary_steps, _full_chain, _smooth_length
+from .chains import WINDOW, Contours, _boundary_steps, _full_chain, _smooth_length
 from .corners import _CornerSignature
 from .features import GROUP_OF
 from .jit import kernels
@@ -79,29 +79,21 @@ class Blob:
         first time it is asked for (most blobs of most frames never are)."""
         c = self._contour
         if c is None:
-            c = self._contour = self.frame.contour(self.index)
+            c = self._contour = self.frame.contours.contour(self.index)
         return c
 
 
 class Frame:
     """What ``kernels.blob_stats`` measured of one call's contours, kept for the faces:
-    all the points (int32, ``(n, 2)``) and the hulls' vertices (indices, ends per
-    contour; empty if hulls were not asked for)."""
+    all the points (int32, ``(n, 2)``), the contours themselves (``chains.Contours`` over
+    those points) and the hulls' vertices (indices, ends per contour; empty if hulls were
+    not asked for)."""
 
-    __slots__ = ("pts", "hull", "hull_ends", "lens", "_starts")
+    __slots__ = ("pts", "hull", "hull_ends", "contours")
 
-    def __init__(self, pts: np.ndarray, hull: np.ndarray, hull_ends: np.ndarray,
-                 lens: np.ndarray | None = None) -> None:
-        self.pts, self.hull, self.hull_ends = pts, hull, hull_ends
-        self.lens = lens                  # points of each contour, one after another
-        self._starts: list[int] | None = None
-
-    def contour(self, i: int) -> np.ndarray:
-        """Contour ``i`` as OpenCV gives contours: a (n, 1, 2) view of the points."""
-        if self._starts is None:
-            self._starts = (np.cumsum(self.lens) - self.lens).tolist()
-        a = self._starts[i]
-        return self.pts[a:a + int(self.lens[i])].reshape(-1, 1, 2)
+    def __init__(self, contours: Contours, hull: np.ndarray, hull_ends: np.ndarray) -> None:
+        self.pts, self.hull, self.hull_ends = contours.pts, hull, hull_ends
+        self.contours = contours
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
@@ -127,16 +119,17 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     s2 = calibration.mm2_per_px2
     min_px = 0.5 * min_area_mm2 / s2
     k = kernels()
-    pts, lens = getattr(contours, "pts", None), getattr(contours, "lens", None)
-    given = pts is None                # else ``segment.Contours``: already one array
+    given = not isinstance(contours, Contours)       # else already one array
     if given:
         pts = np.concatenate(contours).reshape(-1, 2)
         lens = np.fromiter(map(len, contours), np.int64, len(contours))
+    else:
+        pts, lens = contours.pts, contours.lens
     kind, cells, par = (mapping or calibration)._kernel_table()
     boxes, stats, hull, hull_ends = k.blob_stats(
         pts, lens, min_px, full, length and full, hulls,
         WINDOW, kind, cells, par)
-    frame = Frame(pts, hull, hull_ends, lens)
+    frame = Frame(Contours(pts, lens) if given else contours, hull, hull_ends)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
     # calibration's mm_per_px over the window), for areas and lengths
     local = not calibration.linear
@@ -170,12 +163,12 @@ def _hull_stats(b: Blob) -> list[float]:
     asked for hulls)."""
     k = kernels()
     if b.stats[k.RECT_W] != b.stats[k.RECT_W]:          # NaN: not measured yet
-        pts = np.ascontiguousarray(b.contour.reshape(-1, 2))
+        one = Contours(np.ascontiguousarray(b.contour.reshape(-1, 2)),
+                       np.array([len(b.contour)], dtype=np.int64))
         _, stats, hull, hull_ends = k.blob_stats(
-            pts, np.array([len(pts)], dtype=np.int64), 0.0, b.full, False, True, WINDOW,
-            *_SIMILARITY)
+            one.pts, one.lens, 0.0, b.full, False, True, WINDOW, *_SIMILARITY)
         b.stats = b.stats[:k.RECT_W] + stats[0, k.RECT_W:].tolist()
-        b.frame, b.index = Frame(pts, hull, hull_ends), 0
+        b.frame, b.index = Frame(one, hull, hull_ends), 0
     return b.stats
 
 

@@ -5,11 +5,43 @@ Helpers of ``feeder_bt.vision`` (segmentation, blobs) that need no recipe.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .jit import kernels
 
 WINDOW = 5                     # points in the moving average of the smoothed perimeter
+
+
+class Contours(Sequence):
+    """Contours in the frame, their points one after another (``pts``: (n, 2) int32;
+    ``lens``: each one's count): ``blobs.find_blobs`` measures them as they are; each as an
+    (n, 1, 2) array, as ``findContours`` gives them, is a view made only when asked for
+    (drawing, the rarer features)."""
+
+    def __init__(self, pts: np.ndarray, lens: np.ndarray) -> None:
+        self.pts, self.lens = pts, lens
+        self._starts: list[int] | None = None
+
+    def contour(self, i: int) -> np.ndarray:
+        """Contour ``i``: a (n, 1, 2) view of the points."""
+        if self._starts is None:
+            self._starts = (np.cumsum(self.lens) - self.lens).tolist()
+        a = self._starts[i]
+        return self.pts[a:a + int(self.lens[i])].reshape(-1, 1, 2)
+
+    def __len__(self) -> int:
+        return len(self.lens)
+
+    def __getitem__(self, i):  # an index or a slice, as a list's
+        if isinstance(i, slice):
+            return [self.contour(j) for j in range(*i.indices(len(self)))]
+        if i < 0:
+            i += len(self)
+        if not 0 <= i < len(self):
+            raise IndexError("contour index out of range")
+        return self.contour(i)
 
 
 def _full_chain(contour: np.ndarray) -> np.ndarray:

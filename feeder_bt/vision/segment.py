@@ -18,13 +18,12 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Sequence
 
 import cv2
 import numpy as np
 
 from ..scenario.model import VisionRecipe
-from .chains import _with_holes
+from .chains import Contours, _with_holes
 from .jit import kernels
 
 
@@ -301,30 +300,6 @@ _NO_GOLDEN = np.zeros(1, np.uint8)
 _NO_POINTS = np.zeros((0, 2), np.int32)
 _NO_LENS = np.zeros(0, np.int64)
 _NO_GEO = np.zeros((0, 9), np.int64)
-
-
-class Contours(Sequence):
-    """Contours in the frame, their points one after another (``pts``, ``lens`` each):
-    ``blobs.find_blobs`` measures them as they are; as (n, 1, 2) int32 arrays, as
-    ``findContours`` gives them, only when one is asked for."""
-
-    def __init__(self, pts: np.ndarray, lens: np.ndarray) -> None:
-        self.pts, self.lens = pts, lens
-        self._views: list[np.ndarray] | None = None
-
-    def _list(self) -> list[np.ndarray]:
-        if self._views is None:
-            ends = np.cumsum(self.lens).tolist()
-            flat = self.pts.reshape(-1, 1, 2)
-            self._views = [flat[e - n:e] for e, n in zip(ends, self.lens.tolist(),
-                                                         strict=True)]
-        return self._views
-
-    def __len__(self) -> int:
-        return len(self.lens)
-
-    def __getitem__(self, i):  # an index or a slice, as a list's
-        return self._list()[i]
 
 
 MOVED_BUDGET_BYTES = 16 << 20    # the golden images moved by recent levels (``_moved``)
