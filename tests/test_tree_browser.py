@@ -137,6 +137,9 @@ def test_the_tree_fits_its_box_and_pans_at_1_to_1(replay, browser, width):
 def test_drag_the_timeline_back_before_the_fault_and_resume(replay, page, shots):
     db, url = replay
     page.goto(url)
+    # the replay opens 1 s before the first fault once its events are in: a click before
+    # that would be undone by the opening
+    expect(page.locator("#tv-time")).to_contain_text("before the first fault")
     page.click("#tv-live")                                 # "End": the end of the run
     expect(page.locator("#tv-time")).to_contain_text("end of the run")
     expect(node(page, "feeder")).to_have_attribute("data-status", "invalid")
