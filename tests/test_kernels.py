@@ -159,6 +159,38 @@ def test_foreground_rectangles_follow_the_rule(seed, margin, width):
     assert [tuple(r) for r in seg._rois(own).tolist()] == _rois_reference(mask, margin)
 
 
+def _grey(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """A belt and parts: one or two grey modes with noise, or uniform noise, or flat."""
+    kind = int(rng.integers(0, 4))
+    if kind == 0:
+        return rng.integers(0, 256, (h, w), dtype=np.uint8)
+    if kind == 1:
+        return np.full((h, w), int(rng.integers(0, 256)), np.uint8)
+    img = rng.normal(rng.uniform(0, 255), rng.uniform(1, 40), (h, w))
+    if kind == 3:
+        parts = rng.random((h, w)) < rng.uniform(0.02, 0.5)
+        img[parts] = rng.normal(rng.uniform(0, 255), rng.uniform(1, 40), int(parts.sum()))
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 10**6), st.integers(1, 130), st.integers(1, 130))
+def test_otsu_level_of_the_sampled_difference_is_opencvs(seed, h, w):
+    from feeder_bt.vision.segment import otsu_level, subsample
+    rng = np.random.default_rng(seed)
+    img, golden = _grey(rng, h, w), _grey(rng, h, w)
+    small = subsample(golden).copy()
+
+    def cv_otsu(sample: np.ndarray) -> float:
+        return float(cv2.threshold(sample, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)[0])
+
+    assert otsu_level(img) == cv_otsu(subsample(img))
+    assert otsu_level(img, small, "minus_golden") == cv_otsu(
+        cv2.subtract(subsample(img), small))
+    assert otsu_level(img, small, "golden_minus") == cv_otsu(
+        cv2.subtract(small, subsample(img)))
+
+
 def _edge_reference(hulls, diff, cut):
     """``Segmenter._edge_points``' rule in numpy (as before the kernels)."""
     du, dv = np.array([1, -1, 0, 0]), np.array([0, 0, 1, -1])

@@ -25,7 +25,7 @@ from .jit import kernels
 _SIMILARITY = (0, np.zeros((1, 4, 3)), np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))
 
 
-@dataclass
+@dataclass(slots=True)
 class Detection:
     """One blob: its class (None if rejected, with ``reason``), pose in the belt frame and
     in pixels, and the features measured on the way (see ``vision.locator``)."""

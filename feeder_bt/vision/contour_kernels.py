@@ -1,5 +1,5 @@
 """Compiled kernels of the segmentation (numba; see ``vision.kernels``, which imports them):
-the rectangles of foreground in a mask, their packing into one image with mirrors at the
+Otsu's level of a difference image's subsample, the rectangles of foreground in a mask, their packing into one image with mirrors at the
 image's edges, and the contours found there back in the frame, in the whole frame's order
 (``Segmenter._contours_holes``)."""
 
@@ -10,6 +10,55 @@ import numpy as np
 from .jit import _jit
 
 _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
+_FLT_EPSILON = 1.1920928955078125e-07
+
+# what ``otsu_level`` reads: the image, the image minus the golden image (light parts), or
+# the golden image minus the image (dark parts), each saturated at 0 as ``cv2.subtract``
+PLAIN, MINUS_GOLDEN, GOLDEN_MINUS = 0, 1, 2
+
+
+@_jit
+def otsu_level(img, golden, step, mode):
+    """Otsu's level (``cv2.threshold``'s ``THRESH_OTSU`` on 8-bit images: the first level
+    of greatest between-class variance, in the same double arithmetic) of the difference
+    image sampled at every ``step``-th pixel of every ``step``-th row (``segment.subsample``).
+
+    ``golden``: the golden image sampled likewise (its rows and columns bound the sample),
+    read as ``mode`` says. One pass over the sampled pixels, with no copy of the strided
+    sample and no sample-sized difference image: the two cost OpenCV more than the
+    histogram (the first read of a frame's rows)."""
+    hist = np.zeros(256, np.int64)
+    rows, cols = golden.shape
+    for r in range(rows):
+        f = img[np.uintp(r * step)]
+        g = golden[np.uintp(r)]
+        for c in range(cols):
+            v = np.int64(f[np.uintp(c * step)])
+            if mode == MINUS_GOLDEN:
+                v -= np.int64(g[np.uintp(c)])
+            elif mode == GOLDEN_MINUS:
+                v = np.int64(g[np.uintp(c)]) - v
+            hist[max(v, 0)] += 1
+    scale = 1.0 / (rows * cols)
+    mu = 0.0
+    for i in range(256):
+        mu += i * np.float64(hist[i])
+    mu *= scale
+    mu1 = q1 = best = 0.0
+    level = 0
+    for i in range(256):
+        p = hist[i] * scale
+        mu1 *= q1
+        q1 += p
+        q2 = 1.0 - q1
+        if min(q1, q2) < _FLT_EPSILON or max(q1, q2) > 1.0 - _FLT_EPSILON:
+            continue
+        mu1 = (mu1 + i * p) / q1
+        mu2 = (mu - q1 * mu1) / q2
+        sigma = q1 * q2 * (mu1 - mu2) * (mu1 - mu2)
+        if sigma > best:
+            best, level = sigma, i
+    return float(level)
 
 
 @_jit

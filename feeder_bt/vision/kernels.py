@@ -11,8 +11,9 @@ here: before these kernels half of the locator's time was that glue between call
   asked the smoothed length (``chains._smooth_length``'s tours, summed as ``cv2.arcLength``
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length.
-* ``foreground_rois``, ``pack_rois``, ``clear_mirrors``, ``place_contours`` (in
-  ``contour_kernels``): the rectangles of foreground, packed, and their contours back in
+* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``clear_mirrors``, ``place_contours``
+  (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
+  rectangles of foreground, packed, and their contours back in
   the frame (``Segmenter._contours_holes``).
 * ``faces`` (in ``face_kernels``): for the blobs that need a face, the sub-pixel edge points of their hulls'
   vertices (``Segmenter._edge_points``' rule), those points in mm, and their cut-corner
@@ -34,8 +35,12 @@ import math
 import numpy as np
 
 from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
+    GOLDEN_MINUS,
+    MINUS_GOLDEN,
+    PLAIN,
     clear_mirrors,
     foreground_rois,
+    otsu_level,
     pack_rois,
     place_contours,
 )
@@ -411,6 +416,7 @@ def warm() -> None:
     smooth_length(pts, 0, 4, 5)
     map_points(pts.astype(np.float64), SIMILARITY, cells, par)
     mask = np.zeros((6, 16), np.uint8)
+    otsu_level(mask, mask[:2, :4].copy(), 4, GOLDEN_MINUS)   # as the locator passes them: C order
     rois = foreground_rois(mask.view(np.uint64), 6, 16, 1)
     rois = np.array([[0, 6, 0, 8]], np.int64)
     for m in (mask, mask[:, :12]):         # a scratch mask: whole rows, or padded ones

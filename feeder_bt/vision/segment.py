@@ -158,8 +158,8 @@ class Segmenter:
             # against the golden image moved by the level, as for a fixed level: no
             # frame-sized difference image (the faces read the grey from the frame and the
             # golden image where they need it)
-            f, g = subsample(img), self._golden_small
-            level = max(otsu_level(cv2.subtract(f, g) if self._light else cv2.subtract(g, f)),
+            level = max(otsu_level(img, self._golden_small,
+                                   "minus_golden" if self._light else "golden_minus"),
                         float(th.value))
             return (cv2.compare(img, self._moved(math.floor(level)),
                                 cv2.CMP_GT if self._light else cv2.CMP_LT, dst=mask),
@@ -169,7 +169,7 @@ class Segmenter:
             level: float | None = float(th.value)
             cv2.threshold(diff, th.value, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "otsu":
-            level = max(otsu_level(subsample(diff)), float(th.value))
+            level = max(otsu_level(diff), float(th.value))
             cv2.threshold(diff, level, 255, cv2.THRESH_BINARY, dst=mask)
         elif th.method == "adaptive":
             level = None
@@ -246,16 +246,16 @@ class Segmenter:
             packed, geo = k.pack_rois(mask, rois, self._margin if morph else 1)
             if morph:
                 packed = self._morph(packed)
-            if geo[:, 1:5].any():
-                k.clear_mirrors(packed, geo)
+            k.clear_mirrors(packed, geo)        # (nothing to do where none was mirrored)
             cs, hier = cv2.findContours(packed, mode, chain)
             found = _with_holes(cs, hier, holes)
         n_packed = len(found)
         found += own
         if not found:
             return Contours(_NO_POINTS, _NO_LENS), ([] if holes else None)
-        pts = np.concatenate([c for c, _ in found]).reshape(-1, 2)
-        lens = np.fromiter((len(c) for c, _ in found), np.int64, len(found))
+        outer = [c for c, _ in found]
+        pts = np.concatenate(outer).reshape(-1, 2)
+        lens = np.fromiter(map(len, outer), np.int64, len(outer))
         # back to the frame; the whole frame's findContours lists contours by first
         # point, last found first
         pts, lens, order, moved = k.place_contours(pts, lens, n_packed, geo, w)
@@ -313,17 +313,34 @@ def subsample(img: np.ndarray) -> np.ndarray:
     return img if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else img[::OTSU_STEP, ::OTSU_STEP]
 
 
-def otsu_level(small: np.ndarray) -> float:
-    """Otsu's level of a difference image's regular subsample (``subsample``).
+def otsu_level(img: np.ndarray, golden_small: np.ndarray | None = None,
+               mode: str = "plain") -> float:
+    """Otsu's level of the difference image's regular subsample (``subsample``): of ``img``
+    itself (``plain``), of ``img`` minus the golden image (``minus_golden``) or of the golden
+    image minus ``img`` (``golden_minus``), ``golden_small`` being the golden image's
+    subsample. As ``cv2.threshold``'s ``THRESH_OTSU`` gives it on that sample.
 
     The level is a property of the histogram's two modes, belt and parts, which a 1/16
     sample of a frame shows as well as the whole frame (the parts' smallest blobs still
     cover tens of samples); the whole frame's histogram was a fifth of the locator's time
     on a frame of squares (benchmarks/vision_bench.py). The mask is still cut from every
-    pixel, at this level.
+    pixel, at this level. Compiled (``kernels.otsu_level``): the sample read in place,
+    never copied out of the frame.
     """
-    level, _ = cv2.threshold(small, 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
-    return float(level)
+    k = kernels()
+    h, w = img.shape[:2]
+    step = 1 if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else OTSU_STEP
+    if golden_small is None:
+        mode, golden_small = "plain", _sample_shape(h, w, step)
+    return k.otsu_level(np.ascontiguousarray(img), golden_small, step,
+                        {"plain": k.PLAIN, "minus_golden": k.MINUS_GOLDEN,
+                         "golden_minus": k.GOLDEN_MINUS}[mode])
+
+
+def _sample_shape(h: int, w: int, step: int) -> np.ndarray:
+    """A placeholder golden sample (C order, as the golden image's): only its shape, the
+    sample's, is read."""
+    return np.zeros((-(-h // step), -(-w // step)), np.uint8)
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
