@@ -33,7 +33,10 @@ than ``--min-agreement`` of the parts. Then each pipeline is timed on every fram
 alike: p50 / p99 ms per frame, the median over repeats (and the spread of the p50s).
 Then ours and the detector are timed again taking turns without the others
 (``timing_ours_and_blob_alone``): between two of their frames no scikit-image frame
-(about 20 ms of other work) has emptied the caches.
+(about 20 ms of other work) has emptied the caches. Last, what those emptied caches cost
+each (``first_and_second_call``): after a scikit-image frame, ours and the detector (in
+turn, which first alternating frame by frame) each take the frame twice in a row; the
+first call finds the caches as the three-way timing does, the second finds them warm.
 
 scikit-image is an optional extra: ``pip install -e '.[bench]'`` (or
 ``pip install 'scikit-image>=0.22'``).
@@ -392,6 +395,35 @@ def _time(pipes: list[Callable[[np.ndarray], list[Answer]]], frames: list[np.nda
             for name, v in per.items()}
 
 
+def _first_and_second(pipes: list[Callable[[np.ndarray], list[Answer]]],
+                       frames: list[np.ndarray], repeats: int) -> dict[str, dict]:
+    """p50 ms of each pipeline's first and second call on a frame, right after a
+    scikit-image frame (``pipes[0]``) each: what cold caches cost it (the median over
+    repeats)."""
+    warmup, timed = pipes[0], pipes[1:]
+    per: dict[str, dict[str, list[float]]] = {
+        p.name: {"first": [], "second": []} for p in timed}
+    for rep in range(repeats):
+        ms: dict[str, dict[str, list[float]]] = {
+            p.name: {"first": [], "second": []} for p in timed}
+        for i, img in enumerate(frames):
+            k = (i + rep) % len(timed)
+            for p in timed[k:] + timed[:k]:
+                warmup(img)
+                t0 = time.perf_counter()
+                p(img)
+                t1 = time.perf_counter()
+                p(img)
+                t2 = time.perf_counter()
+                ms[p.name]["first"].append((t1 - t0) * 1e3)
+                ms[p.name]["second"].append((t2 - t1) * 1e3)
+        for name, v in ms.items():
+            for which in ("first", "second"):
+                per[name][which].append(_pct(v[which], 50))
+    return {name: {f"{which}_p50_ms": round(float(np.median(v[which])), 4)
+                   for which in ("first", "second")} for name, v in per.items()}
+
+
 def _render_ms(name: str, scenario, cam, truth: list[dict], seed: int) -> dict[str, float]:
     """The simulated camera's renderer on the same scenes (outlines from the truth)."""
     renderer = Renderer(cam)
@@ -430,11 +462,15 @@ def bench_scenario(name: str, n_frames: int, repeats: int, seed: int,
     # ours and the detector alone, taking turns: no scikit-image frame (about 20 ms of
     # other work) between them to empty the caches (docs/performance.md, third round)
     pair = _time([p for p in pipes if p.name in ("ours", "blob")], got.frames, repeats)
+    by_name = {p.name: p for p in pipes}
+    twice = _first_and_second([by_name["skimage"], by_name["ours"], by_name["blob"]],
+                              got.frames, repeats)
     return {
         "frames": len(got.frames), "image_px": [cam.width_px, cam.height_px],
         "truth_parts": sum(len(t) for t in truth),
         "parts_in_view": sum(len(t["parts"]) for t in got.truth),
         "answers": check, "timing": timing, "timing_ours_and_blob_alone": pair,
+        "first_and_second_call": twice,
         "ours_faster_than_peers": all(ours < v["p50_ms"] for k, v in timing.items()
                                       if k not in ("ours", "baseline")),
         "render": _render_ms(name, scenario, cam, got.truth, seed),
