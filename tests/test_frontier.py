@@ -172,3 +172,17 @@ def test_a_setting_the_cell_refuses_stops_the_bench_before_any_run():
     msg = str(e.value)
     assert "belt 260 mm/s, incline 153.85 %" in msg and "max_mm_s 400" in msg
     assert "\n" not in msg
+
+
+def test_the_docs_quote_the_three_tray_kit_grid():
+    # docs/performance.md's sentence on three trays against its frontier_bench JSON
+    result = json.loads((ROOT / "benchmarks" / "results" /
+                         "frontier_kits_three_trays.json").read_text())
+    text = " ".join((ROOT / "docs" / "performance.md").read_text().split())
+    m = re.search(r"three trays give about the same: best fixed setting ([\d.]+) kits/min, tuned "
+                  r"water marks ([\d.]+), tuned fixed ([\d.]+)", text)
+    assert m, "the sentence is gone"
+    by = {e["setting"]: e["mean"] for e in result["evaluated"]}
+    assert tuple(map(float, m.groups())) == (
+        result["best_fixed"]["mean"], by["tuned watermarks"], by["tuned fixed"])
+    assert len(result["screened"]) == 36 and result["eval_seeds"] == [101, 102, 103, 104, 105]
