@@ -1,7 +1,7 @@
 """Compiled kernels of the segmentation (numba; see ``vision.kernels``, which imports them):
-Otsu's level of a difference image's subsample, the rectangles of foreground in a mask, their packing into one image with mirrors at the
-image's edges, and the contours found there back in the frame, in the whole frame's order
-(``Segmenter._contours_holes``)."""
+Otsu's level of a difference image's subsample, the rectangles of foreground in a mask,
+their packing into one image with mirrors at the image's edges, and the contours found
+there back in the frame, in the whole frame's order (``Segmenter._contours_holes``)."""
 
 from __future__ import annotations
 

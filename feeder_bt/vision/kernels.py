@@ -13,8 +13,8 @@ here: before these kernels half of the locator's time was that glue between call
   its minimum-area rectangle, area and length.
 * ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``clear_mirrors``, ``place_contours``
   (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
-  rectangles of foreground, packed, and their contours back in
-  the frame (``Segmenter._contours_holes``).
+  rectangles of foreground, packed, and their contours back in the frame
+  (``Segmenter._contours_holes``).
 * ``faces`` (in ``face_kernels``): for the blobs that need a face, the sub-pixel edge points of their hulls'
   vertices (``Segmenter._edge_points``' rule), those points in mm, and their cut-corner
   signatures (``corners._corner_signatures``' rule); ``signatures`` is that last step alone.
@@ -416,7 +416,7 @@ def warm() -> None:
     smooth_length(pts, 0, 4, 5)
     map_points(pts.astype(np.float64), SIMILARITY, cells, par)
     mask = np.zeros((6, 16), np.uint8)
-    otsu_level(mask, mask[:2, :4].copy(), 4, GOLDEN_MINUS)   # as the locator passes them: C order
+    otsu_level(mask, mask[:2, :4].copy(), 4, GOLDEN_MINUS)   # C order, as the locator's
     rois = foreground_rois(mask.view(np.uint64), 6, 16, 1)
     rois = np.array([[0, 6, 0, 8]], np.int64)
     for m in (mask, mask[:, :12]):         # a scratch mask: whole rows, or padded ones

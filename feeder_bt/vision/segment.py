@@ -306,11 +306,16 @@ MOVED_BUDGET_BYTES = 16 << 20    # the golden images moved by recent levels (``_
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
 
 
+def _sample_step(h: int, w: int) -> int:
+    """The step of ``subsample`` for an h x w image: ``OTSU_STEP``, or 1 (whole) if small."""
+    return 1 if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else OTSU_STEP
+
+
 def subsample(img: np.ndarray) -> np.ndarray:
     """Every ``OTSU_STEP``-th pixel of every ``OTSU_STEP``-th row (a view; a small image
     whole), where Otsu's level is read."""
-    h, w = img.shape[:2]
-    return img if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else img[::OTSU_STEP, ::OTSU_STEP]
+    step = _sample_step(*img.shape[:2])
+    return img if step == 1 else img[::step, ::step]
 
 
 def otsu_level(img: np.ndarray, golden_small: np.ndarray | None = None,
@@ -329,7 +334,7 @@ def otsu_level(img: np.ndarray, golden_small: np.ndarray | None = None,
     """
     k = kernels()
     h, w = img.shape[:2]
-    step = 1 if h < 4 * OTSU_STEP or w < 4 * OTSU_STEP else OTSU_STEP
+    step = _sample_step(h, w)
     if golden_small is None:
         mode, golden_small = "plain", _sample_shape(h, w, step)
     return k.otsu_level(np.ascontiguousarray(img), golden_small, step,
