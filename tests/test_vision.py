@@ -417,7 +417,7 @@ def _random_mask(rng: np.random.Generator, h: int = 120, w: int = 160) -> np.nda
     return mask
 
 
-@pytest.mark.parametrize("open_px,close_px", [(3, 3), (0, 0), (5, 3), (4, 0)])
+@pytest.mark.parametrize("open_px,close_px", [(3, 3), (0, 0), (5, 3), (4, 0), (0, 7), (9, 0)])
 def test_contours_on_bands_equal_the_whole_frame(open_px, close_px):
     """The packed bands (with mirrors at the image's edges) give exactly the contours, in
     the same order, as morphology and findContours on the whole frame."""

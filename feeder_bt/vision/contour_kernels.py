@@ -1,6 +1,7 @@
 """Compiled kernels of the segmentation (numba; see ``vision.kernels``, which imports them):
 Otsu's level of a difference image's subsample, the rectangles of foreground in a mask,
-their packing into one image with mirrors at the image's edges, and the contours found
+their packing into one image with mirrors at the image's edges (the two in one call:
+``packed_rois``), and the contours found
 there back in the frame, in the whole frame's order (``Segmenter._contours_holes``)."""
 
 from __future__ import annotations
@@ -27,7 +28,10 @@ def otsu_level(img, golden, step, mode):
     read as ``mode`` says. One pass over the sampled pixels, with no copy of the strided
     sample and no sample-sized difference image: the two cost OpenCV more than the
     histogram (the first read of a frame's rows)."""
-    hist = np.zeros(256, np.int64)
+    # four histograms, a pixel's column picking one: most samples are the belt, a few
+    # grey levels, and one histogram's count of a level must wait for its last one (one
+    # pass of squares' samples took 28 us so, 16 us with four)
+    hists = np.zeros((4, 256), np.int64)
     rows, cols = golden.shape
     for r in range(rows):
         f = img[np.uintp(r * step)]
@@ -38,7 +42,8 @@ def otsu_level(img, golden, step, mode):
                 v -= np.int64(g[np.uintp(c)])
             elif mode == GOLDEN_MINUS:
                 v = np.int64(g[np.uintp(c)]) - v
-            hist[max(v, 0)] += 1
+            hists[np.uintp(c & 3), np.uintp(max(v, 0))] += 1
+    hist = hists[0] + hists[1] + hists[2] + hists[3]
     scale = 1.0 / (rows * cols)
     mu = 0.0
     for i in range(256):
@@ -179,13 +184,11 @@ def _reflect(i, n):
 
 
 @_jit
-def pack_rois(mask, rois, pad):
-    """The rectangles ``rois`` (v0, v1, u0, u1) of ``mask`` laid side by side in one image
-    (``Segmenter._contours_holes``), each padded by ``pad`` pixels of its own mirror image
-    (BORDER_REFLECT_101) on the sides where it meets the image's edge. Returns the image
-    and per rectangle: its x there, its padding top, bottom, left, right, its height and
-    width there, and the move (du, dv) that takes its pixels back to the frame's."""
-    h, w = mask.shape
+def roi_geometry(rois, h, w, pad):
+    """Where ``pack_rois`` lays the rectangles ``rois`` of an h x w image (padded by
+    ``pad`` where they meet its edge): per rectangle its x there, its padding top, bottom,
+    left, right, its height and width there, and the move (du, dv) that takes its pixels
+    back to the frame's; and the packed image's height and width."""
     n = len(rois)
     geo = np.empty((n, 9), np.int64)
     x = height = 0
@@ -200,6 +203,18 @@ def pack_rois(mask, rois, pad):
         geo[i, 5], geo[i, 6], geo[i, 7], geo[i, 8] = sh, sw, u0 - x - left, v0 - top
         x += sw
         height = max(height, sh)
+    return geo, height, x
+
+
+@_jit
+def pack_rois(mask, rois, pad):
+    """The rectangles ``rois`` (v0, v1, u0, u1) of ``mask`` laid side by side in one image
+    (``Segmenter._contours_holes``), each padded by ``pad`` pixels of its own mirror image
+    (BORDER_REFLECT_101) on the sides where it meets the image's edge. Returns the image
+    and ``roi_geometry``'s table."""
+    h, w = mask.shape
+    n = len(rois)
+    geo, height, x = roi_geometry(rois, h, w, pad)
     packed = np.zeros((height, x), np.uint8)
     for i in range(n):
         v0, v1, u0, u1 = rois[i, 0], rois[i, 1], rois[i, 2], rois[i, 3]
@@ -217,6 +232,16 @@ def pack_rois(mask, rois, pad):
                 for c in range(sw):
                     packed[dst, np.uintp(x0 + c)] = mask[src, np.uintp(u0 + c)]
     return packed, geo
+
+
+@_jit
+def packed_rois(words, mask, margin, pad):
+    """``foreground_rois`` of a mask given both ways (8 pixels a word, and as pixels) and
+    their ``pack_rois`` image, in one call: (rectangles, image, geometry)."""
+    h, w = mask.shape
+    rois = foreground_rois(words, h, w, margin)
+    packed, geo = pack_rois(mask, rois, pad)
+    return rois, packed, geo
 
 
 @_jit

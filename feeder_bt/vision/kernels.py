@@ -11,7 +11,9 @@ here: before these kernels half of the locator's time was that glue between call
   asked the smoothed length (``chains._smooth_length``'s tours, summed as ``cv2.arcLength``
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length.
-* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``clear_mirrors``, ``place_contours``
+* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``packed_rois``, ``clear_mirrors``,
+  ``place_contours``; ``packed_morph`` (in ``bit_kernels``: the packing with the opening
+  and closing, a bit a pixel)
   (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
   rectangles of foreground, packed, and their contours back in the frame
   (``Segmenter._contours_holes``).
@@ -34,6 +36,7 @@ import math
 
 import numpy as np
 
+from .bit_kernels import packed_morph  # noqa: F401
 from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
     GOLDEN_MINUS,
     MINUS_GOLDEN,
@@ -42,6 +45,7 @@ from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
     foreground_rois,
     otsu_level,
     pack_rois,
+    packed_rois,
     place_contours,
 )
 from .jit import _jit
@@ -422,4 +426,7 @@ def warm() -> None:
     for m in (mask, mask[:, :12]):         # a scratch mask: whole rows, or padded ones
         packed, geo = pack_rois(m, rois, 1)
         clear_mirrors(packed, geo)
+        packed_rois(mask.view(np.uint64), m, 1, 1)
+        cross = np.array([-1, 0, 0, 0, 1], np.int64), np.array([0, -1, 0, 1, 0], np.int64)
+        packed_morph(mask.view(np.uint64), m, 1, *cross, *cross)
     place_contours(pts.copy(), lens, 3, geo, 16)

@@ -47,6 +47,8 @@ class Segmenter:
         self._mirror = all(k.shape[0] % 2 == 1 and k.shape[1] % 2 == 1
                            and (k == k[::-1]).all() and (k == k[:, ::-1]).all()
                            for k in (self._open, self._close) if k is not None)
+        # the kernels' points (dy, dx from the anchor) for ``kernels.packed_morph``
+        self._open_pts, self._close_pts = (_points(k) for k in (self._open, self._close))
         self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
         self._golden_small: np.ndarray | None = None     # its subsample (``subsample``)
         self._moved_by: dict[int, np.ndarray] = {}       # Otsu's levels: ``_moved``
@@ -214,39 +216,47 @@ class Segmenter:
         The morphology and the contour search run only on ``_rois``: inside each, every
         pixel comes out as on the whole frame, outside them nothing does. The rectangles
         are laid side by side in one small image (their margins keep them apart, as on the
-        frame), so a frame costs two morphology calls and one contour search however many
+        frame), so a frame costs one morphology and one contour search however many
         blobs it has. Where a rectangle meets the image's edge, which the morphology reads
         as "nothing there to constrain", it gets a mirror image of itself as wide as the
         margin: with a symmetric kernel each operation keeps the mirror a mirror, so up to
         the edge every pixel comes out as on the frame. The mirrors are cleared before the
-        contour search (whose own border is empty, as at the image's edge).
+        contour search (whose own border is empty, as at the image's edge). With symmetric
+        kernels the rectangles, their packing, the opening, the closing and the clearing
+        are one compiled call working a bit a pixel (``kernels.packed_morph``); with
+        others, OpenCV's ``morphologyEx`` on the packed bytes.
         """
         h, w = mask.shape
         k = kernels()
-        rois = self._rois(mask)
-        if not len(rois):
-            return Contours(_NO_POINTS, _NO_LENS), ([] if holes else None)
         mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
         morph = self._open is not None or self._close is not None
         own: list[tuple[np.ndarray, list[np.ndarray]]] = []    # found in the frame's place
         if morph and not self._mirror:
             # an asymmetric kernel: rectangles at the image's edge get their own search
+            rois = self._rois(mask)
             edge = (rois[:, 0] == 0) | (rois[:, 1] == h) | (rois[:, 2] == 0) | (rois[:, 3] == w)
             for v0, v1, u0, u1 in rois[edge].tolist():
                 cs, hier = cv2.findContours(self._morph(mask[v0:v1, u0:u1]), mode, chain,
                                             offset=(u0, v0))
                 own += _with_holes(cs, hier, holes)
             rois = np.ascontiguousarray(rois[~edge])
-        found: list[tuple[np.ndarray, list[np.ndarray]]] = []
-        geo = _NO_GEO
-        if len(rois):
+            packed, geo = k.pack_rois(mask, rois, self._margin) if len(rois) else (None, _NO_GEO)
+        elif morph:
             # a rectangle at the image's edge has no empty margin there: it gets a mirror
-            # (for the morphology), which also keeps it one pixel clear of its neighbours
-            packed, geo = k.pack_rois(mask, rois, self._margin if morph else 1)
-            if morph:
-                packed = self._morph(packed)
-            k.clear_mirrors(packed, geo)        # (nothing to do where none was mirrored)
+            # (for the morphology), which also keeps it one pixel clear of its neighbours;
+            # packed, opened, closed and the mirrors cleared a bit a pixel in one call
+            rois, words, geo, width = k.packed_morph(self._words(mask), mask, self._margin,
+                                                     *self._open_pts, *self._close_pts)
+            packed = words.view(np.uint8)[:, :width]
+        else:
+            rois, packed, geo = k.packed_rois(self._words(mask), mask, self._margin, 1)
+        found: list[tuple[np.ndarray, list[np.ndarray]]] = []
+        if len(rois):
+            if not (morph and self._mirror):      # else done with the packing
+                if morph:
+                    packed = self._morph(packed)
+                k.clear_mirrors(packed, geo)    # (nothing to do where none was mirrored)
             cs, hier = cv2.findContours(packed, mode, chain)
             found = _with_holes(cs, hier, holes)
         n_packed = len(found)
@@ -294,6 +304,16 @@ class Segmenter:
         if self.recipe.golden_image and golden is not None:
             return flat, golden.reshape(-1), k.GOLDEN_LIGHT if self._light else k.GOLDEN_DARK
         return flat, _NO_GOLDEN, k.PLAIN_LIGHT if self._light else k.PLAIN_DARK
+
+
+def _points(kernel: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """A structuring element's points as (dy, dx) from its anchor, its centre (OpenCV's
+    default); none for no kernel."""
+    if kernel is None:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    dy, dx = np.nonzero(kernel)
+    return ((dy - kernel.shape[0] // 2).astype(np.int64),
+            (dx - kernel.shape[1] // 2).astype(np.int64))
 
 
 _NO_GOLDEN = np.zeros(1, np.uint8)
