@@ -292,7 +292,7 @@ def test_a_kernel_with_nowhere_to_cache_is_compiled_in_memory():
 
 
 def test_a_compile_that_takes_long_says_why_on_stderr(monkeypatch):
-    # a fresh install compiles the kernels for 13-25 s before anything else is on the
+    # a fresh install compiles the kernels for 13-40 s before anything else is on the
     # screen: a line says so (here the compile waits for it; no clock is judged)
     from feeder_bt.vision import jit
     said: list[str] = []

@@ -35,13 +35,13 @@ def _jit(fn=None, **kw):
 
 NOTICE_AFTER_S = 1.0
 NOTICE = ("feeder: compiling the locator's kernels (numba), once after installing or "
-          "upgrading: about 20 s; later runs load them from the cache")
+          "upgrading: 20-40 s; later runs load them from the cache")
 
 
 def warm() -> None:
     """Import the kernels and compile them (or load them from numba's cache).
 
-    Loading takes well under a second; compiling (a fresh install) 13-25 s, with nothing
+    Loading takes well under a second; compiling (a fresh install) 13-40 s, with nothing
     else on the screen yet: past ``NOTICE_AFTER_S`` a line on stderr says why."""
     timer = threading.Timer(NOTICE_AFTER_S, lambda: print(NOTICE, file=sys.stderr,
                                                           flush=True))
