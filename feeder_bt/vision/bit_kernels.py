@@ -127,13 +127,12 @@ for _b in range(256):
 
 
 @_jit
-def packed_morph(words, mask, margin, open_dy, open_dx, close_dy, close_dx):
-    """``foreground_rois`` of a mask (given 8 pixels a word and as pixels), their
-    ``pack_rois`` image with mirrors ``margin`` wide, opened and closed by the kernel
-    points given (dy, dx; none: no such operation), the mirrors cleared
-    (``clear_mirrors``): (rectangles, the image as 0/255 bytes in words of 8, geometry, its
-    width in pixels)."""
-    h, w = mask.shape
+def packed_morph(words, h, w, margin, open_dy, open_dx, close_dy, close_dx):
+    """``foreground_rois`` of an h x w mask (given 8 pixels a word), their ``pack_rois``
+    image with mirrors ``margin`` wide, opened and closed by the kernel points given
+    (dy, dx; none: no such operation), the mirrors cleared:
+    (rectangles, the image as 0/255 bytes in words of 8, geometry, its width in pixels).
+    Without kernels, the packing alone (``margin`` 1)."""
     rois = foreground_rois(words, h, w, margin)
     geo, height, width = roi_geometry(rois, h, w, margin)
     bits = _pack_bits(words, rois, geo, height, width)
@@ -144,7 +143,7 @@ def packed_morph(words, mask, margin, open_dy, open_dx, close_dy, close_dx):
     if len(close_dy):
         _morph_pass(bits, spare, width, close_dy, close_dx, True)
         _morph_pass(spare, bits, width, close_dy, close_dx, False)
-    for i in range(len(geo)):                       # ``clear_mirrors``, on bits
+    for i in range(len(geo)):                       # the mirrors cleared
         x0, top, bottom, left, right, sh, sw = (geo[i, 0], geo[i, 1], geo[i, 2], geo[i, 3],
                                                  geo[i, 4], geo[i, 5], geo[i, 6])
         if top + bottom + left + right == 0:

@@ -1,8 +1,8 @@
 """Compiled kernels of the segmentation (numba; see ``vision.kernels``, which imports them):
 Otsu's level of a difference image's subsample, the rectangles of foreground in a mask,
-their packing into one image with mirrors at the image's edges (the two in one call:
-``packed_rois``), and the contours found
-there back in the frame, in the whole frame's order (``Segmenter._contours_holes``)."""
+their packing into one image with mirrors at the image's edges (for asymmetric kernels:
+``bit_kernels.packed_morph`` packs for the others), and the contours found there back in
+the frame, in the whole frame's order (``Segmenter._contours_holes``)."""
 
 from __future__ import annotations
 
@@ -232,36 +232,6 @@ def pack_rois(mask, rois, pad):
                 for c in range(sw):
                     packed[dst, np.uintp(x0 + c)] = mask[src, np.uintp(u0 + c)]
     return packed, geo
-
-
-@_jit
-def packed_rois(words, mask, margin, pad):
-    """``foreground_rois`` of a mask given both ways (8 pixels a word, and as pixels) and
-    their ``pack_rois`` image, in one call: (rectangles, image, geometry)."""
-    h, w = mask.shape
-    rois = foreground_rois(words, h, w, margin)
-    packed, geo = pack_rois(mask, rois, pad)
-    return rois, packed, geo
-
-
-@_jit
-def clear_mirrors(packed, geo):
-    """Empty the mirrored padding of ``pack_rois``' rectangles (after the morphology)."""
-    for i in range(len(geo)):
-        x0, top, bottom, left, right, sh, sw = (geo[i, 0], geo[i, 1], geo[i, 2], geo[i, 3],
-                                                 geo[i, 4], geo[i, 5], geo[i, 6])
-        if top + bottom + left + right == 0:
-            continue
-        for r in range(packed.shape[0]):
-            row = np.uintp(r)
-            if r < top or sh - bottom <= r < sh:
-                for c in range(sw):
-                    packed[row, np.uintp(x0 + c)] = 0
-            else:
-                for c in range(left):
-                    packed[row, np.uintp(x0 + c)] = 0
-                for c in range(sw - right, sw):
-                    packed[row, np.uintp(x0 + c)] = 0
 
 
 @_jit

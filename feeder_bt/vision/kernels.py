@@ -11,8 +11,7 @@ here: before these kernels half of the locator's time was that glue between call
   asked the smoothed length (``chains._smooth_length``'s tours, summed as ``cv2.arcLength``
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length.
-* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``packed_rois``, ``clear_mirrors``,
-  ``place_contours``; ``packed_morph`` (in ``bit_kernels``: the packing with the opening
+* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``place_contours``; ``packed_morph`` (in ``bit_kernels``: the packing with the opening
   and closing, a bit a pixel)
   (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
   rectangles of foreground, packed, and their contours back in the frame
@@ -41,11 +40,9 @@ from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
     GOLDEN_MINUS,
     MINUS_GOLDEN,
     PLAIN,
-    clear_mirrors,
     foreground_rois,
     otsu_level,
     pack_rois,
-    packed_rois,
     place_contours,
 )
 from .jit import _jit
@@ -425,8 +422,6 @@ def warm() -> None:
     rois = np.array([[0, 6, 0, 8]], np.int64)
     for m in (mask, mask[:, :12]):         # a scratch mask: whole rows, or padded ones
         packed, geo = pack_rois(m, rois, 1)
-        clear_mirrors(packed, geo)
-        packed_rois(mask.view(np.uint64), m, 1, 1)
-        cross = np.array([-1, 0, 0, 0, 1], np.int64), np.array([0, -1, 0, 1, 0], np.int64)
-        packed_morph(mask.view(np.uint64), m, 1, *cross, *cross)
+    cross = np.array([-1, 0, 0, 0, 1], np.int64), np.array([0, -1, 0, 1, 0], np.int64)
+    packed_morph(mask.view(np.uint64), 6, 12, 1, *cross, *cross)
     place_contours(pts.copy(), lens, 3, geo, 16)

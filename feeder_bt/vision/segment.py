@@ -222,17 +222,16 @@ class Segmenter:
         margin: with a symmetric kernel each operation keeps the mirror a mirror, so up to
         the edge every pixel comes out as on the frame. The mirrors are cleared before the
         contour search (whose own border is empty, as at the image's edge). With symmetric
-        kernels the rectangles, their packing, the opening, the closing and the clearing
-        are one compiled call working a bit a pixel (``kernels.packed_morph``); with
-        others, OpenCV's ``morphologyEx`` on the packed bytes.
+        kernels (or none) the rectangles, their packing, the opening, the closing and the
+        clearing are one compiled call working a bit a pixel (``kernels.packed_morph``);
+        with others, OpenCV's ``morphologyEx`` on the packed bytes.
         """
         h, w = mask.shape
         k = kernels()
         mode = cv2.RETR_CCOMP if holes else cv2.RETR_EXTERNAL
         chain = cv2.CHAIN_APPROX_NONE if full else cv2.CHAIN_APPROX_SIMPLE
-        morph = self._open is not None or self._close is not None
         own: list[tuple[np.ndarray, list[np.ndarray]]] = []    # found in the frame's place
-        if morph and not self._mirror:
+        if not self._mirror:
             # an asymmetric kernel: rectangles at the image's edge get their own search
             rois = self._rois(mask)
             edge = (rois[:, 0] == 0) | (rois[:, 1] == h) | (rois[:, 2] == 0) | (rois[:, 3] == w)
@@ -241,22 +240,20 @@ class Segmenter:
                                             offset=(u0, v0))
                 own += _with_holes(cs, hier, holes)
             rois = np.ascontiguousarray(rois[~edge])
-            packed, geo = k.pack_rois(mask, rois, self._margin) if len(rois) else (None, _NO_GEO)
-        elif morph:
+            # none of them meets the image's edge: no mirrors
+            packed, geo = k.pack_rois(mask, rois, 0) if len(rois) else (None, _NO_GEO)
+            if len(rois):
+                packed = self._morph(packed)
+        else:
             # a rectangle at the image's edge has no empty margin there: it gets a mirror
             # (for the morphology), which also keeps it one pixel clear of its neighbours;
             # packed, opened, closed and the mirrors cleared a bit a pixel in one call
-            rois, words, geo, width = k.packed_morph(self._words(mask), mask, self._margin,
+            # (without morphology the margin is 1: the packing alone)
+            rois, words, geo, width = k.packed_morph(self._words(mask), h, w, self._margin,
                                                      *self._open_pts, *self._close_pts)
             packed = words.view(np.uint8)[:, :width]
-        else:
-            rois, packed, geo = k.packed_rois(self._words(mask), mask, self._margin, 1)
         found: list[tuple[np.ndarray, list[np.ndarray]]] = []
         if len(rois):
-            if not (morph and self._mirror):      # else done with the packing
-                if morph:
-                    packed = self._morph(packed)
-                k.clear_mirrors(packed, geo)    # (nothing to do where none was mirrored)
             cs, hier = cv2.findContours(packed, mode, chain)
             found = _with_holes(cs, hier, holes)
         n_packed = len(found)
