@@ -104,8 +104,19 @@ def summary(rows: list[dict]) -> dict:
                                                     for r in rows), 2),
             "lost": sum(r.get("lost") or 0 for r in rows),
             "robot_busy_pct": round(statistics.mean(r["robot_busy_pct"] for r in rows), 1),
+            **_robot_time(rows),
             "selection_bound_ppm": round(statistics.mean(r["robot_bound_selection_ppm"]
                                                          for r in rows), 2)}
+
+
+def _robot_time(rows: list[dict]) -> dict:
+    """Where the arm's time went (the reports' ``robot_time``), % of feeding, mean over the
+    seeds; nothing if a report lacks it."""
+    parts = ("cycles", "waiting", "missed", "idle")
+    if not all(r.get("robot_time") for r in rows):
+        return {}
+    return {"robot_time_pct": {k: round(statistics.mean(r["robot_time"][f"{k}_pct"]
+                                                        for r in rows), 1) for k in parts}}
 
 
 def envelope(points: list[dict]) -> list[dict]:

@@ -211,11 +211,18 @@ class Cell:
         return list(self.root.iterate()) if self.root is not None else []
 
     # ------------------------------------------------------------------ internals
+    #: what a restart of the same job carries over from its last run, as ``stats`` is: the
+    #: learnt model of the arm and the account of its time (the arm has not changed)
+    KEPT_ON_RESTART = ("robot_fit",)
+
     def _make_ctx(self, scenario: Scenario) -> Ctx:
         init_blackboard(scenario)
+        kept: dict[str, Any] = {}
         if self.stats.scenario != scenario.name:   # a restart of the same job keeps counting
             self.stats = Stats()
             self.stats.scenario = scenario.name
+        elif self.ctx is not None:
+            kept = {k: self.ctx.extras[k] for k in self.KEPT_ON_RESTART if k in self.ctx.extras}
         self.stats.pending.clear()
         self.stats.attempts.clear()
         queue = PartsQueue(list(scenario.parts))
@@ -225,10 +232,12 @@ class Cell:
         adjuster = (load_class(scenario.adjust.leaf)(scenario.adjust.params)
                     if scenario.adjust.leaf
                     else make_adjuster(scenario.adjust.algorithm, scenario.adjust.params))
-        return Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
-                   queue=queue, encoder=self.encoder, stats=self.stats,
-                   vision=VisionWorker(locator, self.clock, self.cell.camera.vision_latency_s),
-                   adjuster=_Holdable(adjuster, self))
+        ctx = Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
+                  queue=queue, encoder=self.encoder, stats=self.stats,
+                  vision=VisionWorker(locator, self.clock, self.cell.camera.vision_latency_s),
+                  adjuster=_Holdable(adjuster, self))
+        ctx.extras.update(kept)
+        return ctx
 
     def _halt_feeding(self) -> None:
         if self.root is not None and self.root.status is Status.RUNNING:

@@ -221,7 +221,8 @@ def summary(report: dict) -> str:
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
             + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
                if p.get("recirculated_per_placed") is not None else "")
-            + _ceiling_line(report) + _fit_line(report) + _kits_line(report)
+            + _ceiling_line(report) + _fit_line(report) + _robot_time_line(report)
+            + _kits_line(report)
             + _robots_line(report) + "\n"
             + story_text(report))
 
@@ -235,6 +236,16 @@ def _fit_line(report: dict) -> str:
     return (f"\n  robot fit: x{fitted['time_scale']:.3f} {1000 * fitted['offset_s']:+.0f} ms;"
             f" residual rms {res['rms_ms']:.0f} ms ({res['rms_pct']:.1f} %),"
             f" max {res['max_ms']:.0f} ms")
+
+
+def _robot_time_line(report: dict) -> str:
+    """Where the arm's time went (``robot_time``): what limits the cell at a glance."""
+    rt = report.get("robot_time") or {}
+    if not rt:
+        return ""
+    return (f"\n  robot: cycles {rt['cycles_pct']:.1f} %, waiting for parts "
+            f"{rt['waiting_pct']:.1f} %, missed {rt['missed_pct']:.1f} %, "
+            f"idle {rt['idle_pct']:.1f} %")
 
 
 def _kits_line(report: dict) -> str:

@@ -214,6 +214,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         # time is not in it): near 100 %, the robot is what limits the cell
         report["robot_busy_pct"] = (round(100.0 * fit.busy_s / feed_seconds, 1)
                                     if feed_seconds > 0 else None)
+        report["robot_time"] = fit.time_split(feed_seconds, s.started_at)
         report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
             robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
         if world is not None:             # the simulated arm's truth, for comparison
@@ -225,6 +226,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                            # the simulator's imperfections at work (docs/simulator.md)
                            "landed_clumped": world.counts["landed_clumped"],
                            "grip_slipped": world.counts["grip_slipped"],
+                           # the arm's waits at the reach for parts it gripped (robot_time)
+                           "pick_waited_s": round(world.pick_waited_s, 2),
                            # parts that slid on the belt (a hard speed change), and how far
                            "slips": world.counts["slips"],
                            "slid_mm": round(world.slid_mm, 1),

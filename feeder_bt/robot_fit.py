@@ -92,6 +92,11 @@ class RobotFit:
         self.samples: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self.busy_s = 0.0              # commanded to the end of every pick and place that ended
+        # where the arm's time went (the report's robot_time): of busy_s, the picks' waits at
+        # the reach for a part still upstream; beside it, picks that gripped nothing
+        self.waited_s = 0.0
+        self.missed_s = 0.0
+        self.first_pick_t: float | None = None
         # the fit's one-step prediction residual (predicted before each update against the
         # measured move): how well the controller's Cartesian form fits the arm (issue 30)
         self.res_n = 0
@@ -160,15 +165,28 @@ class RobotFit:
         """A pick that gripped at ``grip_x`` (the tool point along the belt) ended at
         ``t_end``: its move ran from ``timing.start`` to where the part was at arrival."""
         self.busy_s += t_end - timing.t0          # a wait for the part is the arm's time too
-        if not timing.usable:
-            self.rejected["may_have_waited"] += 1
-            return
         sp = self.spec
         hold = (sp.track_settle_s if timing.tracking else 0.0) + sp.grip_s
         arrive_x = grip_x - (timing.belt_mm_s * hold if timing.tracking else 0.0)
         d = math.dist(timing.start, (arrive_x, timing.tool_y))
-        self.observe("pick", d, timing.speed_pct,
-                     t_end - timing.t0 - sp.command_overhead_s - hold)
+        measured = t_end - timing.t0 - sp.command_overhead_s - hold
+        if not timing.usable:
+            # commanded before the part was in reach: the arm waited at the reach's edge
+            # for as long as the move took less than the whole pick (priced by the fit)
+            self.rejected["may_have_waited"] += 1
+            wait = measured - self.model.arch_time(d, timing.speed_pct)
+            self.waited_s += min(max(wait, 0.0), t_end - timing.t0)
+            return
+        self.observe("pick", d, timing.speed_pct, measured)
+
+    def pick_missed(self, timing: Timing, t_end: float) -> None:
+        """A pick that ended with nothing gripped: the arm's time, but no part's."""
+        self.missed_s += t_end - timing.t0
+
+    def pick_commanded(self, timing: Timing) -> None:
+        """A pick left for the arm (the first one ends the start-up's idle)."""
+        if self.first_pick_t is None:
+            self.first_pick_t = timing.t0
 
     def place_done(self, timing: Timing, t_end: float) -> None:
         sp = self.spec
@@ -197,6 +215,24 @@ class RobotFit:
                        "rms_residual_s": round(math.sqrt(self.mean_sq), 4),
                        "residual": self.residual()},
         }
+
+    def time_split(self, feed_seconds: float, started_at: float | None) -> dict[str, Any]:
+        """The report's ``robot_time``: the arm's share of feeding on pick-and-place cycles
+        (moving, gripping, releasing), waiting at the reach for a part still upstream, on
+        picks that gripped nothing, and idle (no pick or place under way: nothing the
+        policy would take, a decision, a recovery); and when it first picked."""
+        if feed_seconds <= 0:
+            return {}
+
+        def pct(s: float) -> float:
+            return round(100.0 * s / feed_seconds, 1)
+
+        idle = max(feed_seconds - self.busy_s - self.missed_s, 0.0)
+        first = (round(self.first_pick_t - started_at, 2)
+                 if self.first_pick_t is not None and started_at is not None else None)
+        return {"cycles_pct": pct(self.busy_s - self.waited_s), "waiting_pct": pct(self.waited_s),
+                "missed_pct": pct(self.missed_s), "idle_pct": pct(idle),
+                "first_pick_s": first}
 
     def residual(self) -> dict[str, Any]:
         """The fit's prediction error over the run: every accepted move's time predicted

@@ -142,13 +142,16 @@ def test_the_docs_quote_the_committed_kit_grid():
     """docs/performance.md's kit grid table is frontier_kits.json's, row for row."""
     result, rows = _table("frontier_kits.json", "| setting (fresh seeds 101–105, 600 s) |",
                           r"^\| ([^|]+) \| ([\d.]+) \(sd ([\d.]+)\) \| ([\d.]+) % of "
-                          r"([\d.]+) \| ([\d.]+) % of ([\d.]+) \| ([\d.]+) % \|$")
+                          r"([\d.]+) \| ([\d.]+) % of ([\d.]+) \| ([\d.]+) % \| "
+                          r"([\d.]+) / ([\d.]+) / ([\d.]+) / ([\d.]+) % \|$")
     quoted = [(name, *map(float, figs)) for name, *figs in rows]
     want = [(e["setting"], e["mean"], e["sd"],
              round(100 * e["mean"] / e["kit_inflow_bound_kpm"], 1), e["kit_inflow_bound_kpm"],
              round(100 * e["mean"] / e["kit_selection_bound_kpm"], 1),
-             e["kit_selection_bound_kpm"], e["robot_busy_pct"])
+             e["kit_selection_bound_kpm"], e["robot_busy_pct"],
+             *(e["robot_time_pct"][k] for k in ("cycles", "waiting", "missed", "idle")))
             for e in sorted(result["evaluated"], key=lambda e: -e["mean"])]
+    assert len(quoted) == len(result["evaluated"]) == 9
     assert quoted == want
 
 
@@ -186,3 +189,22 @@ def test_the_docs_quote_the_three_tray_kit_grid():
     assert tuple(map(float, m.groups())) == (
         result["best_fixed"]["mean"], by["tuned watermarks"], by["tuned fixed"])
     assert len(result["screened"]) == 36 and result["eval_seeds"] == [101, 102, 103, 104, 105]
+
+
+def test_the_docs_robot_time_sentence_is_the_kit_grids():
+    """The cycle per part, the share of feeding 17.1 kits/min needs on cycles and what the
+    rest takes now: derived from frontier_kits.json's best setting."""
+    best = json.loads((ROOT / "benchmarks" / "results" / "frontier_kits.json").read_text()
+                      )["best_fixed"]
+    t = best["robot_time_pct"]
+    cycle = t["cycles"] / 100 * 60 / best["parts_per_min"]
+    text = " ".join((ROOT / "docs" / "performance.md").read_text().split())
+    m = re.search(r"The best setting spends ([\d.]+) % of feeding on pick-and-place cycles, "
+                  r"([\d.]+) s of cycle per placed part \(([\d.]+) parts/min\)\. At that cycle, "
+                  r"17.1 kits/min \(68.4 parts/min\) needs ([\d.]+) % on cycles, which leaves "
+                  r"([\d.]+) % for everything else; the rest takes ([\d.]+) % now", text)
+    assert m, "the sentence is gone"
+    need = 17.1 * 4 * cycle / 60 * 100
+    assert tuple(map(float, m.groups())) == (
+        t["cycles"], round(cycle, 2), best["parts_per_min"], round(need, 1),
+        round(100 - need, 1), round(t["waiting"] + t["missed"] + t["idle"], 1))

@@ -70,7 +70,9 @@ def test_connecting_and_reconnecting_sends_no_sh_until_a_person_asks():
 def test_a_reversed_encoder_trips_on_a_small_error():
     """ER from the cell file (5 mm = 100 counts): the first motion after SH with the encoder
     wired reversed builds error at twice the speed; OE turns the motor off and #POSERR
-    reports, a few mm into the motion, not at the card's default 16384 counts."""
+    reports, a few mm into the motion, not at the card's default 16384 counts (8192 counts
+    of belt: 410 mm). The emulator looks every 10 ms of the wall clock; the bounds below
+    allow a busy machine a second's stall (800 counts of error) and still tell the two."""
     assert _Axis("B").er == 16384                         # the card's power-on error limit
     with rig(servo=False) as r:
         belt = r.conveyors["horizontal"]
@@ -82,9 +84,9 @@ def test_a_reversed_encoder_trips_on_a_small_error():
         assert wait_until(lambda: any(k == "POSERR" for k, _, _ in r.ctl.card_events))
         st = r.emu.axes["B"]
         assert not st.servo and st.sc == 8                # off-on-error
-        assert 100 < abs(st.te) < 200                     # tripped just past ER
+        assert 100 < abs(st.te) < 1000                    # tripped past ER, far from 16384
         assert wait_until(lambda: not r.plant.in_motion("B"))
-        assert abs(r.plant.position_counts("B") - start) < 100   # under 5 mm of belt
+        assert abs(r.plant.position_counts("B") - start) < 600   # under 30 mm of belt
         assert wait_until(lambda: isinstance(belt.fault(), ConveyorFault))
         assert "off-on-error" in str(belt.fault())
 

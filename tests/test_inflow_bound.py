@@ -135,5 +135,6 @@ def test_robot_busy_tells_a_starved_robot_from_a_saturated_one(tight, tmp_path):
         assert 0.95 * placed * r["robot_bound_cycle_s"] <= busy_s <= r["feed_seconds"]
     # 85, not 90 as with the Cartesian world: the SCARA's far-side moves are slower than
     # the controller's model says, and grabs that reach the belt's end after the part fell
-    # off are misses, whose time is not counted busy (issue 30, docs/performance.md)
+    # off are misses, whose time is not counted busy but is `robot_time.missed_pct`
+    # (issue 30, docs/performance.md, tests/test_robot_time.py)
     assert tight["robot_busy_pct"] < 75 < 85 < full["robot_busy_pct"]

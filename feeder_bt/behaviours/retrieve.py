@@ -146,6 +146,7 @@ class Pick(PartJob):
         self.timing = self._timing(      # in reach now: the arm cannot wait for the part
             "pick", usable=robot_fit(self.ctx).nominal.reachable(x, y), tool_y=y,
             belt_mm_s=self.ctx.hal.conveyors["horizontal"].speed(), tracking=tracking)
+        robot_fit(self.ctx).pick_commanded(self.timing)
         return self.ctx.hal.robot.pick(PickTarget(
             part_id=part.id, x_mm=part.x_mm + part.grip_dx_mm,
             y_mm=part.y_mm + part.grip_dy_mm, angle_deg=part.angle_deg,
@@ -164,6 +165,9 @@ class Pick(PartJob):
     def on_failure(self, error: HalError) -> Status:
         if error.kind != "comms_lost":      # the controller's own word: nothing gripped
             self.bb.set(PHASE, None)
+        if error.kind == "missed_grab" and self.timing is not None:
+            robot_fit(self.ctx).pick_missed(self.timing, self.ctx.now())
+        self.timing = None
         return super().on_failure(error)
 
     def terminate(self, new_status: Status) -> None:

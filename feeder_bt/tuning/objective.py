@@ -70,6 +70,7 @@ def evaluate(job: Job) -> dict[str, Any]:
            "robot_bound_selection_ppm": report.get("robot_bound_selection_ppm"),
            "inflow_bound_ppm": report.get("inflow_bound_ppm"),
            "robot_busy_pct": report.get("robot_busy_pct"),
+           "robot_time": report.get("robot_time"),
            "ceiling_ppm": report.get("ceiling_ppm"),
            "lost": parts.get("lost") or 0, "missed": parts.get("missed") or 0,
            "recirc_per_placed": parts.get("recirculated_per_placed"),

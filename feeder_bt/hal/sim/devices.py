@@ -16,7 +16,7 @@ from ...errors import HalError
 from ...jobs import DoneJob, FutureJob, Job
 from ...scenario.model import CellSpec, Scenario
 from ...vision.calibration import Calibration
-from ..interfaces import Frame, Hal, IoChange, PickTarget, Pose
+from ..interfaces import Frame, Hal, IoChange, PickResult, PickTarget, Pose
 from .axis import Axis
 from .imperfect import true_calibration
 from .render import Renderer
@@ -187,7 +187,14 @@ class SimRobot:
                                     scale=w.imperfect.time_factor())
         except HalError as e:
             return DoneJob("robot.pick", error=e)
-        return self._run("robot.pick", t_grip - w.now(), lambda t: w.grip(target, t))
+        wait = w.planned_wait_s
+
+        def grip(t: float) -> PickResult:
+            result = w.grip(target, t)
+            w.pick_waited_s += wait       # the truth beside the report's robot_time
+            return result
+
+        return self._run("robot.pick", t_grip - w.now(), grip)
 
     def place(self, pose: Pose) -> Job:
         w = self.world

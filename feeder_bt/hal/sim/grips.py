@@ -63,6 +63,10 @@ class RobotGrips:
     counts: Counter[str]
     placed_by_type: Counter[str]
     misplaced_by_type: Counter[str]
+    #: seconds the arm waited at the reach's edge for parts it then gripped (the truth
+    #: beside the report's ``robot_time``), and the wait of the pick last planned
+    pick_waited_s: float = 0.0
+    planned_wait_s: float = 0.0
 
     def commanded_xy(self, target: PickTarget, t: float) -> tuple[float, float]:
         """Where the robot aims for ``target`` at ``t``: tracking follows the belt encoder."""
@@ -80,6 +84,7 @@ class RobotGrips:
         move taking ``scale`` times the nominal model's time)."""
         spec = self.cell.robot
         px, py = self.robot_pose.x, self.robot_pose.y
+        self.planned_wait_s = 0.0     # at the reach's edge, for a part still upstream
         t_arr = t0
         for _ in range(6):
             cx, cy = self.commanded_xy(target, t_arr)
@@ -91,6 +96,7 @@ class RobotGrips:
             if t_enter is None or t_enter < t_arr:
                 raise EnvelopeError(f"part {target.part_id} at x={cx:.0f} y={cy:.0f} mm "
                                     "is out of reach")
+            self.planned_wait_s = t_enter - t_arr
             t_arr = t_enter
         t_grip = t_arr + (spec.track_settle_s if target.tracking else 0.0) + spec.grip_s
         gx, gy = self.commanded_xy(target, t_grip)
