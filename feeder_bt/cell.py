@@ -212,8 +212,9 @@ class Cell:
 
     # ------------------------------------------------------------------ internals
     #: what a restart of the same job carries over from its last run, as ``stats`` is: the
-    #: learnt model of the arm and the account of its time (the arm has not changed)
-    KEPT_ON_RESTART = ("robot_fit",)
+    #: learnt model of the arm and the account of its time (the arm has not changed), the
+    #: recipe's watch (told of the restart, if it has a ``restarted``)
+    KEPT_ON_RESTART = ("robot_fit", "recipe_watch")
 
     def _make_ctx(self, scenario: Scenario) -> Ctx:
         init_blackboard(scenario)
@@ -223,6 +224,9 @@ class Cell:
             self.stats.scenario = scenario.name
         elif self.ctx is not None:
             kept = {k: self.ctx.extras[k] for k in self.KEPT_ON_RESTART if k in self.ctx.extras}
+            for thing in kept.values():
+                if hasattr(thing, "restarted"):
+                    thing.restarted()
         self.stats.pending.clear()
         self.stats.attempts.clear()
         queue = PartsQueue(list(scenario.parts))

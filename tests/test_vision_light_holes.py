@@ -358,3 +358,28 @@ def test_watch_counts_blobs_that_are_no_part_for_any_reason(reason, hint):
     summary = watch.summary()
     assert summary["reasons"] == {reason: summary["frames_no_match"]}
     assert summary["frames_no_match"] == 40
+
+
+def test_the_watch_counts_the_whole_run_across_a_restart(tmp_path):
+    """After an e-stop the job restarts: the report's no-match summary still counts the
+    alarms raised before it (each one an event in the log), and the spell starts again."""
+    text = (ROOT / "scenarios" / "lenses.yaml").read_text()
+    text = text.replace("circularity: [0.90, 1.10]", "circularity: [0.50, 0.80]")
+    text = text.replace("aspect: [2.6, 4.8]", "aspect: [5.0, 6.0]")
+    text = text.replace("cell: ../cells/sim.yaml", f"cell: {ROOT / 'cells/sim.yaml'}")
+    p = tmp_path / "nomatch.yaml"
+    p.write_text(text)
+    plan = tmp_path / "estop.yaml"
+    plan.write_text("scripted:\n  - {at_s: 75, kind: estop, release_after_s: 5}\n")
+    db = tmp_path / "runs.db"
+    report = run_job(RunOptions(scenario=str(p), duration=150, fast=True, seed=1, view="none",
+                                db=str(db), faults=str(plan)))
+    assert report["recoveries"].get("estop") == 1
+    with sqlite3.connect(db) as con:
+        ts = [t for (t,) in con.execute("SELECT t FROM events WHERE kind = 'vision_no_match' "
+                                        "ORDER BY t")]
+    assert any(t < 75 for t in ts) and any(t > 80 for t in ts)
+    nm = report["vision"]["no_match"]
+    assert nm["alarms"] == len(ts)
+    # the spell began again after the stop: no alarm within AFTER_S of the restart
+    assert not any(80 < t < 80 + 30 for t in ts)

@@ -74,6 +74,11 @@ class RecipeWatch:
                        feature=feature, example=self.example,
                        hint=_hint(len(unmatched), cls, feature))
 
+    def restarted(self) -> None:
+        """The job restarted (after an e-stop, a fault): a spell of no matches does not
+        span the stop; the run's counts go on."""
+        self.since = self.last_alarm = None
+
     def summary(self) -> dict[str, Any]:
         """For the run report: how long the recipe matched nothing, and why."""
         out: dict[str, Any] = {"alarms": self.alarms, "frames_no_match": self.frames_no_match,
