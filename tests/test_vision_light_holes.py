@@ -300,14 +300,20 @@ def test_watch_raises_the_alarm_after_a_spell_of_no_match_and_not_for_empty_fram
     assert summary["nearest"] == "lens/flat" and summary["feature"] == "area_mm2"
 
 
-def test_a_run_whose_recipe_matches_nothing_says_so_within_a_minute(tmp_path):
+def _matching_nothing(tmp_path: Path) -> Path:
+    """The lenses scenario with ranges `feeder check` cannot fault (the areas fit the
+    outlines) that fit no lens."""
     text = (ROOT / "scenarios" / "lenses.yaml").read_text()
-    # ranges `feeder check` cannot fault (the areas fit the outlines), that fit no lens
     text = text.replace("circularity: [0.90, 1.10]", "circularity: [0.50, 0.80]")
     text = text.replace("aspect: [2.6, 4.8]", "aspect: [5.0, 6.0]")
     text = text.replace("cell: ../cells/sim.yaml", f"cell: {ROOT / 'cells/sim.yaml'}")
     p = tmp_path / "nomatch.yaml"
     p.write_text(text)
+    return p
+
+
+def test_a_run_whose_recipe_matches_nothing_says_so_within_a_minute(tmp_path):
+    p = _matching_nothing(tmp_path)
     db = tmp_path / "runs.db"
     report = run_job(RunOptions(scenario=str(p), duration=90, fast=True, seed=1, view="none",
                                 db=str(db)))
@@ -363,12 +369,7 @@ def test_watch_counts_blobs_that_are_no_part_for_any_reason(reason, hint):
 def test_the_watch_counts_the_whole_run_across_a_restart(tmp_path):
     """After an e-stop the job restarts: the report's no-match summary still counts the
     alarms raised before it (each one an event in the log), and the spell starts again."""
-    text = (ROOT / "scenarios" / "lenses.yaml").read_text()
-    text = text.replace("circularity: [0.90, 1.10]", "circularity: [0.50, 0.80]")
-    text = text.replace("aspect: [2.6, 4.8]", "aspect: [5.0, 6.0]")
-    text = text.replace("cell: ../cells/sim.yaml", f"cell: {ROOT / 'cells/sim.yaml'}")
-    p = tmp_path / "nomatch.yaml"
-    p.write_text(text)
+    p = _matching_nothing(tmp_path)
     plan = tmp_path / "estop.yaml"
     plan.write_text("scripted:\n  - {at_s: 75, kind: estop, release_after_s: 5}\n")
     db = tmp_path / "runs.db"
