@@ -19,7 +19,8 @@ from feeder_bt.scenario.schema import KINDS, file_kind, schema
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = {
-    "scenario": sorted((ROOT / "scenarios").glob("*.yaml")) + [ROOT / "examples/gussets.yaml"],
+    "scenario": sorted((ROOT / "scenarios").glob("*.yaml")) + [ROOT / "examples/gussets.yaml",
+                                                          ROOT / "examples/sprockets.yaml"],
     "cell": sorted((ROOT / "cells").glob("*.yaml")),
     "faults": sorted((ROOT / "faults").glob("*.yaml")),
 }
@@ -116,6 +117,7 @@ def _apply(data, path, change):
 
 @pytest.mark.parametrize("kind,path", [("scenario", "scenarios/lenses.yaml"),
                                        ("scenario", "scenarios/squares.yaml"),
+                                       ("scenario", "examples/sprockets.yaml"),
                                        ("cell", "cells/sim.yaml"),
                                        ("faults", "faults/shift.yaml")])
 def test_the_schema_never_refuses_what_the_loader_takes(kind, path, tmp_path):

@@ -16,6 +16,7 @@ from feeder_bt.scenario.model import AdjustParams, CellSpec, Scenario
 from feeder_bt.scenario.special import part_size_mm
 from feeder_bt.scenario.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
 from feeder_bt.scenario.walker import _Ctx, _suggest
+from feeder_bt.vision.features import FEATURES
 
 
 def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
@@ -123,6 +124,7 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
                         f"local mean minus c, so c >= 0 makes flat belt foreground "
                         f"(c: -{_num(abs(th.c) or 5)} puts it {_num(abs(th.c) or 5)} grey "
                         f"levels above the mean)")
+    _check_rulers(sc, ctx)
     for i, vc in enumerate(sc.vision.classes):
         cpath = f"vision.classes[{i}]"
         if vc.part not in sc.parts:
@@ -159,6 +161,30 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
                                               "retrieve.sequence to build",
                         line=ctx.key_lines.get("retrieve.open_kits"))
     ctx.adjust_params = _check_adjust(sc.adjust, ctx)
+
+
+def _check_rulers(sc: Scenario, ctx: _Ctx) -> None:
+    """Each ruler is a line or a circle, named apart from the features; each class's ruler
+    ranges name a ruler of the recipe and run low to high."""
+    rulers = sc.vision.rulers
+    for name, r in rulers.items():
+        rpath = f"vision.rulers.{name}"
+        if (r.line_deg is None) == (r.circle_mm is None):
+            ctx.add_problem(rpath, "give exactly one of line_deg (a line through the "
+                                   "centroid) and circle_mm (a circle about it)",
+                            line=ctx.key_lines.get(rpath))
+        if name in FEATURES:
+            ctx.add_problem(rpath, f"{name!r} is a feature's name; name the ruler apart",
+                            line=ctx.key_lines.get(rpath))
+    for i, vc in enumerate(sc.vision.classes):
+        for name, (lo, hi) in vc.rulers.items():
+            path = f"vision.classes[{i}].rulers.{name}"
+            if name not in rulers:
+                ctx.add_problem(path, f"unknown ruler {name!r}{_suggest(name, rulers)}; "
+                                      f"vision.rulers: {', '.join(rulers) or 'none'}",
+                                line=ctx.key_lines.get(path))
+            elif lo > hi:
+                ctx.add_problem(path, f"range [lo, hi] has lo > hi: [{_num(lo)}, {_num(hi)}]")
 
 
 def _check_adjust(adj: AdjustParams, ctx: _Ctx) -> dict[str, float]:

@@ -141,6 +141,20 @@ class VisionClass:
     pickable: bool
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # feature -> [lo, hi]
     mirrored: bool | None = None         # for chiral outlines (cut_corner): face seen
+    rulers: dict[str, tuple[float, float]] = field(default_factory=dict)  # ruler -> [lo, hi]
+
+
+@dataclass
+class Ruler:
+    """A gauge laid on a blob's outline from its centroid (the thesis's "linear and circular
+    rulers", 8.2.1.6): exactly one of the two is given."""
+
+    # a line through the centroid at this angle to the blob's long axis: the distance
+    # between the outline's outermost edges along it, mm
+    line_deg: float | None = None
+    # a circle of this radius about the centroid: how many separate arcs of it lie on the
+    # part (a sprocket's teeth, a connector's pins)
+    circle_mm: float | None = None
 
 
 @dataclass
@@ -152,6 +166,7 @@ class VisionRecipe:
     morphology: Morphology = field(default_factory=Morphology)
     min_area_mm2: float = 100.0
     min_hole_mm2: float = 3.0            # smaller holes in a blob are not counted (specks)
+    rulers: dict[str, Ruler] = field(default_factory=dict)   # named gauges, for classes
     classes: list[VisionClass] = field(default_factory=list)
     orientation: str = "none"            # none | cut_corner | principal_axis | outline
     # offer only grips whose footprint is clear of other blobs (``PartSpec.pick``);

@@ -226,9 +226,10 @@ def _vision_class() -> dict[str, Any]:
     required = [f.name for f in dataclasses.fields(VisionClass)
                 if f.name != "ranges" and L._required(f)]
     return {"type": "object", "properties": props, "additionalProperties": False,
-            "required": required, "anyOf": [{"required": [f]} for f in FEATURES],
+            "required": required,
+            "anyOf": [{"required": [f]} for f in (*FEATURES, "rulers")],
             "description": "a feature box: a blob whose features all fall in the ranges is "
-                           "this part in this pose (at least one feature range)"}
+                           "this part in this pose (at least one feature range, or rulers)"}
 
 
 def _hopper() -> dict[str, Any]:

@@ -176,7 +176,7 @@ def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], holes: list[list[tuple[
 
 
 def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
-    """``{part, pose, pickable, mirrored?, <feature>: [lo, hi], ...}``."""
+    """``{part, pose, pickable, mirrored?, rulers?, <feature>: [lo, hi], ...}``."""
     hints = _hints(VisionClass)
     plain = {f.name: f for f in dataclasses.fields(VisionClass) if f.name != "ranges"}
     kwargs: dict[str, Any] = {}
@@ -202,9 +202,9 @@ def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
     for fname, f in plain.items():
         if fname not in given and _required(f):
             g.fail(ctx.missing(path, fname, node))
-    if not given & set(FEATURES):             # a misspelt feature is that mistake already
+    if not given & {*FEATURES, "rulers"}:     # a misspelt feature is that mistake already
         g.fail(stray or ctx.error(path, f"a class needs at least one feature range "
-                                        f"({', '.join(FEATURES)})"))
+                                        f"({', '.join(FEATURES)}) or rulers"))
     g.done()
     return VisionClass(ranges=ranges, **kwargs)
 

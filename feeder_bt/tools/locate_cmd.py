@@ -58,7 +58,7 @@ def cmd_locate(args: argparse.Namespace) -> int:
             row["annotated"] = str(dest)
         out.append(row)
         if not args.json:
-            print(format_table(row))
+            print(format_table(row, tuple(locator.recipe.rulers)))
     if args.json:
         json.dump(out, sys.stdout, indent=1)
         print()
@@ -73,19 +73,21 @@ def _det_dict(d: Detection) -> dict[str, Any]:
     return row
 
 
-def format_table(row: dict[str, Any]) -> str:
-    """One image's result as a readable table: parts first, then rejected blobs and why."""
+def format_table(row: dict[str, Any], rulers: tuple[str, ...] = ()) -> str:
+    """One image's result as a readable table: parts first, then rejected blobs and why;
+    the recipe's ``rulers`` after the features."""
+    shown = TABLE_FEATURES + rulers
     lines = [f"{row['image']}: {len(row['parts'])} part(s), {len(row['rejected'])} "
              f"rejected, {row['ms']:.1f} ms"]
     head = (f"  {'part':<12} {'pose':<10} {'pick':<4} {'u_px':>7} {'v_px':>7} {'x_mm':>8} "
-            f"{'y_mm':>8} {'angle':>7} " + " ".join(f"{f:>11}" for f in TABLE_FEATURES))
+            f"{'y_mm':>8} {'angle':>7} " + " ".join(f"{f:>11}" for f in shown))
     if row["parts"] or row["rejected"]:
         lines.append(head)
     for d in row["parts"] + row["rejected"]:
         name = d["part"] or "-"
         pose = d["pose"] or "-"
         pick = "yes" if d["pickable"] else "no"
-        feats = " ".join(f"{d['features'].get(f, float('nan')):>11.3f}" for f in TABLE_FEATURES)
+        feats = " ".join(f"{d['features'].get(f, float('nan')):>11.3f}" for f in shown)
         line = (f"  {name:<12} {pose:<10} {pick:<4} {d['u_px']:>7.1f} {d['v_px']:>7.1f} "
                 f"{d['x_mm']:>8.1f} {d['y_mm']:>8.1f} {d['angle_deg']:>7.1f} {feats}")
         if d["reason"]:

@@ -36,6 +36,9 @@ Recipe semantics worth knowing:
   fall back to the principal axis when elongated, else 0. The face and angle are read
   from the blob's outline to a fraction of a pixel (``Locator._faces``).
 
+* ``rulers``: gauges on the outline from the centroid (``vision.rulers``): a line's width
+  or a circle's arcs, checked after every feature of a class (they cost the most).
+
 Each call of ``locate`` uses only local state and per-thread scratch images (the golden
 image is read, never written), so one ``Locator`` may serve several threads.
 """
@@ -67,6 +70,7 @@ from .features import FEATURES, GROUP_OF
 from .jit import kernels, warm
 from .outline import OutlineModel, orient_outline
 from .overlay import draw
+from .rulers import measure as measure_ruler
 from .segment import Segmenter, to_grey
 from .split import split_blob
 
@@ -102,10 +106,15 @@ class Locator(Segmenter):
             for name in cls.ranges:
                 if name not in FEATURES:
                     raise ValueError(f"class {cls.part}/{cls.pose}: unknown feature {name!r}")
-        # each class's ranges, cheapest feature first: the cascade's order of checks
+            for name in cls.rulers:
+                if name not in recipe.rulers:
+                    raise ValueError(f"class {cls.part}/{cls.pose}: unknown ruler {name!r}")
+        # each class's ranges, cheapest feature first, its rulers last: the cascade's order
+        # of checks (a ruler's reading is kept among the blob's features, by its name)
         self._checks: list[tuple[VisionClass, list[tuple[str, float, float]]]] = [
             (cls, sorted(((n, lo, hi) for n, (lo, hi) in cls.ranges.items()),
-                         key=lambda r: GROUP_OF[r[0]]))
+                         key=lambda r: GROUP_OF[r[0]])
+             + [(n, lo, hi) for n, (lo, hi) in cls.rulers.items()])
             for cls in recipe.classes]
         # The smoothed perimeter reads every boundary pixel of the contour; without it only
         # the chain's corners are kept (the same polygon: the same moments, hull and
@@ -153,6 +162,8 @@ class Locator(Segmenter):
                        self._signatures.get(cls.part) if cut else None)
                       for cls, checks in self._checks]
         self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
+        if recipe.rulers:              # without rulers the cascade keeps its plain lookup
+            self._feature = self._feature_or_ruler            # type: ignore[method-assign]
         super().__init__(recipe)       # the segmentation, once the classes are known good
 
     # -------------------------------------------------------------- locate
@@ -242,7 +253,7 @@ class Locator(Segmenter):
                            hulls=all_features or self._want_hulls)
         if all_features:
             for b in blobs:
-                for name in FEATURES:
+                for name in (*FEATURES, *self.recipe.rulers):
                     self._feature(b, name)
         if self.recipe.orientation == "principal_axis":
             for b in blobs:            # as before the cascade: the rejected ones' too
@@ -252,6 +263,20 @@ class Locator(Segmenter):
     def _feature(self, b: Blob, name: str) -> float:
         """One feature of the blob (``blobs.measure_feature``), measured once."""
         return measure_feature(b, name, self.calibration, self.recipe.min_hole_mm2)
+
+    def _feature_or_ruler(self, b: Blob, name: str) -> float:
+        """``_feature``, or one of the recipe's rulers' readings (``vision.rulers``),
+        measured once; ``_feature`` itself for a recipe with rulers."""
+        ruler = self.recipe.rulers.get(name)
+        if ruler is None:
+            return measure_feature(b, name, self.calibration, self.recipe.min_hole_mm2)
+        feats = b.det.features
+        if name not in feats:
+            outline = contour_mm(b, self.calibration).astype(np.float64)
+            axis = principal_angle(cv2.moments(outline.astype(np.float32)))
+            feats[name] = measure_ruler(ruler, outline, (b.det.x_mm, b.det.y_mm), axis,
+                                        b.scale or self.calibration.mm_per_px)
+        return feats[name]
 
     def _faces(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
                level: float | None) -> None:

@@ -42,7 +42,7 @@ class RecipeWatch:
         self.frames_no_match = 0              # frames with unmatched blobs and no part
         self.longest_s = 0.0
         self.nearest: Counter[tuple[str, str]] = Counter()   # (class, feature) over the run
-        self.example = ""
+        self.examples: dict[tuple[str, str], str] = {}        # the latest reason of each
 
     def feed(self, t: float, result: LocateResult, stats: Any) -> None:
         """One frame's result at time ``t``; events go to ``stats.emit``."""
@@ -60,9 +60,9 @@ class RecipeWatch:
             key = _key(reason)
             spell[key] += 1
             self.nearest[key] += 1
+            self.examples[key] = reason
         if self.since is None:
             self.since = t
-        self.example = unmatched[0]
         lasted = t - self.since
         self.longest_s = max(self.longest_s, lasted)
         if lasted >= self.after_s and (self.last_alarm is None
@@ -71,7 +71,7 @@ class RecipeWatch:
             self.alarms += 1
             (cls, feature), _ = spell.most_common(1)[0]
             stats.emit(t, "vision_no_match", seconds=round(lasted, 1), nearest=cls,
-                       feature=feature, example=self.example,
+                       feature=feature, example=self.examples[(cls, feature)],
                        hint=_hint(len(unmatched), cls, feature))
 
     def restarted(self) -> None:
@@ -85,7 +85,8 @@ class RecipeWatch:
                                "longest_s": round(self.longest_s, 1)}
         if self.nearest:
             (cls, feature), n = self.nearest.most_common(1)[0]
-            out.update(nearest=cls, feature=feature, blobs=n, example=self.example,
+            out.update(nearest=cls, feature=feature, blobs=n,
+                       example=self.examples[(cls, feature)],   # the commonest reason's
                        reasons={_reason_name(k): v for k, v in self.nearest.items()})
         return out
 
