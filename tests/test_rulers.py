@@ -113,8 +113,7 @@ def _run(path: Path, seconds: float = 150.0) -> dict:
 
 def test_the_world_finds_each_sprocket_in_its_own_bin_only_with_the_ruler(tmp_path):
     """Placed parts are judged by the simulated world: with the ruler none in the wrong
-    bin; without it every 9-tooth sprocket goes to the 8s' bin; with the circle inside the
-    roots (one arc) none is a part, and the no-match warning names the ruler."""
+    bin; without it every 9-tooth sprocket goes to the 8s' bin."""
     with_ruler = _run(SPROCKETS)["parts"]
     assert with_ruler["misplaced"] == {} and with_ruler["lost"] == 0
     assert min(with_ruler["retrieved"].values()) > 40
@@ -122,12 +121,36 @@ def test_the_world_finds_each_sprocket_in_its_own_bin_only_with_the_ruler(tmp_pa
                               (", rulers: {teeth: [9, 9]}", "")))["parts"]
     assert without["retrieved"]["sprocket_9"] == 0
     assert without["misplaced"]["sprocket_9"] > 40 and without["lost"] == 0
-    wrong = _run(_sprockets(tmp_path, ("circle_mm: 23.5", "circle_mm: 15")), 90.0)
-    assert sum(wrong["parts"]["retrieved"].values()) == 0
-    no_match = wrong["vision"]["no_match"]
-    assert (no_match["nearest"], no_match["feature"]) == ("sprocket_8/flat", "teeth"), no_match
-    # the warning leads with the commonest reason's words, not the last frame's first blob
-    assert no_match["example"] == "no class; nearest sprocket_8/flat: teeth 1 not in [8, 8]"
+
+
+@pytest.mark.parametrize("edit,want", [
+    (("circle_mm: 23.5", "circle_mm: 15"),            # inside the roots: one arc
+     ["vision.classes[0].rulers.teeth: [8, 8] cannot hold sprocket_8/flat: its outline has "
+      "1 arc(s) on the circle of 15 mm", "vision.classes[1].rulers.teeth: [9, 9] cannot "
+      "hold sprocket_9/flat: its outline has 1 arc(s)"]),
+    (("rulers: {teeth: [8, 8]}", "rulers: {teeth: [9, 9]}"),   # the other part's count
+     ["vision.classes[0].rulers.teeth: [9, 9] cannot hold sprocket_8/flat: its outline has "
+      "8 arc(s) on the circle of 23.5 mm"]),
+    (("    teeth: {circle_mm: 23.5}", "    teeth: {circle_mm: 23.5}\n    across: {line_deg: 90}"),
+     []),
+])
+def test_a_ruler_range_its_outline_cannot_read_is_named_before_a_run(tmp_path, capsys, edit,
+                                                                      want):
+    """No silent zero: ``feeder check`` lays each class's rulers on the outline it names
+    (as it holds the area range against the outline's area); a range it cannot read is
+    one line, and every blob of the part would otherwise be rejected at run time."""
+    p = _sprockets(tmp_path, edit)
+    if not want:                      # a line across a sprocket: 38-56 mm at some turn
+        text = p.read_text().replace("rulers: {teeth: [8, 8]}",
+                                     "rulers: {teeth: [8, 8], across: [20, 30]}")
+        p.write_text(text)
+        want = ["vision.classes[0].rulers.across: [20, 30] cannot hold sprocket_8/flat: "
+                "across its outline the line reads"]
+    assert main(["check", str(p)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == len(want), err
+    for w, line in zip(want, err, strict=True):
+        assert w in line and line.startswith(f"{p}:"), (w, line)
 
 
 def test_every_ruler_mistake_is_one_line_naming_where(tmp_path, capsys):

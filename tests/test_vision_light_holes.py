@@ -366,6 +366,22 @@ def test_watch_counts_blobs_that_are_no_part_for_any_reason(reason, hint):
     assert summary["frames_no_match"] == 40
 
 
+def test_the_watch_quotes_its_commonest_reason_not_the_last_frames_first_blob():
+    """A frame of three blobs outside a class's teeth range and one cut by the border, the
+    border blob first: the alarm and the report quote the commonest reason's words."""
+    from feeder_bt.vision.locator import Detection
+    teeth = "no class; nearest sprocket_8/flat: teeth 1 not in [8, 8]"
+    dets = [Detection(None, None, False, 0.0, 0.0, 0.0, 0.0, 0.0, {"area_mm2": 1700.0}, r)
+            for r in ("touches border", teeth, teeth, teeth)]
+    watch, stats = RecipeWatch(), _Stats()
+    for k in range(40):
+        watch.feed(float(k), LocateResult(parts=[], rejected=dets, ms=0.0), stats)
+    alarm = next(d for _, kind, d in stats.events if kind == "vision_no_match")
+    summary = watch.summary()
+    assert alarm["example"] == summary["example"] == teeth
+    assert (summary["nearest"], summary["feature"]) == ("sprocket_8/flat", "teeth")
+
+
 def test_the_watch_counts_the_whole_run_across_a_restart(tmp_path):
     """After an e-stop the job restarts: the report's no-match summary still counts the
     alarms raised before it (each one an event in the log), and the spell starts again."""

@@ -1,4 +1,5 @@
-"""A vision class against its part's outline (issue 27, "no silent zero").
+"""A vision class against its part's outline (issue 27, "no silent zero"): its area range
+and its rulers' ranges.
 
 A class whose ``area_mm2`` range cannot hold the area of the outline it names (a unit
 mistake: ``diameter_mm: 2`` for a 2-inch lens) would reject every blob of that part as
@@ -21,6 +22,7 @@ from feeder_bt.scenario.tables import _num
 from feeder_bt.scenario.walker import _Ctx
 
 SCALE_SLACK = 0.05             # the calibration's scale error, lens and tilt, as a fraction
+LINE_STEPS_DEG = 1.0           # a line ruler is tried at every turn of the axis this apart
 
 
 def _perimeter(outline: np.ndarray) -> float:
@@ -63,3 +65,42 @@ def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
             ctx.add_problem(f"parts.{vc.part}.shape",
                             f"{vc.part}/{vc.pose} is {area:.4g} mm², {area / (s * s):.3g} px "
                             f"at the cell's {_num(s)} mm/px: too small to see")
+
+
+def check_class_rulers(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
+    """Each class's ruler ranges against what the ruler reads on the outline it names: a
+    circle's arcs exactly (a circle that misses the teeth reads 1 or 0); a line's width at
+    any turn of the long axis (an outline without a clear axis may be read at any), give
+    or take the scale slack and two pixels. A range that cannot hold it would reject every
+    blob of the part; the usual cause is a radius or angle for another part, or in inches."""
+    from feeder_bt.geometry import pose_outline, rings
+    from feeder_bt.vision.rulers import circle_arcs, line_mm
+    s = cell.camera.calibration.mm_per_px
+    for i, vc in enumerate(sc.vision.classes):
+        if vc.part not in sc.parts or vc.pose not in sc.parts[vc.part].poses:
+            continue                              # listed by _check_scenario
+        outer = rings(pose_outline(sc.parts[vc.part], vc.pose))[0]
+        for name, (lo, hi) in vc.rulers.items():
+            ruler = sc.vision.rulers.get(name)
+            if ruler is None or lo > hi:
+                continue                          # listed by _check_rulers
+            path = f"vision.classes[{i}].rulers.{name}"
+            where = f"{vc.part}/{vc.pose}"
+            if ruler.circle_mm is not None:
+                n = circle_arcs(outer, (0.0, 0.0), ruler.circle_mm)
+                if not lo <= n <= hi:
+                    ctx.add_problem(path, f"[{_num(lo)}, {_num(hi)}] cannot hold {where}: "
+                                          f"its outline has {n:g} arc(s) on the circle of "
+                                          f"{_num(ruler.circle_mm)} mm; is the range or "
+                                          f"the radius another part's, or the radius in "
+                                          f"the wrong unit?")
+            elif ruler.line_deg is not None:
+                got = [line_mm(outer, (0.0, 0.0), a) for a in
+                       np.arange(0.0, 180.0, LINE_STEPS_DEG)]
+                least = min(got) * (1 - SCALE_SLACK) - 2 * s
+                most = max(got) * (1 + SCALE_SLACK) + 2 * s
+                if hi < least or lo > most:
+                    ctx.add_problem(path, f"[{_num(lo)}, {_num(hi)}] cannot hold {where}: "
+                                          f"across its outline the line reads "
+                                          f"{min(got):.4g}-{max(got):.4g} mm; is a size in "
+                                          f"the wrong unit?")

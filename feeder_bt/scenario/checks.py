@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
-from feeder_bt.scenario.area_checks import check_class_areas
+from feeder_bt.scenario.area_checks import check_class_areas, check_class_rulers
 from feeder_bt.scenario.model import AdjustParams, CellSpec, Scenario
 from feeder_bt.scenario.special import part_size_mm
 from feeder_bt.scenario.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
@@ -287,6 +287,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                             f"the cell's sim.belt_mu_*, {cfile}): sliding friction is never "
                             f"more than sticking friction")
     check_class_areas(sc, ctx, cell)
+    check_class_rulers(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
                         key=lambda t: t[1])
