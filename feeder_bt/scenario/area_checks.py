@@ -79,6 +79,8 @@ def check_class_rulers(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
     for i, vc in enumerate(sc.vision.classes):
         if vc.part not in sc.parts or vc.pose not in sc.parts[vc.part].poses:
             continue                              # listed by _check_scenario
+        if not vc.rulers:
+            continue
         outer = rings(pose_outline(sc.parts[vc.part], vc.pose))[0]
         for name, (lo, hi) in vc.rulers.items():
             ruler = sc.vision.rulers.get(name)

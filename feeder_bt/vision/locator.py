@@ -265,17 +265,20 @@ class Locator(Segmenter):
         return measure_feature(b, name, self.calibration, self.recipe.min_hole_mm2)
 
     def _feature_or_ruler(self, b: Blob, name: str) -> float:
-        """``_feature``, or one of the recipe's rulers' readings (``vision.rulers``),
-        measured once; ``_feature`` itself for a recipe with rulers."""
-        ruler = self.recipe.rulers.get(name)
-        if ruler is None:
+        """``_feature``, or one of the recipe's rulers' readings (``vision.rulers``): all
+        of them at once, on one mapped outline; ``_feature`` itself for a recipe with
+        rulers."""
+        rulers = self.recipe.rulers
+        if name not in rulers:
             return measure_feature(b, name, self.calibration, self.recipe.min_hole_mm2)
         feats = b.det.features
         if name not in feats:
-            outline = contour_mm(b, self.calibration).astype(np.float64)
-            axis = principal_angle(cv2.moments(outline.astype(np.float32)))
-            feats[name] = measure_ruler(ruler, outline, (b.det.x_mm, b.det.y_mm), axis,
-                                        b.scale or self.calibration.mm_per_px)
+            mm = contour_mm(b, self.calibration)
+            axis = principal_angle(cv2.moments(mm))
+            outline = mm.astype(np.float64)
+            for n, ruler in rulers.items():
+                feats[n] = measure_ruler(ruler, outline, (b.det.x_mm, b.det.y_mm), axis,
+                                         b.scale or self.calibration.mm_per_px)
         return feats[name]
 
     def _faces(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
