@@ -18,19 +18,19 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
-from .adjusters import AdjustInputs, Speeds, make_adjuster
-from .behaviours.common import Ctx, Stats, init_blackboard
-from .clock import Clock
-from .encoder import EncoderSync
-from .errors import FeederError
-from .hal.interfaces import Hal
-from .parts import PartsQueue
-from .scenario.model import CellSpec, Scenario
-from .scenario.plugins import load_class
-from .trees import build_cleanup, build_feeding, build_setup
-from .vision.calibration import Calibration
-from .vision.locator import Locator
-from .vision.worker import VisionWorker
+from feeder_bt.adjusters import AdjustInputs, Speeds, make_adjuster
+from feeder_bt.behaviours.common import Ctx, Stats, init_blackboard
+from feeder_bt.clock import Clock
+from feeder_bt.encoder import EncoderSync
+from feeder_bt.errors import FeederError
+from feeder_bt.hal.interfaces import Hal
+from feeder_bt.parts import PartsQueue
+from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.scenario.plugins import load_class
+from feeder_bt.trees import build_cleanup, build_feeding, build_setup
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.locator import Locator
+from feeder_bt.vision.worker import VisionWorker
 
 ESTOP = "estop"         # the cell description's e-stop input, if it has one
 

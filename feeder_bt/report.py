@@ -8,14 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from .cell import Cell
-from .kits import KitTracker, kits_report
-from .robot_bounds import Pricing, mean_bound, selection_bound
-from .robot_model import RobotModel
-from .scenario.model import CellSpec, Scenario
-from .supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm, transport_lag_s
-from .ticker import Ticker
-from .vocabulary import split
+from feeder_bt.cell import Cell
+from feeder_bt.kits import KitTracker, kits_report
+from feeder_bt.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.robot_model import RobotModel
+from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm, transport_lag_s
+from feeder_bt.ticker import Ticker
+from feeder_bt.vocabulary import split
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -25,7 +25,7 @@ def _pct(values: list[float], q: float) -> float:
 def pick_window(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float, float, float]:
     """Where a part's centre can be when picked: along the belt up to ``too_far`` (or the
     belt's end), across it inside the side rails. (x_lo, x_hi, y_lo, y_hi) in mm."""
-    from .hal.sim.world import EDGE_MARGIN_MM
+    from feeder_bt.hal.sim.world import EDGE_MARGIN_MM
 
     belt = cell_spec.conveyors["horizontal"]
     x_hi = min(scenario.retrieve.too_far_mm, belt.length_mm)

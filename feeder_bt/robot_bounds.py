@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kits import KitTracker
-from .robot_model import RobotModel
-from .scenario.model import CellSpec, Scenario
+from feeder_bt.kits import KitTracker
+from feeder_bt.robot_model import RobotModel
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 
 @dataclass

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .scenario.model import RobotSpec
+from feeder_bt.scenario.model import RobotSpec
 
 
 def trapezoid_time(d: float, v_max: float, a_max: float) -> float:

@@ -12,16 +12,16 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from .cell import Cell, CellState
-from .clock import RealClock, SimClock
-from .errors import ConfigError, FeederError
-from .eventlog import EventLog
-from .hal.factory import make_hal
-from .report import build_report, write_report
-from .scenario import load_scenario
-from .scenario.model import Scenario
-from .ticker import Ticker
-from .view import LiveView, Progress
+from feeder_bt.cell import Cell, CellState
+from feeder_bt.clock import RealClock, SimClock
+from feeder_bt.errors import ConfigError, FeederError
+from feeder_bt.eventlog import EventLog
+from feeder_bt.hal.factory import make_hal
+from feeder_bt.report import build_report, write_report
+from feeder_bt.scenario import load_scenario
+from feeder_bt.scenario.model import Scenario
+from feeder_bt.ticker import Ticker
+from feeder_bt.view import LiveView, Progress
 
 STOP_GRACE_S = 30.0        # clock time allowed for the clean-up tree after a stop
 DEFAULT_DB = "runs/feeder.db"   # the command line's event log unless --db / --no-db
@@ -58,8 +58,8 @@ def add_db_options(parser: argparse.ArgumentParser) -> None:
 
 def add_ui_options(parser: argparse.ArgumentParser) -> None:
     """``--ui [HOST:PORT]``, ``--users FILE``, ``--start`` for ``feeder run``."""
-    from .ui import DEFAULT_BIND, parse_bind
-    from .ui.users import default_path
+    from feeder_bt.ui import DEFAULT_BIND, parse_bind
+    from feeder_bt.ui.users import default_path
 
     def bind(text: str) -> str:
         parse_bind(text)                 # one-line usage error now, not after the HAL opens
@@ -110,7 +110,7 @@ def plant_options(args: argparse.Namespace) -> Any:
     """The ``PlantOptions`` of parsed ``feeder run`` arguments (None: no adapter)."""
     if not getattr(args, "part_server", None) and not getattr(args, "opcua", None):
         return None
-    from .plant.adapters import PlantOptions
+    from feeder_bt.plant.adapters import PlantOptions
     return PlantOptions(part_server=args.part_server, sim_robot=args.sim_robot,
                         robots=getattr(args, "robots", None),
                         sim_robot_port=getattr(args, "sim_robot_port", None),
@@ -123,7 +123,7 @@ def _check_opcua(opts: RunOptions) -> None:
     if opts.ui:
         raise FeederError("--ui and --opcua each keep their own control token: serve one "
                           "of them per run, so that one user at a time controls the cell")
-    from .ui.app import check_users
+    from feeder_bt.ui.app import check_users
     check_users(opts.plant.opcua_users)
 
 
@@ -131,7 +131,7 @@ def _open_plant(opts: RunOptions, cell: Cell, scenario: Scenario):
     """The part server / OPC UA adapters of this run, opened (None: none asked for)."""
     if opts.plant is None:
         return None
-    from .plant.adapters import PlantAdapters
+    from feeder_bt.plant.adapters import PlantAdapters
     plant = PlantAdapters(cell, opts.plant, opts.scenario, opts.cell or scenario.cell_path,
                           fast=opts.fast)
     try:
@@ -182,7 +182,7 @@ def _chain(*fns: Callable[[], None] | None) -> Callable[[], None] | None:
 
 
 def _bind(text: str) -> tuple[str, int]:
-    from .ui import parse_bind
+    from feeder_bt.ui import parse_bind
     try:
         return parse_bind(text)
     except argparse.ArgumentTypeError as e:
@@ -292,21 +292,21 @@ def _prepare(opts: RunOptions) -> _Prepared:
     start = (not opts.ui) if opts.start is None else opts.start
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell, overlay=opts.overlay)
     if opts.ui:
-        from .ui.app import check_users
+        from feeder_bt.ui.app import check_users
         check_users(opts.users)
     if opcua:
         _check_opcua(opts)
     prep = _Prepared(scenario, cell_spec, duration, start)
     if opts.faults:
-        from .scenario.faults import load_fault_plan
+        from feeder_bt.scenario.faults import load_fault_plan
         prep.plan = load_fault_plan(opts.faults)
         if opts.hal != "sim":
             raise ConfigError("fault plans drive the simulated cell; the emulators take "
                               "their faults from tests (feeder_bt.emulators.faults)",
                               key="faults")
     if opts.supply:
-        from .hal.sim.supply import with_start
-        from .scenario.supply import check_against_scenario, load_supply_plan
+        from feeder_bt.hal.sim.supply import with_start
+        from feeder_bt.scenario.supply import check_against_scenario, load_supply_plan
         prep.supply_plan = load_supply_plan(opts.supply)
         if opts.hal != "sim":
             raise ConfigError("supply plans drive the simulated cell; on an emulated or "
@@ -337,16 +337,16 @@ class _Run:
         opts, prep = self.opts, self.prep
         self.hal, clock = make_hal(opts.hal, prep.scenario, prep.cell_spec, opts.seed)
         if prep.plan is not None:
-            from .hal.sim.faults import inject_faults
+            from feeder_bt.hal.sim.faults import inject_faults
             self.injector = inject_faults(self.hal, prep.plan)  # type: ignore[arg-type]
         if prep.supply_plan is not None:
-            from .hal.sim.supply import apply_supply
+            from feeder_bt.hal.sim.supply import apply_supply
             self.supply = apply_supply(self.hal, prep.supply_plan)
         self.clock = clock if isinstance(clock, SimClock) else RealClock()
         self.cell = Cell(prep.cell_spec, self.hal, self.clock)
         self.broken = _watch_accounting(self.cell)
         if self.log or opts.ui:     # the trees' history, for `feeder replay` and the timeline
-            from .treelog import TreeTrace
+            from feeder_bt.treelog import TreeTrace
             self.trace = TreeTrace(self.cell, live=bool(opts.ui), logged=bool(self.log))
         if self.log:
             _start_log(self.log, opts, prep.scenario, self.cell)
@@ -385,7 +385,7 @@ class _Run:
         opts, cell = self.opts, self.cell
         cell.load(self.prep.scenario)
         if opts.ui:             # commands run and snapshots are taken in the tick thread
-            from .ui.app import OperatorUi
+            from feeder_bt.ui.app import OperatorUi
             self.ui = OperatorUi(cell, opts.scenario, opts.cell or self.prep.scenario.cell_path,
                                  *_bind(opts.ui), users_path=opts.users, t0=self.t_start,
                                  trace=self.trace)

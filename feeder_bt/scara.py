@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .robot_model import RobotModel
-from .scenario.model import RobotSpec
+from feeder_bt.robot_model import RobotModel
+from feeder_bt.scenario.model import RobotSpec
 
 # Cobra 600 class figures (docs/simulator.md, "Robot", says which are published and which
 # are assumptions). Speeds: the Cobra s600 data sheet's joint speeds (not confirmed by the

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from .scenario.model import CellSpec, Scenario
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 
 class ReachWindow:

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cell import Cell
-from .clock import EPS, SimClock
-from .jobs import Job
-from .trees.build import Loop
+from feeder_bt.cell import Cell
+from feeder_bt.clock import EPS, SimClock
+from feeder_bt.jobs import Job
+from feeder_bt.trees.build import Loop
 
 _STATUS = operator.attrgetter("status")
 

@@ -7,15 +7,15 @@ import shutil
 
 import py_trees
 
-from .behaviours.common import Ctx, Stats, init_blackboard
-from .clock import SimClock
-from .encoder import EncoderSync
-from .errors import FeederError
-from .hal.mock import MockHal
-from .parts import PartsQueue
-from .scenario import load_scenario
-from .scenario.model import Scenario
-from .trees import build_cleanup, build_feeding, build_setup
+from feeder_bt.behaviours.common import Ctx, Stats, init_blackboard
+from feeder_bt.clock import SimClock
+from feeder_bt.encoder import EncoderSync
+from feeder_bt.errors import FeederError
+from feeder_bt.hal.mock import MockHal
+from feeder_bt.parts import PartsQueue
+from feeder_bt.scenario import load_scenario
+from feeder_bt.scenario.model import Scenario
+from feeder_bt.trees import build_cleanup, build_feeding, build_setup
 
 
 def scenario_tree(path: str, part: str = "feeding") -> py_trees.behaviour.Behaviour:

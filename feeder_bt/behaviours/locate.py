@@ -7,14 +7,14 @@ import math
 
 from py_trees.common import Status
 
-from ..encoder import diff
-from ..hal.interfaces import Frame
-from ..jobs import Job
-from ..parts import Part
-from ..supply_bound import ReachWindow
-from ..vision.latest import hand_over
-from ..vision.watch import recipe_watch
-from .common import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
+from feeder_bt.encoder import diff
+from feeder_bt.hal.interfaces import Frame
+from feeder_bt.jobs import Job
+from feeder_bt.parts import Part
+from feeder_bt.supply_bound import ReachWindow
+from feeder_bt.vision.latest import hand_over
+from feeder_bt.vision.watch import recipe_watch
 
 
 class WaitTravel(JobLeaf):

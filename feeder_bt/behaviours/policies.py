@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..parts import Part
-from ..robot_fit import pricing_model
-from .common import Ctx
+from feeder_bt.behaviours.common import Ctx
+from feeder_bt.parts import Part
+from feeder_bt.robot_fit import pricing_model
 
 XNow = Callable[[Part], float]
 

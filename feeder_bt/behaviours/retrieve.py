@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from ..errors import HalError, UnknownPart
-from ..geometry import wrap_deg
-from ..hal.interfaces import Held, PickTarget, Pose
-from ..jobs import Job
-from ..kits import KitTracker
-from ..parts import Part
-from ..robot_fit import Timing, robot_fit
-from .common import Ctx, JobLeaf, Leaf, client
-from .policies import POLICIES
+from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.policies import POLICIES
+from feeder_bt.errors import HalError, UnknownPart
+from feeder_bt.geometry import wrap_deg
+from feeder_bt.hal.interfaces import Held, PickTarget, Pose
+from feeder_bt.jobs import Job
+from feeder_bt.kits import KitTracker
+from feeder_bt.parts import Part
+from feeder_bt.robot_fit import Timing, robot_fit
 
 
 def belt_x_now(ctx: Ctx, part: Part) -> float:

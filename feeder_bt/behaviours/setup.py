@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from ..encoder import FreshAnchor
-from ..jobs import Job
-from .common import Ctx, JobLeaf, Leaf
+from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf
+from feeder_bt.encoder import FreshAnchor
+from feeder_bt.jobs import Job
 
 
 class SetSignal(JobLeaf):

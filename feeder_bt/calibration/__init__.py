@@ -8,8 +8,8 @@ that drive a cell through the HAL interfaces only, so they run on the simulated 
 and on a real cell once its drivers exist. ``files`` reads and writes calibration files.
 """
 
-from .belt import BeltFit, BeltTouch, belt_procedure, fit_belt
-from .camera import (
+from feeder_bt.calibration.belt import BeltFit, BeltTouch, belt_procedure, fit_belt
+from feeder_bt.calibration.camera import (
     DEFAULT_TARGETS,
     CameraFit,
     Target,
@@ -19,10 +19,14 @@ from .camera import (
     fit_camera,
     window_error_mm,
 )
-from .camera_model import CameraResult, calibrate_camera_views
-from .common import CalibrationError, sim_waiter
-from .files import apply_calibration_file, read_camera_calibration, write_calibration_file
-from .tool import ToolFit, ToolTouch, fit_tool, tool_procedure
+from feeder_bt.calibration.camera_model import CameraResult, calibrate_camera_views
+from feeder_bt.calibration.common import CalibrationError, sim_waiter
+from feeder_bt.calibration.files import (
+    apply_calibration_file,
+    read_camera_calibration,
+    write_calibration_file,
+)
+from feeder_bt.calibration.tool import ToolFit, ToolTouch, fit_tool, tool_procedure
 
 __all__ = [
     "DEFAULT_TARGETS", "BeltFit", "BeltTouch", "CalibrationError", "CameraFit", "CameraResult",

@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..encoder import diff
-from ..hal.interfaces import Hal
-from ..jobs import Job
-from .common import CalibrationError, Waiter, rms_max
+from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
+from feeder_bt.encoder import diff
+from feeder_bt.hal.interfaces import Hal
+from feeder_bt.jobs import Job
 
 MIN_TOUCHES = 3
 MIN_TRAVEL_MM = 50.0

@@ -29,11 +29,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..hal.interfaces import Camera, Frame
-from ..scenario.model import CameraCalibration
-from ..vision.calibration import Calibration
-from .common import CalibrationError, Waiter, rms_max
-from .targets import DEFAULT_TARGETS, Target, detect_points
+from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
+from feeder_bt.calibration.targets import DEFAULT_TARGETS, Target, detect_points
+from feeder_bt.hal.interfaces import Camera, Frame
+from feeder_bt.scenario.model import CameraCalibration
+from feeder_bt.vision.calibration import Calibration
 
 __all__ = ["DEFAULT_TARGETS", "CameraFit", "Target", "TargetPose", "calibrate_camera_image",
            "camera_procedure", "centred_pose", "correspondences", "detect_target",
@@ -316,7 +316,7 @@ def calibrate_camera_image(image: np.ndarray, target: Target, pose: TargetPose,
     has (if any: one view cannot tell the lens), to the belt (``intrinsics.fit_belt_plane``).
     The fit's calibration keeps that lens, and its similarity fields are the homography's
     nearest similarity."""
-    from .intrinsics import fit_belt_plane
+    from feeder_bt.calibration.intrinsics import fit_belt_plane
 
     px, mm, note = correspondences(image, target, pose, nominal, prior)
     plane = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist,

@@ -18,10 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scenario.model import CameraCalibration
-from .camera import calibration_values, correspondences
-from .common import CalibrationError
-from .intrinsics import (
+from feeder_bt.calibration.camera import calibration_values, correspondences
+from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.intrinsics import (
     MIN_VIEWS,
     BeltPlane,
     CameraModel,
@@ -29,7 +28,8 @@ from .intrinsics import (
     find_views,
     fit_belt_plane,
 )
-from .targets import Target
+from feeder_bt.calibration.targets import Target
+from feeder_bt.scenario.model import CameraCalibration
 
 DEFAULT_MAX_RMS_PX = 1.0       # reprojection rms of the lens model over all views
 DEFAULT_MAX_BELT_MM = 0.3      # rms of the belt plane over the target's points

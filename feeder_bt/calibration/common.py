@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..clock import SimClock
-from ..errors import FeederError
-from ..jobs import Job
+from feeder_bt.clock import SimClock
+from feeder_bt.errors import FeederError
+from feeder_bt.jobs import Job
 
 Waiter = Callable[[Job], Any]
 

@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from ..hal.interfaces import Hal, Pose
-from ..jobs import Job
-from .common import CalibrationError, Waiter
+from feeder_bt.calibration.common import CalibrationError, Waiter
+from feeder_bt.hal.interfaces import Hal, Pose
+from feeder_bt.jobs import Job
 
 POLL_S = 0.005
 

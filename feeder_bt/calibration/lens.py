@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .common import CalibrationError
-from .targets import Target, detect_points
+from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.targets import Target, detect_points
 
 MIN_VIEWS = 3
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .common import CalibrationError
+from feeder_bt.calibration.common import CalibrationError
 
 KINDS = ("chessboard", "circles", "acircles", "charuco", "dots")
 MARKER_FRACTION = 0.7          # charuco: default marker side / square side
@@ -341,7 +341,7 @@ def _charuco_rings(target: Target) -> list[np.ndarray]:
     """OpenCV draws the board; its dark squares are read off the drawing (a pixel in each
     square's corner, clear of any marker) and drawn exactly, and the markers (each clear of
     the squares) become outlines with their white cells as holes."""
-    from ..geometry import join_rings
+    from feeder_bt.geometry import join_rings
 
     k, p = BOARD_PX_PER_MM, target.pitch_mm
     nsx, nsy = target.nx + 1, target.ny + 1

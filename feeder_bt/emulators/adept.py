@@ -33,13 +33,13 @@ from collections import Counter, deque
 from pathlib import Path
 from typing import Any
 
-from .faults import FaultPlan
-from .plant import Plant
-from .vplus.devices import cut
-from .vplus.program import load_dir
-from .vplus.runtime import Runtime
-from .vplus.trans import Trans
-from .vplus_check import VPLUS_DIR, require_loadable
+from feeder_bt.emulators.faults import FaultPlan
+from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.vplus.devices import cut
+from feeder_bt.emulators.vplus.program import load_dir
+from feeder_bt.emulators.vplus.runtime import Runtime
+from feeder_bt.emulators.vplus.trans import Trans
+from feeder_bt.emulators.vplus_check import VPLUS_DIR, require_loadable
 
 SERVERS = ("motion", "position", "io", "notify")
 VPLUS_PORTS = {"motion": 1401, "position": 1402, "io": 1403, "notify": 1404}  # init_constants

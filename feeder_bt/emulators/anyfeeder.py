@@ -22,7 +22,10 @@ from __future__ import annotations
 import socket
 import threading
 
-from ..hal.anyfeeder.protocol import (
+from feeder_bt.emulators.faults import FaultPlan
+from feeder_bt.emulators.line_server import LineServer
+from feeder_bt.emulators.plant import Plant
+from feeder_bt.hal.anyfeeder.protocol import (
     BACKLIGHT_OFF,
     BACKLIGHT_ON,
     CR,
@@ -34,10 +37,7 @@ from ..hal.anyfeeder.protocol import (
     ProtocolError,
     parse_command,
 )
-from ..scenario.plate_model import PlateCommands
-from .faults import FaultPlan
-from .line_server import LineServer
-from .plant import Plant
+from feeder_bt.scenario.plate_model import PlateCommands
 
 PLATE_FAULTS = ("servo_timeout",)    # the fault plan's kinds this emulator acts on
 

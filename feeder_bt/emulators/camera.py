@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .plant import Plant
+from feeder_bt.emulators.plant import Plant
 
 
 class PlantCameraSource:

@@ -30,15 +30,7 @@ import re
 import threading
 from dataclasses import dataclass, field
 
-from ..hal.galil.protocol import (
-    MAX_LABELS,
-    MAX_LINE_CHARS,
-    MAX_PROGRAM_LINES,
-    MAX_VARIABLE_CHARS,
-    THREADS,
-    label_problem,
-)
-from .dmc_expr import (
+from feeder_bt.emulators.dmc_expr import (
     _FMT_RE,
     _MATH,
     DmcError,
@@ -48,6 +40,14 @@ from .dmc_expr import (
     format_number,
     split_args,
     tokenize,
+)
+from feeder_bt.hal.galil.protocol import (
+    MAX_LABELS,
+    MAX_LINE_CHARS,
+    MAX_PROGRAM_LINES,
+    MAX_VARIABLE_CHARS,
+    THREADS,
+    label_problem,
 )
 
 AXES = "ABCDEFGH"

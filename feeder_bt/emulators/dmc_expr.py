@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from ..hal.galil.protocol import ERROR_TEXT
+from feeder_bt.hal.galil.protocol import ERROR_TEXT
 
 
 class DmcError(Exception):

@@ -44,17 +44,22 @@ import sys
 import threading
 import time
 
-from ..hal.galil.protocol import HANDLES, MODEL
-from .dmc import AXES, DmcError, DmcInterpreter, Program
-from .faults import FaultPlan
-from .galil_axes import AxisCommands, _Axis
-from .galil_commands import COPYRIGHT, INPUT_BITS, OUTPUT_BITS, ControllerCommands
-from .galil_link import POLL_S
-from .galil_link import Link as _Link
-from .galil_link import PtyLink as _PtyLink
-from .galil_link import Session as _Session
-from .galil_link import TcpLink as _TcpLink
-from .plant import Plant
+from feeder_bt.emulators.dmc import AXES, DmcError, DmcInterpreter, Program
+from feeder_bt.emulators.faults import FaultPlan
+from feeder_bt.emulators.galil_axes import AxisCommands, _Axis
+from feeder_bt.emulators.galil_commands import (
+    COPYRIGHT,
+    INPUT_BITS,
+    OUTPUT_BITS,
+    ControllerCommands,
+)
+from feeder_bt.emulators.galil_link import POLL_S
+from feeder_bt.emulators.galil_link import Link as _Link
+from feeder_bt.emulators.galil_link import PtyLink as _PtyLink
+from feeder_bt.emulators.galil_link import Session as _Session
+from feeder_bt.emulators.galil_link import TcpLink as _TcpLink
+from feeder_bt.emulators.plant import Plant
+from feeder_bt.hal.galil.protocol import HANDLES, MODEL
 
 __all__ = ["COPYRIGHT", "INPUT_BITS", "OUTPUT_BITS", "REJECT_CODES", "GalilEmulator", "main",
            "run_forever", "serve"]
@@ -359,7 +364,7 @@ def run_forever(host: str, port: int, scenario: str, cell: str | None = None,
                 seed: int = 1, reversed_encoders: str = "") -> None:
     """``feeder emulate galil``: a plant and an emulator until Ctrl-C. ``reversed_encoders``
     (axis letters) wires those encoders reversed, to rehearse the error-limit trip."""
-    from ..scenario.loader import load_scenario
+    from feeder_bt.scenario.loader import load_scenario
 
     sc, cell_spec = load_scenario(scenario, cell)
     plant = Plant(sc, cell_spec, seed=seed).start()

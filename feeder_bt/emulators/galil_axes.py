@@ -21,8 +21,8 @@ import re
 import threading
 from dataclasses import dataclass
 
-from .dmc import AXES, DmcError, DmcInterpreter
-from .plant import Plant
+from feeder_bt.emulators.dmc import AXES, DmcError, DmcInterpreter
+from feeder_bt.emulators.plant import Plant
 
 
 @dataclass

@@ -24,9 +24,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from ..calibration.camera import Target, TargetPose
-from .camera_server import CameraScene
-from .plant import Plant
+from feeder_bt.calibration.camera import Target, TargetPose
+from feeder_bt.emulators.camera_server import CameraScene
+from feeder_bt.emulators.plant import Plant
 
 HELP = ("actions: toggle NAME | press NAME | release NAME | look NAME | trigger | "
         "push BELT MM | touch X Y | power on|off | part on|off | marker X Y | marker off | "

@@ -62,10 +62,10 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import ConfigError
-from .vplus_flow import NOWAIT, FlowProgram, ForwardChecker
-from .vplus_vars import unassigned
-from .vplus_words import INSTRUCTIONS, reserved
+from feeder_bt.emulators.vplus_flow import NOWAIT, FlowProgram, ForwardChecker
+from feeder_bt.emulators.vplus_vars import unassigned
+from feeder_bt.emulators.vplus_words import INSTRUCTIONS, reserved
+from feeder_bt.errors import ConfigError
 
 VPLUS_DIR = Path(__file__).resolve().parents[2] / "vplus"
 MAX_NAME = 15                 # V+ significant characters in a name (User's Guide p. 99)

@@ -11,11 +11,11 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from ..clock import Clock, RealClock, SimClock
-from ..errors import ConfigError, HalError
-from ..jobs import DoneJob, Job
-from ..scenario.model import CellSpec, Scenario
-from .interfaces import Hal, IoChange
+from feeder_bt.clock import Clock, RealClock, SimClock
+from feeder_bt.errors import ConfigError, HalError
+from feeder_bt.hal.interfaces import Hal, IoChange
+from feeder_bt.jobs import DoneJob, Job
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 HAL_KINDS = ("sim", "emulated", "real")
 PROGRAMS_DIR = Path(__file__).resolve().parents[2] / "galil_programs"
@@ -99,7 +99,7 @@ class DriverHal(Hal):
 def adept_estop(cell: CellSpec) -> int | None:
     """The e-stop input the V+ motion server watches (ESTOP), from the cell's ``io.estop``
     on the Adept controller: negative when the input is active low; None if not wired."""
-    from .adept.protocol import estop_signal
+    from feeder_bt.hal.adept.protocol import estop_signal
     sig = cell.io.get("estop")
     if sig is None or sig.controller != "adept" or sig.dir != "in":
         return None
@@ -110,7 +110,7 @@ def wire_line_trigger(cell: CellSpec, source: object, io: CellIO) -> None:
     """A line-triggered pylon camera whose pulse the cell fires: ``camera.pylon.
     trigger_signal`` set and cleared once per grab, on the camera's worker (the output is
     wired to the camera's line and to the Galil latch input, docs/real-cell.md)."""
-    from .camera.latched import wait_job
+    from feeder_bt.hal.camera.latched import wait_job
     signal = cell.camera.pylon.trigger_signal
     if signal is None or not hasattr(source, "line_pulse") or source.line_pulse is not None:
         return
@@ -124,9 +124,9 @@ def wire_line_trigger(cell: CellSpec, source: object, io: CellIO) -> None:
 
 def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real") -> DriverHal:
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
-    from .adept import AdeptController
-    from .camera import LatchedCamera, open_source
-    from .galil import make_galil
+    from feeder_bt.hal.adept import AdeptController
+    from feeder_bt.hal.camera import LatchedCamera, open_source
+    from feeder_bt.hal.galil import make_galil
 
     closers: list = []
     try:
@@ -147,7 +147,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         wire_line_trigger(cell, camera.source, io)
         plate = None
         if cell.presentation == "plate":    # an AnyFeeder on its serial line (issue 31)
-            from .anyfeeder.driver import AnyFeeder
+            from feeder_bt.hal.anyfeeder.driver import AnyFeeder
             plate = AnyFeeder(cell.plate, clock)
             closers.append(plate.close)
     except BaseException:
@@ -163,11 +163,11 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
     if kind == "sim" and cell.presentation == "plate":      # issue 31
-        from .sim.plate import make_plate_sim_hal
+        from feeder_bt.hal.sim.plate import make_plate_sim_hal
         clock = SimClock()
         return make_plate_sim_hal(scenario, cell, clock, seed), clock
     if kind == "sim":
-        from .sim.devices import make_sim_hal
+        from feeder_bt.hal.sim.devices import make_sim_hal
         clock = SimClock()
         return make_sim_hal(scenario, cell, clock, seed), clock
     if kind == "real":
@@ -185,10 +185,10 @@ def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[
 def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
                    faults=None) -> tuple[Hal, Clock]:
     """Emulators on loopback over the simulated cell in real time, and the real drivers."""
-    from ..emulators.adept import AdeptEmulator
-    from ..emulators.camera import PlantCameraSource
-    from ..emulators.galil import GalilEmulator
-    from ..emulators.plant import Plant
+    from feeder_bt.emulators.adept import AdeptEmulator
+    from feeder_bt.emulators.camera import PlantCameraSource
+    from feeder_bt.emulators.galil import GalilEmulator
+    from feeder_bt.emulators.plant import Plant
 
     plant = Plant(scenario, cell, seed).start()
     galil = GalilEmulator(plant, faults=faults).start()
@@ -196,7 +196,7 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     ports = adept.ports
     plate_emu = None
     if cell.presentation == "plate":        # the AnyFeeder emulator over the plate (issue 31)
-        from ..emulators.anyfeeder import AnyFeederEmulator
+        from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
         plate_emu = AnyFeederEmulator(plant, faults=faults).start()
         cell = dataclasses.replace(cell, plate=dataclasses.replace(
             cell.plate, url=f"socket://127.0.0.1:{plate_emu.port}"))
@@ -210,7 +210,7 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     source = None
     try:
         if cell.camera.source.startswith("pylon:"):    # through pylon's camera emulator
-            from ..emulators.pylon_camera import PylonPlantCamera
+            from feeder_bt.emulators.pylon_camera import PylonPlantCamera
             source = PylonPlantCamera(plant, cell.camera, faults=faults)
         else:
             source = PlantCameraSource(plant)

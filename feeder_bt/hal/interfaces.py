@@ -11,8 +11,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ..errors import ConveyorFault, HalError
-from ..jobs import DoneJob, Job
+from feeder_bt.errors import ConveyorFault, HalError
+from feeder_bt.jobs import DoneJob, Job
 
 
 @dataclass(frozen=True)

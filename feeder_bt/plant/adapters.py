@@ -12,10 +12,10 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
-from ..behaviours.serve import Desk
-from ..cell import Cell
-from ..clock import SimClock
-from ..errors import FeederError
+from feeder_bt.behaviours.serve import Desk
+from feeder_bt.cell import Cell
+from feeder_bt.clock import SimClock
+from feeder_bt.errors import FeederError
 
 
 @dataclass
@@ -81,9 +81,9 @@ class PlantAdapters:
     def open(self) -> None:
         cell, opts = self.cell, self.opts
         if opts.part_server:
-            from .part_server import DEFAULT_PORT, PartServer, install
+            from feeder_bt.plant.part_server import DEFAULT_PORT, PartServer, install
             host, port = parse_hostport(opts.part_server, DEFAULT_PORT, "--part-server")
-            from .robots import RobotTrust
+            from feeder_bt.plant.robots import RobotTrust
             trust = RobotTrust.load(opts.robots)
             self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
             install(cell, self.desk)
@@ -103,7 +103,7 @@ class PlantAdapters:
             if opts.sim_robot_port:
                 self._robot_port(opts.sim_robot_port)
         if opts.opcua:
-            from .opcua import CellUaServer
+            from feeder_bt.plant.opcua import CellUaServer
             self.opcua = CellUaServer(cell, opts, self.scenario_path, self.cell_path)
             url = self.opcua.start()
             print(f"OPC UA: {url}", file=sys.stderr, flush=True)
@@ -111,8 +111,8 @@ class PlantAdapters:
     def _sim_robot(self, where: str):
         """The simulated robot's program: over TCP in real time, lock-step in a fast run
         (a socket's timing would make a virtual-time run depend on the machine)."""
-        from .client import LoopLink, PartClient, TcpLink
-        from .sim_robot import SimRobotProgram
+        from feeder_bt.plant.client import LoopLink, PartClient, TcpLink
+        from feeder_bt.plant.sim_robot import SimRobotProgram
         cell = self.cell
         assert self.desk is not None and cell.scenario is not None
         if isinstance(cell.clock, SimClock) and self.fast:
@@ -132,7 +132,7 @@ class PlantAdapters:
 
     def _robot_port(self, text: str) -> None:
         """The simulated robot's port for an outside program (--sim-robot-port)."""
-        from .robot_port import RobotPort
+        from feeder_bt.plant.robot_port import RobotPort
         cell, opts = self.cell, self.opts
         if opts.sim_robot or getattr(cell.hal, "world", None) is None:
             raise FeederError("--sim-robot-port: with --no-sim-robot on the simulated cell "

@@ -25,9 +25,9 @@ from collections import deque
 from collections.abc import Hashable
 from typing import Protocol
 
-from ..clock import Clock
-from ..errors import FeederError
-from ..part_protocol import (
+from feeder_bt.clock import Clock
+from feeder_bt.errors import FeederError
+from feeder_bt.part_protocol import (
     MAX_LINE,
     Offer,
     ProtocolError,
@@ -111,7 +111,7 @@ class LoopLink:
     def send(self, line: str) -> None:
         if self.closed:
             raise PartServerError("link closed")
-        from ..behaviours.serve import Pending
+        from feeder_bt.behaviours.serve import Pending
 
         def answer(text: str) -> None:
             self.sent.pop(id(item), None)
@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     each line of standard input) and print each reply — a robot's side, by hand."""
     import sys
 
-    from .adapters import parse_hostport
+    from feeder_bt.plant.adapters import parse_hostport
     args = sys.argv[1:] if argv is None else argv
     if not args or args[0] in ("-h", "--help"):
         print(main.__doc__)

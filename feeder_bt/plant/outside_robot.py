@@ -16,7 +16,7 @@ import argparse
 import sys
 import threading
 
-from .client import PartClient, PartServerError, TcpLink
+from feeder_bt.plant.client import PartClient, PartServerError, TcpLink
 
 
 def _hostport(text: str) -> tuple[str, int]:

@@ -158,6 +158,8 @@ def _check_only_for(ctx: Any, kind: str, path: str) -> None:
 
 def load_fault_plan(path: str | Path) -> FaultPlanSpec:
     """Load and validate a fault plan (see ``feeder_bt.scenario.loader.load_fault_plan``)."""
-    from .loader import load_fault_plan as load  # the loader imports this module's classes
+    from feeder_bt.scenario.loader import (
+        load_fault_plan as load,  # the loader imports this module's classes
+    )
 
     return load(path)

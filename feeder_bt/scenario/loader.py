@@ -150,7 +150,7 @@ def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _C
         ctx.collect(_check_cell, cell, ctx)
     ctx.raise_problems()
     if calibration_files:
-        from ..calibration.files import apply_calibration_file, apply_robot_frame_file
+        from feeder_bt.calibration.files import apply_calibration_file, apply_robot_frame_file
         cell = apply_calibration_file(cell, line=ctx.line("camera.calibration_file"))
         cell = apply_robot_frame_file(cell, line=ctx.line("robot.frame_file"))
     return cell, ctx
@@ -178,7 +178,7 @@ def load_scenario(path: str | Path, cell: str | Path | None = None,
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
     if overlay is not None:
-        from .overlay import apply_overlay
+        from feeder_bt.scenario.overlay import apply_overlay
         root = apply_overlay(root, overlay, ctx, _compose, _Ctx)
     cell_path = ctx.collect(_cell_path, path, root, ctx, cell)
     scenario = ctx.collect(ctx.dataclass, Scenario, root, "",

@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .plate_model import PlatePolicy, PlateSpec
+from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
 
 # ---------------------------------------------------------------------------- parts
 

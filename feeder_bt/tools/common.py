@@ -8,13 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..didyoumean import hint
-from ..errors import FeederError
-from ..scenario import load_scenario
-from ..scenario.model import CellSpec, Scenario
-from ..scenario.plugins import load_class
-from ..vision.calibration import Calibration
-from ..vision.locator import Locator
+from feeder_bt.didyoumean import hint
+from feeder_bt.errors import FeederError
+from feeder_bt.scenario import load_scenario
+from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.scenario.plugins import load_class
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.locator import Locator
 
 
 class BadInput(FeederError):

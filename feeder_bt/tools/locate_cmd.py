@@ -16,9 +16,15 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from ..vision.diagnose import why_nothing
-from ..vision.locator import Detection
-from .common import check_size, load_golden, read_image, scenario_locator, write_image
+from feeder_bt.tools.common import (
+    check_size,
+    load_golden,
+    read_image,
+    scenario_locator,
+    write_image,
+)
+from feeder_bt.vision.diagnose import why_nothing
+from feeder_bt.vision.locator import Detection
 
 #: Features shown in the table (all are in the JSON).
 TABLE_FEATURES = ("area_mm2", "circularity", "aspect", "holes")

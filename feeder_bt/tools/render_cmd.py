@@ -18,16 +18,16 @@ from typing import Any
 
 import numpy as np
 
-from ..cell import Cell, CellState
-from ..clock import SimClock
-from ..geometry import outer, place_outline
-from ..hal.interfaces import Frame
-from ..hal.sim.devices import make_sim_hal
-from ..jobs import Job
-from ..scenario import load_scenario
-from ..ticker import Ticker
-from ..vision.calibration import Calibration
-from .common import BadInput, write_image
+from feeder_bt.cell import Cell, CellState
+from feeder_bt.clock import SimClock
+from feeder_bt.geometry import outer, place_outline
+from feeder_bt.hal.interfaces import Frame
+from feeder_bt.hal.sim.devices import make_sim_hal
+from feeder_bt.jobs import Job
+from feeder_bt.scenario import load_scenario
+from feeder_bt.ticker import Ticker
+from feeder_bt.tools.common import BadInput, write_image
+from feeder_bt.vision.calibration import Calibration
 
 MAX_RUN_S = 900.0          # virtual seconds to wait for enough frames with parts in them
 STOP_GRACE_S = 30.0

@@ -10,10 +10,10 @@ import sqlite3
 import sys
 from typing import Any
 
-from ..eventlog import EventLogError, open_readonly
-from ..treelog import STATUS_NAMES, TraceView, TreeState, read_trace
-from ..vocabulary import MISS_KINDS
-from .runs_db import run_ids
+from feeder_bt.eventlog import EventLogError, open_readonly
+from feeder_bt.tools.runs_db import run_ids
+from feeder_bt.treelog import STATUS_NAMES, TraceView, TreeState, read_trace
+from feeder_bt.vocabulary import MISS_KINDS
 
 MARK = {"invalid": "[-]", "running": "[*]", "success": "[✓]", "failure": "[✕]"}
 SHAPE = {"sequence": "{-}", "selector": "{o}", "parallel": "/_/", "decorator": "-^-",
@@ -35,7 +35,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="draw this tree (default: the one ticked at that time)")
     p.add_argument("--json", action="store_true", help="print the state as JSON")
     def bind(text: str) -> str:
-        from ..ui import parse_bind
+        from feeder_bt.ui import parse_bind
         parse_bind(text)                 # a usage mistake: one line, exit 2
         return text
 
@@ -140,7 +140,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             raise EventLogError(f"run {run_id} has no recorded trees (a run logged before "
                                 "the trees' history was recorded)")
         if args.ui:
-            from ..ui.replay import serve_replay
+            from feeder_bt.ui.replay import serve_replay
             return serve_replay(args.db, run_id, args.ui, args.users)
         t, what = pick_time(conn, run_id, view, args.at, args.before_fault)
         state = view.at(t)

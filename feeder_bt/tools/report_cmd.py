@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..eventlog import ACCESS_KINDS, EventLogError, open_readonly
-from ..kits import describe_kits
-from .runs_db import run_ids, summary
+from feeder_bt.eventlog import ACCESS_KINDS, EventLogError, open_readonly
+from feeder_bt.kits import describe_kits
+from feeder_bt.tools.runs_db import run_ids, summary
 
 COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
            "located", "missed", "lost", "misoriented", "scrapped", "faults", "misses")
@@ -43,7 +43,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     if args.study or args.db is None:
         if args.db is not None or args.study is None:
             raise EventLogError("give an event log FILE.db or --study FILE.db (one of them)")
-        from ..tuning.report import report_study
+        from feeder_bt.tuning.report import report_study
         return report_study(args.study, args.plot)
     conn = open_readonly(args.db)
     try:
@@ -124,7 +124,7 @@ def write_plot(conn: Any, run_id: int, out: str | Path) -> None:
         import matplotlib  # noqa: F401
     except ImportError:
         raise EventLogError("--plot needs matplotlib: pip install 'matplotlib>=3.7'") from None
-    from .plots import plot_run
+    from feeder_bt.tools.plots import plot_run
     fig = plot_run(conn, run_id)
     try:
         Path(out).parent.mkdir(parents=True, exist_ok=True)

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from ..eventlog import EventLogError
-from ..vocabulary import MISS_KINDS, split, story
+from feeder_bt.eventlog import EventLogError
+from feeder_bt.vocabulary import MISS_KINDS, split, story
 
 
 @dataclass

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import outer, polygon_area, pose_outline, rings
-from ..scenario.model import Scenario
-from ..vision.features import FEATURES
-from ..vision.locator import Locator
-from .common import BadInput, check_size, load_golden, read_image, scenario_locator
+from feeder_bt.geometry import outer, polygon_area, pose_outline, rings
+from feeder_bt.scenario.model import Scenario
+from feeder_bt.tools.common import BadInput, check_size, load_golden, read_image, scenario_locator
+from feeder_bt.vision.features import FEATURES
+from feeder_bt.vision.locator import Locator
 
 FEW_SAMPLES = 20            # fewer good blobs than this: say the ranges may be too narrow
 OUTLIER_AREA = 0.20        # good-image blobs further than this from the median area are not samples

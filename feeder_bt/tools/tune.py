@@ -13,9 +13,9 @@ import time
 from contextlib import ExitStack
 from typing import Any
 
-from ..argtypes import non_negative, positive, positive_int
-from ..errors import FeederError
-from ..tuning.space import SPACES
+from feeder_bt.argtypes import non_negative, positive, positive_int
+from feeder_bt.errors import FeederError
+from feeder_bt.tuning.space import SPACES
 
 DEFAULT_STUDY = "runs/tune.db"
 
@@ -86,7 +86,7 @@ def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, 
         return client.get_executor(pure=False), workers, f"Dask {args.dask}, {workers} workers"
     workers = args.workers or os.cpu_count() or 1
     if workers == 1:
-        from ..tuning.search import InlineExecutor
+        from feeder_bt.tuning.search import InlineExecutor
         return InlineExecutor(), 1, "this process"
     ctx = multiprocessing.get_context("forkserver")
     pool = stack.enter_context(cf.ProcessPoolExecutor(workers, mp_context=ctx))
@@ -94,8 +94,8 @@ def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, 
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
-    from ..tuning.progress import TrialProgress
-    from ..tuning.search import TuneConfig, best_overlay, describe, run_search, unit_of
+    from feeder_bt.tuning.progress import TrialProgress
+    from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search, unit_of
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
                      supply=args.supply, sampler_seed=args.sampler_seed,
@@ -116,7 +116,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
           f"{time.monotonic() - wall0:.0f} s wall)")
     if args.out:
-        from ..scenario.overlay import write_overlay
+        from feeder_bt.scenario.overlay import write_overlay
         header = (f"feeder tune {args.scenario}: best of study {study.study_name!r} in "
                   f"{args.study}\ntrial {best.number}: {best.value:.2f} {unit}, the mean "
                   f"of seeds 1-{args.seeds} ({per_seed}), {args.duration:g} s each"
@@ -128,5 +128,5 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 
 def main() -> None:  # pragma: no cover - `python -m feeder_bt.tools.tune` for debugging
-    from ..cli import main as cli_main
+    from feeder_bt.cli import main as cli_main
     sys.exit(cli_main(["tune", *sys.argv[1:]]))

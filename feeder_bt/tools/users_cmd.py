@@ -17,8 +17,8 @@ import json
 import sys
 from typing import Any
 
-from ..ui.access import SETTINGS, Settings, parse_setting
-from ..ui.users import (
+from feeder_bt.ui.access import SETTINGS, Settings, parse_setting
+from feeder_bt.ui.users import (
     ROLES,
     UsersError,
     UsersFile,

@@ -1,5 +1,5 @@
 """The four feeding trees and the set-up / clean-up sequences, built from a scenario."""
 
-from .build import build_cleanup, build_feeding, build_setup
+from feeder_bt.trees.build import build_cleanup, build_feeding, build_setup
 
 __all__ = ["build_feeding", "build_setup", "build_cleanup"]

@@ -6,9 +6,9 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Sequence
 
-from ..behaviours.adjust import Adjust, CheckDrift
-from ..behaviours.common import Ctx, Wait
-from . import plate
+from feeder_bt.behaviours.adjust import Adjust, CheckDrift
+from feeder_bt.behaviours.common import Ctx, Wait
+from feeder_bt.trees import plate
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:

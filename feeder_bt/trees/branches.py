@@ -10,8 +10,8 @@ from collections.abc import Sequence as Seq
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
-from ..behaviours.present import FirstJamIn
+from feeder_bt.behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from feeder_bt.behaviours.present import FirstJamIn
 
 
 def link_lost(ctx: Ctx, key: str,

@@ -10,13 +10,13 @@ from py_trees.common import ParallelPolicy, Status
 from py_trees.composites import Parallel, Selector, Sequence
 from py_trees.decorators import SuccessIsRunning
 
-from ..behaviours.common import Ctx, ErrorIs, Wait
-from ..behaviours.locate import GrabGolden
-from ..behaviours.plate import InitPlate, PurgePlate, init_plate_keys
-from ..behaviours.present import StopConveyors
-from ..behaviours.retrieve import MoveSafe, PhaseIs, Reconcile, Recover, SetRobotSpeed
-from ..behaviours.setup import ClearWindow, SetSignal, SyncEncoders
-from . import adjust, locate, plate, present, retrieve
+from feeder_bt.behaviours.common import Ctx, ErrorIs, Wait
+from feeder_bt.behaviours.locate import GrabGolden
+from feeder_bt.behaviours.plate import InitPlate, PurgePlate, init_plate_keys
+from feeder_bt.behaviours.present import StopConveyors
+from feeder_bt.behaviours.retrieve import MoveSafe, PhaseIs, Reconcile, Recover, SetRobotSpeed
+from feeder_bt.behaviours.setup import ClearWindow, SetSignal, SyncEncoders
+from feeder_bt.trees import adjust, locate, plate, present, retrieve
 
 SETTLE_S = 0.25        # after the conveyors stop, before the encoders are tied together
 

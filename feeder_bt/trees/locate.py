@@ -8,8 +8,8 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
-from ..behaviours.locate import (
+from feeder_bt.behaviours.common import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
+from feeder_bt.behaviours.locate import (
     AdvanceIfNothing,
     ClearForGolden,
     Enqueue,
@@ -19,10 +19,10 @@ from ..behaviours.locate import (
     Recognise,
     WaitTravel,
 )
-from ..behaviours.plate import AskPlate
-from ..scenario.plugins import load_class
-from . import plate
-from .branches import link_lost
+from feeder_bt.behaviours.plate import AskPlate
+from feeder_bt.scenario.plugins import load_class
+from feeder_bt.trees import plate
+from feeder_bt.trees.branches import link_lost
 
 KEY = "/locate/error"
 

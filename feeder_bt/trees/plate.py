@@ -14,9 +14,15 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from ..behaviours.common import Ctx, Escalate
-from ..behaviours.plate import ChoosePlateAction, InitPlate, ResetPlate, ServePlate, WaitLook
-from .branches import link_lost, once_a_minute
+from feeder_bt.behaviours.common import Ctx, Escalate
+from feeder_bt.behaviours.plate import (
+    ChoosePlateAction,
+    InitPlate,
+    ResetPlate,
+    ServePlate,
+    WaitLook,
+)
+from feeder_bt.trees.branches import link_lost, once_a_minute
 
 KEY = "/present/error"
 

@@ -10,10 +10,10 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
-from ..behaviours.present import RunConveyors, ServeAdvance, Shake, StopConveyors
-from . import plate
-from .branches import link_lost, once_a_minute
+from feeder_bt.behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
+from feeder_bt.behaviours.present import RunConveyors, ServeAdvance, Shake, StopConveyors
+from feeder_bt.trees import plate
+from feeder_bt.trees.branches import link_lost, once_a_minute
 
 KEY = "/present/error"
 

@@ -14,8 +14,8 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
-from ..behaviours.common import CountFault, Ctx, ErrorIs, Escalate
-from ..behaviours.retrieve import (
+from feeder_bt.behaviours.common import CountFault, Ctx, ErrorIs, Escalate
+from feeder_bt.behaviours.retrieve import (
     FailedPicksBelow,
     FollowRobotSpeed,
     Holding,
@@ -27,8 +27,8 @@ from ..behaviours.retrieve import (
     Reconcile,
     Recover,
 )
-from ..scenario.plugins import load_class
-from .branches import link_lost
+from feeder_bt.scenario.plugins import load_class
+from feeder_bt.trees.branches import link_lost
 
 KEY = "/retrieve/error"
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"

@@ -12,10 +12,10 @@ import py_trees
 from py_trees.common import ParallelPolicy
 from py_trees.composites import Parallel
 
-from ..behaviours.common import Ctx
-from ..behaviours.serve import Desk, ServeRobots
-from . import adjust, locate, present
-from .build import Loop, build_cleanup, build_setup
+from feeder_bt.behaviours.common import Ctx
+from feeder_bt.behaviours.serve import Desk, ServeRobots
+from feeder_bt.trees import adjust, locate, present
+from feeder_bt.trees.build import Loop, build_cleanup, build_setup
 
 
 def build_serving(ctx: Ctx, desk: Desk) -> py_trees.behaviour.Behaviour:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from typing import Any, TextIO
 
-from .search import TrialResult, describe
+from feeder_bt.tuning.search import TrialResult, describe
 
 AS_WRITTEN = " (the scenario as written)"
 

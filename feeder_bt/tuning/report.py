@@ -8,8 +8,8 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-from ..errors import FeederError
-from .search import unit_of
+from feeder_bt.errors import FeederError
+from feeder_bt.tuning.search import unit_of
 
 
 class StudyError(FeederError):
@@ -63,7 +63,7 @@ def importances(study: Any) -> dict[str, float]:
 def summary_lines(study: Any) -> list[str]:
     from optuna.trial import TrialState
 
-    from .search import describe
+    from feeder_bt.tuning.search import describe
     trials = study.get_trials(deepcopy=False)
     done = [t for t in trials if t.state is TrialState.COMPLETE]
     failed = sum(t.state is TrialState.FAIL for t in trials)

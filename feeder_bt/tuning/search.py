@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import FeederError
-from .objective import Job, evaluate
-from .space import GRID_MIN_TRIALS, Limits, grid_space, start_params, suggest
+from feeder_bt.errors import FeederError
+from feeder_bt.tuning.objective import Job, evaluate
+from feeder_bt.tuning.space import GRID_MIN_TRIALS, Limits, grid_space, start_params, suggest
 
 INTERRUPTED = "interrupted"
 
@@ -157,7 +157,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     """
     from optuna.trial import TrialState
 
-    from ..scenario import load_scenario
+    from feeder_bt.scenario import load_scenario
     if cfg.grid and cfg.space != "fixed":
         raise TuneError(f"--grid searches the fixed space (two speeds), not {cfg.space!r}")
     if cfg.grid and cfg.trials < GRID_MIN_TRIALS:

@@ -11,17 +11,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..cell import Cell
-from ..vision.calibration import Calibration
-from ..vision.latest import LatestLook
-from .access import Settings
-from .belt import BeltPanel
-from .bridge import Bridge, Snapshot
-from .camera import CameraFeed
-from .operate import CellOps
-from .server import UiApp, UiServer, make_notice
-from .status import CellPanel
-from .users import UsersError, UsersFile, group_or_world_readable
+from feeder_bt.cell import Cell
+from feeder_bt.ui.access import Settings
+from feeder_bt.ui.belt import BeltPanel
+from feeder_bt.ui.bridge import Bridge, Snapshot
+from feeder_bt.ui.camera import CameraFeed
+from feeder_bt.ui.operate import CellOps
+from feeder_bt.ui.server import UiApp, UiServer, make_notice
+from feeder_bt.ui.status import CellPanel
+from feeder_bt.ui.users import UsersError, UsersFile, group_or_world_readable
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.latest import LatestLook
 
 _WARNED: set[Path] = set()
 

@@ -30,10 +30,10 @@ from starlette.requests import HTTPConnection, Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from ..vision.calibration import Calibration
-from ..vision.latest import KEY, LatestLook, Look
-from ..vision.overlay import draw
-from .responses import json_response, refuse
+from feeder_bt.ui.responses import json_response, refuse
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.latest import KEY, LatestLook, Look
+from feeder_bt.vision.overlay import draw
 
 JPEG_QUALITY = 80
 

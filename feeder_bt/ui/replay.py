@@ -23,16 +23,16 @@ from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from ..errors import FeederError
-from ..eventlog import open_readonly
-from ..treelog import TraceView, read_trace
-from . import parse_bind
-from .access import Gate, Settings, allowed_hosts
-from .conns import ConnGate, ConnLimits, quiet_logger
-from .replay_login import ReplayLogin
-from .responses import SecurityHeaders
-from .serve import _bind, is_loopback, make_notice, uvicorn_config
-from .treedata import tree_routes
+from feeder_bt.errors import FeederError
+from feeder_bt.eventlog import open_readonly
+from feeder_bt.treelog import TraceView, read_trace
+from feeder_bt.ui import parse_bind
+from feeder_bt.ui.access import Gate, Settings, allowed_hosts
+from feeder_bt.ui.conns import ConnGate, ConnLimits, quiet_logger
+from feeder_bt.ui.replay_login import ReplayLogin
+from feeder_bt.ui.responses import SecurityHeaders
+from feeder_bt.ui.serve import _bind, is_loopback, make_notice, uvicorn_config
+from feeder_bt.ui.treedata import tree_routes
 
 STATIC = Path(__file__).parent / "static"
 
@@ -65,7 +65,7 @@ def serve_replay(db: str | Path, run_id: int, bind: str,
     """Serve until Ctrl-C; the line ``replay UI: URL`` on standard error says where."""
     import uvicorn
 
-    from .app import check_users
+    from feeder_bt.ui.app import check_users
     try:
         host, port = parse_bind(bind)
     except argparse.ArgumentTypeError as e:

@@ -18,11 +18,18 @@ from starlette.requests import HTTPConnection, Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from .access import Settings
-from .control import Session, Sessions, retry_after
-from .guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
-from .responses import client_ip, json_body, json_response, refuse, same_origin
-from .users import MAX_PASSWORD, NAME_RE, UsersError, UsersFile, _dummy_hash, verify_password
+from feeder_bt.ui.access import Settings
+from feeder_bt.ui.control import Session, Sessions, retry_after
+from feeder_bt.ui.guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
+from feeder_bt.ui.responses import client_ip, json_body, json_response, refuse, same_origin
+from feeder_bt.ui.users import (
+    MAX_PASSWORD,
+    NAME_RE,
+    UsersError,
+    UsersFile,
+    _dummy_hash,
+    verify_password,
+)
 
 COOKIE = "feeder_replay_session"
 MAX_BODY = 16 * 1024

@@ -26,11 +26,11 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from ..errors import FeederError
-from .conns import ConnGate, ConnLimits, backlog, quiet_logger
+from feeder_bt.errors import FeederError
+from feeder_bt.ui.conns import ConnGate, ConnLimits, backlog, quiet_logger
 
 if TYPE_CHECKING:
-    from .server import UiApp
+    from feeder_bt.ui.server import UiApp
 
 
 def _bind(host: str, port: int) -> socket.socket:

@@ -16,8 +16,8 @@ from starlette.requests import Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from ..treelog import TraceView
-from .responses import json_response, refuse
+from feeder_bt.treelog import TraceView
+from feeder_bt.ui.responses import json_response, refuse
 
 Guard = Callable[[Request], Response | None]
 

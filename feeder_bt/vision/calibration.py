@@ -31,7 +31,7 @@ import math
 import cv2
 import numpy as np
 
-from ..scenario.model import CameraCalibration
+from feeder_bt.scenario.model import CameraCalibration
 
 
 class Calibration:
@@ -199,7 +199,7 @@ class PixelGrid:
         """``(N, 2)`` pixels -> belt mm ``(N, 2)`` and mm per px ``(N,)`` (as
         ``Calibration.px_to_mm_scale``; points off the table are extrapolated linearly).
         Each point: its cell's bilinear form's coefficients of 1, fu, fv and fu·fv."""
-        from .jit import kernels
+        from feeder_bt.vision.jit import kernels
         uv = np.ascontiguousarray(np.asarray(uv, dtype=float).reshape(-1, 2))
         out = kernels().map_points(uv, 1, self._cells, self._par)
         return out[:, :2], out[:, 2]

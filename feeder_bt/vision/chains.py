@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .jit import kernels
+from feeder_bt.vision.jit import kernels
 
 WINDOW = 5                     # points in the moving average of the smoothed perimeter
 

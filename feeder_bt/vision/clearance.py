@@ -15,10 +15,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..gripper import footprint, grip_poses
-from ..scenario.model import PartSpec
-from .blobs import Blob
-from .calibration import Calibration
+from feeder_bt.gripper import footprint, grip_poses
+from feeder_bt.scenario.model import PartSpec
+from feeder_bt.vision.blobs import Blob
+from feeder_bt.vision.calibration import Calibration
 
 
 def offer_grips(blobs: list[Blob], parts: dict[str, PartSpec],

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import pose_outline, wrap_deg
-from ..scenario.model import PartSpec
-from .jit import kernels
+from feeder_bt.geometry import pose_outline, wrap_deg
+from feeder_bt.scenario.model import PartSpec
+from feeder_bt.vision.jit import kernels
 
 
 @dataclass

@@ -13,7 +13,7 @@ from collections import Counter
 
 import numpy as np
 
-from .locator import LocateResult, Locator
+from feeder_bt.vision.locator import LocateResult, Locator
 
 
 def why_nothing(locator: Locator, image: np.ndarray, result: LocateResult,

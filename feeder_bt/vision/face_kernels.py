@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from .jit import _jit
-from .kernels import _to_mm, convex_hull, min_rect
+from feeder_bt.vision.jit import _jit
+from feeder_bt.vision.kernels import _to_mm, convex_hull, min_rect
 
 # how ``faces`` reads the image in which parts are bright at a pixel (``Segmenter._diff_at``)
 DIFF, GOLDEN_LIGHT, GOLDEN_DARK, PLAIN_LIGHT, PLAIN_DARK = range(5)

@@ -15,7 +15,7 @@ def kernels() -> ModuleType:
     """``feeder_bt.vision.kernels``, imported the first time it is asked for."""
     global _mod
     if _mod is None:
-        from . import kernels as mod
+        from feeder_bt.vision import kernels as mod
         _mod = mod
     return _mod
 

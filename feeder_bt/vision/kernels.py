@@ -35,8 +35,8 @@ import math
 
 import numpy as np
 
-from .bit_kernels import packed_morph  # noqa: F401
-from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
+from feeder_bt.vision.bit_kernels import packed_morph  # noqa: F401
+from feeder_bt.vision.contour_kernels import (  # noqa: F401  (the locator reads them all here)
     GOLDEN_MINUS,
     MINUS_GOLDEN,
     PLAIN,
@@ -45,7 +45,7 @@ from .contour_kernels import (  # noqa: F401  (the locator reads them all here)
     pack_rois,
     place_contours,
 )
-from .jit import _jit
+from feeder_bt.vision.jit import _jit
 
 _DB1_6 = 0.16666666666666666666666666666667          # cv2.moments' constant
 _FLT_EPSILON = 1.1920928955078125e-07
@@ -388,7 +388,7 @@ def _hull_stats(pts, hull, a, b, row):
 
 
 # the faces' kernels use this module's mapping, hull and rectangle: imported last
-from .face_kernels import (  # noqa: E402, F401  (the locator reads them all here)
+from feeder_bt.vision.face_kernels import (  # noqa: E402, F401  (the locator reads them all here)
     DIFF,
     GOLDEN_DARK,
     GOLDEN_LIGHT,

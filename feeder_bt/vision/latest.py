@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..hal.interfaces import Frame
+from feeder_bt.hal.interfaces import Frame
 
 KEY = "latest_look"            # where the slot sits in ``Ctx.extras`` when someone watches
 

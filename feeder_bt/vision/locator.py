@@ -52,9 +52,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..geometry import wrap_deg
-from ..scenario.model import PartSpec, VisionClass, VisionRecipe
-from .blobs import (
+from feeder_bt.geometry import wrap_deg
+from feeder_bt.scenario.model import PartSpec, VisionClass, VisionRecipe
+from feeder_bt.vision.blobs import (
     Blob,
     Detection,
     _hull_stats,
@@ -63,16 +63,22 @@ from .blobs import (
     measure_feature,
     principal_angle,
 )
-from .calibration import Calibration, PixelGrid
-from .clearance import offer_grips
-from .corners import _CornerSignature, _cut_corner, _orient, _part_signature, _signature_rows
-from .features import FEATURES, GROUP_OF
-from .jit import kernels, warm
-from .outline import OutlineModel, orient_outline
-from .overlay import draw
-from .rulers import measure as measure_ruler
-from .segment import Segmenter, to_grey
-from .split import split_blob
+from feeder_bt.vision.calibration import Calibration, PixelGrid
+from feeder_bt.vision.clearance import offer_grips
+from feeder_bt.vision.corners import (
+    _CornerSignature,
+    _cut_corner,
+    _orient,
+    _part_signature,
+    _signature_rows,
+)
+from feeder_bt.vision.features import FEATURES, GROUP_OF
+from feeder_bt.vision.jit import kernels, warm
+from feeder_bt.vision.outline import OutlineModel, orient_outline
+from feeder_bt.vision.overlay import draw
+from feeder_bt.vision.rulers import measure as measure_ruler
+from feeder_bt.vision.segment import Segmenter, to_grey
+from feeder_bt.vision.split import split_blob
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 

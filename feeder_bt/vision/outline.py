@@ -26,9 +26,9 @@ import math
 import cv2
 import numpy as np
 
-from ..geometry import outer, place_outline, pose_outline, wrap_deg
-from ..scenario.model import PartSpec
-from .corners import _face_up
+from feeder_bt.geometry import outer, place_outline, pose_outline, wrap_deg
+from feeder_bt.scenario.model import PartSpec
+from feeder_bt.vision.corners import _face_up
 
 RES_MM = 0.5              # raster of the overlap score
 ISOTROPIC = 1.08          # inertia ratio under which the principal axis is not trusted

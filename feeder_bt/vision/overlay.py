@@ -11,8 +11,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .calibration import Calibration
-from .segment import to_grey
+from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.segment import to_grey
 
 ARROW_MM = 25.0                 # the angle arrow's length in the belt frame
 PART = (0, 200, 0)              # BGR: located parts

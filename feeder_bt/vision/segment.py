@@ -22,9 +22,9 @@ import threading
 import cv2
 import numpy as np
 
-from ..scenario.model import VisionRecipe
-from .chains import Contours, _with_holes
-from .jit import kernels
+from feeder_bt.scenario.model import VisionRecipe
+from feeder_bt.vision.chains import Contours, _with_holes
+from feeder_bt.vision.jit import kernels
 
 
 class Segmenter:

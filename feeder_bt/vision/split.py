@@ -19,7 +19,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .blobs import Blob
+from feeder_bt.vision.blobs import Blob
 
 CORE = 0.7                   # a marker: pixels farther than this of the maximum distance
 

@@ -22,7 +22,7 @@ from collections import Counter
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .locator import LocateResult
+    from feeder_bt.vision.locator import LocateResult
 
 AFTER_S = 30.0              # blobs and no match for this long: say so
 REPEAT_S = 30.0             # and again this often while it lasts

@@ -29,11 +29,11 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .task import VError
-from .trans import BeltLoc, Trans
+from feeder_bt.emulators.vplus.task import VError
+from feeder_bt.emulators.vplus.trans import BeltLoc, Trans
 
 if TYPE_CHECKING:
-    from .runtime import Runtime
+    from feeder_bt.emulators.vplus.runtime import Runtime
 
 ERR_POWER_OFF = -604
 ERR_RANGE = -610

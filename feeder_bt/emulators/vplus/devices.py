@@ -25,11 +25,11 @@ import threading
 import time
 from typing import TYPE_CHECKING
 
-from ...hal.adept import protocol as P
-from .task import Killed, VError
+from feeder_bt.emulators.vplus.task import Killed, VError
+from feeder_bt.hal.adept import protocol as P
 
 if TYPE_CHECKING:
-    from .runtime import Runtime
+    from feeder_bt.emulators.vplus.runtime import Runtime
 
 ST_DATA, ST_CONNECT, ST_CLOSED, ST_NODATA, ST_BROKEN = 1, 100, 101, -526, -527
 MOTIONS = ("PICK", "PLACE", "MOVE", "SAFE")

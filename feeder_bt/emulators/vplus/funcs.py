@@ -18,7 +18,7 @@ import math
 import re
 from typing import Any
 
-from ...hal.adept import protocol as P
+from feeder_bt.hal.adept import protocol as P
 
 ERROR_TEXTS = {code: text for code, (text, _) in P.VPLUS_ERRORS.items()}
 ERROR_TEXTS.update({

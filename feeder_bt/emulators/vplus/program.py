@@ -13,7 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .parse import Parser, SyntaxErr, compile_expr, compile_ref, strip_comment, tokenize
+from feeder_bt.emulators.vplus.parse import (
+    Parser,
+    SyntaxErr,
+    compile_expr,
+    compile_ref,
+    strip_comment,
+    tokenize,
+)
 
 _PROGRAM = re.compile(r"^\s*\.PROGRAM\s+([\w.]+)\s*\((.*)\)\s*$", re.IGNORECASE)
 _IO = {"attach", "fopen", "fcmnd", "fclose", "detach", "read", "write"}

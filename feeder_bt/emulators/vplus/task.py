@@ -21,11 +21,11 @@ from __future__ import annotations
 import threading
 from typing import TYPE_CHECKING, Any
 
-from .parse import truth
-from .program import Instr, Program
+from feeder_bt.emulators.vplus.parse import truth
+from feeder_bt.emulators.vplus.program import Instr, Program
 
 if TYPE_CHECKING:
-    from .runtime import Runtime
+    from feeder_bt.emulators.vplus.runtime import Runtime
 
 
 class VError(Exception):

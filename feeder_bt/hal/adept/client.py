@@ -17,9 +17,9 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from ...errors import CommsLost
-from . import protocol
-from .protocol import Command, ProtocolError
+from feeder_bt.errors import CommsLost
+from feeder_bt.hal.adept import protocol
+from feeder_bt.hal.adept.protocol import Command, ProtocolError
 
 BACKOFF_MIN_S = 0.1
 BACKOFF_MAX_S = 2.0

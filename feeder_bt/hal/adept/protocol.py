@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ...errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
-from ..interfaces import Held, Pose
+from feeder_bt.errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
+from feeder_bt.hal.interfaces import Held, Pose
 
 PROTOCOL_VERSION = 1
 MAX_LINE = 256                       # longest line either side sends (V+ READ buffer)

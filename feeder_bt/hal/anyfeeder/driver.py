@@ -18,12 +18,20 @@ from concurrent.futures import ThreadPoolExecutor
 
 import serial
 
-from ...clock import Clock
-from ...errors import CommsLost, HalError, PlateFault
-from ...jobs import DoneJob, FutureJob, Job
-from ...scenario.plate_model import PlateSpec
-from ..interfaces import PlateStatus
-from .protocol import BUSY, CR, DONE, ProtocolError, Reply, command_line, parse_reply
+from feeder_bt.clock import Clock
+from feeder_bt.errors import CommsLost, HalError, PlateFault
+from feeder_bt.hal.anyfeeder.protocol import (
+    BUSY,
+    CR,
+    DONE,
+    ProtocolError,
+    Reply,
+    command_line,
+    parse_reply,
+)
+from feeder_bt.hal.interfaces import PlateStatus
+from feeder_bt.jobs import DoneJob, FutureJob, Job
+from feeder_bt.scenario.plate_model import PlateSpec
 
 READ_POLL_S = 0.05
 

@@ -12,8 +12,8 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from ...errors import ConfigError, GrabFailed
-from ...scenario.model import CameraSpec
+from feeder_bt.errors import ConfigError, GrabFailed
+from feeder_bt.scenario.model import CameraSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 
@@ -111,7 +111,7 @@ def open_source(spec: str, camera: CameraSpec | None = None) -> FrameSource:
     """The cell description's ``camera.source``: a device index, a URL, a folder or a file,
     or ``pylon:SERIAL`` (a GenICam camera set from ``camera.pylon``)."""
     if spec.startswith("pylon:"):
-        from .pylon import PylonSource
+        from feeder_bt.hal.camera.pylon import PylonSource
         cam = camera if camera is not None else CameraSpec()
         return PylonSource(spec, cam.pylon, cam.exposure_ms, (cam.width_px, cam.height_px))
     if spec.isdigit() or "://" in spec:

@@ -12,14 +12,11 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from ...clock import Clock
-from ...encoder import diff
-from ...errors import CardFault, ConveyorFault, HalError
-from ...jobs import DoneJob, FutureJob, Job, JobState
-from ...scenario.model import IoSignal
-from ..interfaces import IoChange, speed_refused, watchdog_stopped
-from .driver import RETRY, Delay, GalilController
-from .protocol import (
+from feeder_bt.clock import Clock
+from feeder_bt.encoder import diff
+from feeder_bt.errors import CardFault, ConveyorFault, HalError
+from feeder_bt.hal.galil.driver import RETRY, Delay, GalilController
+from feeder_bt.hal.galil.protocol import (
     DistanceEvent,
     Event,
     GalilError,
@@ -28,6 +25,9 @@ from .protocol import (
     parse_int,
     positional,
 )
+from feeder_bt.hal.interfaces import IoChange, speed_refused, watchdog_stopped
+from feeder_bt.jobs import DoneJob, FutureJob, Job, JobState
+from feeder_bt.scenario.model import IoSignal
 
 COUNTER_BITS = 32
 STALL_S = 2.0                # jogging with no encoder motion this long: a stall

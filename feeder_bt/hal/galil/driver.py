@@ -55,11 +55,10 @@ from typing import Any
 
 import serial
 
-from ...clock import Clock
-from ...encoder import wrap
-from ...errors import CommsLost, ConfigError, ConveyorFault, HalError
-from ...scenario.model import GalilSpec
-from .link import (
+from feeder_bt.clock import Clock
+from feeder_bt.encoder import wrap
+from feeder_bt.errors import CommsLost, ConfigError, ConveyorFault, HalError
+from feeder_bt.hal.galil.link import (
     DEAD,
     Connection,
     Scheduler,
@@ -69,7 +68,7 @@ from .link import (
     set_exception,
     set_result,
 )
-from .protocol import (
+from feeder_bt.hal.galil.protocol import (
     AXES,
     CardEvent,
     DistanceEvent,
@@ -85,7 +84,7 @@ from .protocol import (
     parse_unsolicited,
     read_programs,
 )
-from .startup import (
+from feeder_bt.hal.galil.startup import (
     DIST_NOTIFIER,
     HEALTH_S,
     INPUT_MONITOR,
@@ -93,6 +92,7 @@ from .startup import (
     AxisStatus,
     CardSetup,
 )
+from feeder_bt.scenario.model import GalilSpec
 
 log = logging.getLogger(__name__)
 

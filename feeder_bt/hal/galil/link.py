@@ -15,7 +15,7 @@ from typing import Any
 
 import serial
 
-from .protocol import ProtocolError, Reply, ReplySplitter
+from feeder_bt.hal.galil.protocol import ProtocolError, Reply, ReplySplitter
 
 log = logging.getLogger("feeder_bt.hal.galil.driver")
 

@@ -15,11 +15,11 @@ import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .link import Connection, retrieve
-from .protocol import AXES, THREADS, GalilError, parse_int, positional
+from feeder_bt.hal.galil.link import Connection, retrieve
+from feeder_bt.hal.galil.protocol import AXES, THREADS, GalilError, parse_int, positional
 
 if TYPE_CHECKING:
-    from ...scenario.model import GalilSpec
+    from feeder_bt.scenario.model import GalilSpec
 
 log = logging.getLogger("feeder_bt.hal.galil.driver")
 

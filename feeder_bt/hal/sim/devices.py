@@ -11,16 +11,16 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ...clock import SimClock
-from ...errors import HalError
-from ...jobs import DoneJob, FutureJob, Job
-from ...scenario.model import CellSpec, Scenario
-from ...vision.calibration import Calibration
-from ..interfaces import Frame, Hal, IoChange, PickResult, PickTarget, Pose
-from .axis import Axis
-from .imperfect import true_calibration
-from .render import Renderer
-from .world import World
+from feeder_bt.clock import SimClock
+from feeder_bt.errors import HalError
+from feeder_bt.hal.interfaces import Frame, Hal, IoChange, PickResult, PickTarget, Pose
+from feeder_bt.hal.sim.axis import Axis
+from feeder_bt.hal.sim.imperfect import true_calibration
+from feeder_bt.hal.sim.render import Renderer
+from feeder_bt.hal.sim.world import World
+from feeder_bt.jobs import DoneJob, FutureJob, Job
+from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.vision.calibration import Calibration
 
 
 class TimedJob(Job):
@@ -54,7 +54,7 @@ class SimConveyor:
     def _refused(self, what: str, mm_s: float) -> Job | None:
         """A speed above the cell's ``max_mm_s`` fails the job: the simulated belt never
         clamps silently, so every setting runs under the same limits (issue 16)."""
-        from ..interfaces import speed_refused
+        from feeder_bt.hal.interfaces import speed_refused
         return speed_refused(self.name, what, mm_s, self.axis.max_speed, self.world.cell.path)
 
     def set_speed(self, mm_s: float) -> Job:

@@ -32,12 +32,17 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import CommsLost, ConfigError, ConveyorFault, FeederError, MissedGrab, ServoTimeout
-from ...jobs import DoneJob, Job
-from ...scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
-from ..interfaces import PickTarget, Pose, watchdog_stopped
-from .devices import SimHal, TimedJob
-from .faulty_devices import (
+from feeder_bt.errors import (
+    CommsLost,
+    ConfigError,
+    ConveyorFault,
+    FeederError,
+    MissedGrab,
+    ServoTimeout,
+)
+from feeder_bt.hal.interfaces import PickTarget, Pose, watchdog_stopped
+from feeder_bt.hal.sim.devices import SimHal, TimedJob
+from feeder_bt.hal.sim.faulty_devices import (
     POWER_OFF,
     FaultyCamera,
     FaultyConveyor,
@@ -48,7 +53,9 @@ from .faulty_devices import (
     _event_time,
     _fail_timed,
 )
-from .world import World
+from feeder_bt.hal.sim.world import World
+from feeder_bt.jobs import DoneJob, Job
+from feeder_bt.scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
 
 __all__ = [
     "POWER_OFF", "SERVO_FRACTION", "FaultInjector", "FaultyCamera", "FaultyConveyor",

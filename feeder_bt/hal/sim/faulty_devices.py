@@ -13,14 +13,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from ...errors import GrabFailed, HalError, ServoTimeout
-from ...jobs import DoneJob, Job, JobState
-from ..interfaces import IoChange, PickTarget, Pose
-from .devices import TimedJob
-from .world import World
+from feeder_bt.errors import GrabFailed, HalError, ServoTimeout
+from feeder_bt.hal.interfaces import IoChange, PickTarget, Pose
+from feeder_bt.hal.sim.devices import TimedJob
+from feeder_bt.hal.sim.world import World
+from feeder_bt.jobs import DoneJob, Job, JobState
 
 if TYPE_CHECKING:
-    from .faults import FaultInjector
+    from feeder_bt.hal.sim.faults import FaultInjector
 
 POWER_OFF = "robot power is off: run the recovery program"
 

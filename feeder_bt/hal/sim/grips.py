@@ -19,18 +19,18 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from ...encoder import diff
-from ...errors import EnvelopeError, HalError, MissedGrab
-from ...geometry import near, outer, place_outline, rings, wrap_deg
-from ...gripper import footprint, grip_poses
-from ...jobs import Job
-from ...scara import ScaraModel
-from ...scenario.model import CellSpec, Scenario
-from ..interfaces import Held, PickResult, PickTarget, Pose
-from .accounting import SimPart
-from .axis import Axis
-from .imperfect import Imperfections
-from .passlog import PassLog
+from feeder_bt.encoder import diff
+from feeder_bt.errors import EnvelopeError, HalError, MissedGrab
+from feeder_bt.geometry import near, outer, place_outline, rings, wrap_deg
+from feeder_bt.gripper import footprint, grip_poses
+from feeder_bt.hal.interfaces import Held, PickResult, PickTarget, Pose
+from feeder_bt.hal.sim.accounting import SimPart
+from feeder_bt.hal.sim.axis import Axis
+from feeder_bt.hal.sim.imperfect import Imperfections
+from feeder_bt.hal.sim.passlog import PassLog
+from feeder_bt.jobs import Job
+from feeder_bt.scara import ScaraModel
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 RECYCLE_S = 20.0                # placed parts go back to the hopper after this long
 PLACE_TOL_MM = 10.0             # a part released farther than this from its own type's

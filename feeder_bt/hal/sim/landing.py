@@ -17,11 +17,19 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from ...geometry import is_convex, near, outer, place_outline, polygon_area, pose_outline, wrap_deg
-from ...scenario.model import Scenario
-from .accounting import SimPart
-from .axis import Axis
-from .imperfect import Imperfections
+from feeder_bt.geometry import (
+    is_convex,
+    near,
+    outer,
+    place_outline,
+    polygon_area,
+    pose_outline,
+    wrap_deg,
+)
+from feeder_bt.hal.sim.accounting import SimPart
+from feeder_bt.hal.sim.axis import Axis
+from feeder_bt.hal.sim.imperfect import Imperfections
+from feeder_bt.scenario.model import Scenario
 
 LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp
 EDGE_MARGIN_MM = 28.0           # side rails keep parts this far from the belt edges

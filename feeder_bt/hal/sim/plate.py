@@ -23,17 +23,25 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from ...clock import SimClock
-from ...errors import HalError
-from ...geometry import circumradius, is_convex, outer, place_outline, wrap_deg
-from ...jobs import DoneJob, Job
-from ...robot_model import RobotModel, with_speed_factor
-from ...scenario.model import CellSpec, Scenario
-from ..interfaces import PlateStatus
-from .accounting import SimPart
-from .devices import SimCamera, SimConveyor, SimHal, SimIO, SimRobot, SimRobotPosition, TimedJob
-from .landing import TOUCH_GAP_MM, _grown
-from .world import World
+from feeder_bt.clock import SimClock
+from feeder_bt.errors import HalError
+from feeder_bt.geometry import circumradius, is_convex, outer, place_outline, wrap_deg
+from feeder_bt.hal.interfaces import PlateStatus
+from feeder_bt.hal.sim.accounting import SimPart
+from feeder_bt.hal.sim.devices import (
+    SimCamera,
+    SimConveyor,
+    SimHal,
+    SimIO,
+    SimRobot,
+    SimRobotPosition,
+    TimedJob,
+)
+from feeder_bt.hal.sim.landing import TOUCH_GAP_MM, _grown
+from feeder_bt.hal.sim.world import World
+from feeder_bt.jobs import DoneJob, Job
+from feeder_bt.robot_model import RobotModel, with_speed_factor
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 PURGE_TRANSIT_S = 1.0      # a purged part falls back into the bulk container in this long
 

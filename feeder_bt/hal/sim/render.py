@@ -23,9 +23,9 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from ...geometry import rings
-from ...scenario.model import CameraCalibration, CameraSpec
-from ...vision.calibration import Calibration
+from feeder_bt.geometry import rings
+from feeder_bt.scenario.model import CameraCalibration, CameraSpec
+from feeder_bt.vision.calibration import Calibration
 
 SUPERSAMPLE = 4                      # sub-pixels per pixel, each axis, for anti-aliasing
 _SHIFT = 4                           # fillPoly fractional bits

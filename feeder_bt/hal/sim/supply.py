@@ -20,12 +20,12 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from ...errors import FeederError
-from ...scenario.model import Scenario
-from ...scenario.supply import SupplyPlanSpec, Totes
-from .devices import SimHal
-from .faults import plan_rng
-from .world import World
+from feeder_bt.errors import FeederError
+from feeder_bt.hal.sim.devices import SimHal
+from feeder_bt.hal.sim.faults import plan_rng
+from feeder_bt.hal.sim.world import World
+from feeder_bt.scenario.model import Scenario
+from feeder_bt.scenario.supply import SupplyPlanSpec, Totes
 
 RAMP_STEP_S = 5.0          # a friction ramp changes the lift in steps this long
 

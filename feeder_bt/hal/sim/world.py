@@ -26,20 +26,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...clock import EPS, SimClock
-from ...encoder import wrap
-from ...geometry import circumradius, place_outline
-from ...jobs import Job
-from ...scara import world_arm
-from ...scenario.model import CellSpec, Scenario
-from ..interfaces import Pose
-from .accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
-from .axis import Axis
-from .grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
-from .imperfect import Imperfections
-from .landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
-from .passlog import PassLog
-from .slip import BeltSlip
+from feeder_bt.clock import EPS, SimClock
+from feeder_bt.encoder import wrap
+from feeder_bt.geometry import circumradius, place_outline
+from feeder_bt.hal.interfaces import Pose
+from feeder_bt.hal.sim.accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
+from feeder_bt.hal.sim.axis import Axis
+from feeder_bt.hal.sim.grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
+from feeder_bt.hal.sim.imperfect import Imperfections
+from feeder_bt.hal.sim.landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
+from feeder_bt.hal.sim.passlog import PassLog
+from feeder_bt.hal.sim.slip import BeltSlip
+from feeder_bt.jobs import Job
+from feeder_bt.scara import world_arm
+from feeder_bt.scenario.model import CellSpec, Scenario
 
 __all__ = [
     "AUDIT_EVERY", "EDGE_MARGIN_MM", "LAND_X_MM", "PLACES", "PLACE_TOL_MM", "RECYCLE_S",

@@ -28,12 +28,12 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from ...argtypes import positive
-from ...scenario import load_cell
-from .adept import commission_adept, pick_window
-from .camera import CAMERA_STEPS, commission_camera
-from .common import Asker, CommissionError, Report, load_answers
-from .galil import commission_galil
+from feeder_bt.argtypes import positive
+from feeder_bt.scenario import load_cell
+from feeder_bt.tools.commission.adept import commission_adept, pick_window
+from feeder_bt.tools.commission.camera import CAMERA_STEPS, commission_camera
+from feeder_bt.tools.commission.common import Asker, CommissionError, Report, load_answers
+from feeder_bt.tools.commission.galil import commission_galil
 
 JOG_MM_S = 20.0          # commissioning jogs are slow
 INPUT_WAIT_S = 5.0       # after the person says they acted, how long to look for it

@@ -24,11 +24,11 @@ import time
 from pathlib import Path
 from typing import Any
 
-from ...calibration.files import robot_frame_path, write_calibration_file
-from ...clock import RealClock
-from ...encoder import EncoderSync, FreshAnchor, diff
-from ...scenario.model import CellSpec
-from .common import (
+from feeder_bt.calibration.files import robot_frame_path, write_calibration_file
+from feeder_bt.clock import RealClock
+from feeder_bt.encoder import EncoderSync, FreshAnchor, diff
+from feeder_bt.scenario.model import CellSpec
+from feeder_bt.tools.commission.common import (
     Asker,
     Report,
     active_low,
@@ -38,7 +38,7 @@ from .common import (
     wait,
     wait_for,
 )
-from .frame import FrameFit, fit_frame, frame_record, touch_points
+from feeder_bt.tools.commission.frame import FrameFit, fit_frame, frame_record, touch_points
 
 JOG_S = 1.0
 DRIFT_TOLERANCE_MM = 0.5
@@ -72,8 +72,8 @@ def _signal(cell: CellSpec, name: str, direction: str) -> int | None:
 
 def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.Namespace
                      ) -> None:
-    from ...hal.adept import AdeptController
-    from ...hal.galil import make_galil
+    from feeder_bt.hal.adept import AdeptController
+    from feeder_bt.hal.galil import make_galil
     clock = RealClock()
     ctl, conveyors, _io = make_galil(cell, clock)
     adept = None
@@ -134,7 +134,7 @@ def _vacuum(cell: CellSpec, adept: Any, ask: Asker, wait_s: float) -> dict[str, 
     t = cell.adept.timeout_s + 1
 
     def holding() -> bool:            # what HOLDING answers: SIG(grip.sense)
-        from ...hal.adept import protocol
+        from feeder_bt.hal.adept import protocol
         return protocol.decode_flag(adept.clients["io"].call("SIG", GRIP_SENSE), "SIG")
     wait(adept.io.set(bit, True), t)
     on = ask.yes("vacuum.on", f"The vacuum (Adept output {bit}) is ON: do you hear or feel it "
@@ -243,7 +243,7 @@ def _frame(cell: CellSpec, adept: Any, ask: Asker, opts: argparse.Namespace,
 
 def _corner(cell: CellSpec, adept: Any, ask: Asker, fit: FrameFit, i: int, x: float, y: float
             ) -> dict[str, Any]:
-    from ...hal.interfaces import Pose
+    from feeder_bt.hal.interfaces import Pose
     if not ask.yes(f"corner.{i}.go", f"The arm will move at {CORNER_SPEED_PCT:g} % speed to "
                                      f"corner {i} of the pick window, cell x {x:.0f}, y {y:.0f} "
                                      f"mm, {cell.robot.approach_mm:g} mm up. Clear to move?"):

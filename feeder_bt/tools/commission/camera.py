@@ -20,13 +20,13 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ...calibration import DEFAULT_TARGETS, calibrate_camera_image
-from ...calibration.camera import Target, centred_pose
-from ...clock import RealClock
-from ...encoder import diff
-from ...scenario.model import CameraCalibration, CellSpec
-from ...vision.calibration import Calibration
-from .common import Asker, Report, ensure_motor_on, try_step, wait
+from feeder_bt.calibration import DEFAULT_TARGETS, calibrate_camera_image
+from feeder_bt.calibration.camera import Target, centred_pose
+from feeder_bt.clock import RealClock
+from feeder_bt.encoder import diff
+from feeder_bt.scenario.model import CameraCalibration, CellSpec
+from feeder_bt.tools.commission.common import Asker, Report, ensure_motor_on, try_step, wait
+from feeder_bt.vision.calibration import Calibration
 
 TIMING_SPEEDS_MM_S = (100.0, 200.0)
 FRAME_GAP_S = 0.15           # between triggered frames while the marker crosses the view
@@ -47,10 +47,10 @@ def cell_target(cell: CellSpec) -> Target:
 
 def open_camera(spec: str, cell: CellSpec | None = None) -> Any:
     """``camera.source``; ``emulated-camera://HOST:PORT`` is ``feeder emulate cell``'s."""
-    from ...emulators.camera_server import CameraClient
+    from feeder_bt.emulators.camera_server import CameraClient
     if spec.startswith(CameraClient.SCHEME):
         return CameraClient(spec)
-    from ...hal.camera import open_source
+    from feeder_bt.hal.camera import open_source
     return open_source(spec, cell.camera if cell is not None else None)
 
 
@@ -93,13 +93,13 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
     pylon = cell.camera.source.startswith("pylon:")
     try:
         if pylon and "enumerate" in wanted:
-            from .pylon_steps import enumerate_step
+            from feeder_bt.tools.commission.pylon_steps import enumerate_step
             if not try_step(report, "camera.pylon.enumerate", lambda: enumerate_step(cell)):
                 return
         if not try_step(report, "camera.grab", grab):
             return
         if pylon:
-            from .pylon_steps import pylon_steps
+            from feeder_bt.tools.commission.pylon_steps import pylon_steps
             pylon_steps(cell, ask, report, opts, src, wanted)
         if "calibration" in wanted:
             try_step(report, "camera.calibration", calibrate)
@@ -134,7 +134,7 @@ def find_marker(img: np.ndarray, calibration: CameraCalibration) -> tuple[float,
 
 def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration,
             opts: argparse.Namespace) -> dict[str, Any]:
-    from ...hal.galil import make_galil
+    from feeder_bt.hal.galil import make_galil
     g = cell.galil
     axis = g.latch_axis.upper()
     name = next((n for n, a in g.axes.items() if a.upper() == axis), None)

@@ -11,9 +11,9 @@ from typing import Any, TextIO
 
 import yaml
 
-from ...errors import FeederError
-from ...jobs import Job, JobState
-from ...scenario.model import CellSpec
+from feeder_bt.errors import FeederError
+from feeder_bt.jobs import Job, JobState
+from feeder_bt.scenario.model import CellSpec
 
 
 class CommissionError(FeederError):

@@ -17,10 +17,10 @@ import argparse
 import time
 from typing import Any
 
-from ...clock import RealClock
-from ...encoder import diff
-from ...scenario.model import CellSpec
-from .common import (
+from feeder_bt.clock import RealClock
+from feeder_bt.encoder import diff
+from feeder_bt.scenario.model import CellSpec
+from feeder_bt.tools.commission.common import (
     Asker,
     Report,
     active_low,
@@ -39,7 +39,7 @@ PUSH_MIN_MM = 10.0       # less than this after a push: the encoder did not see 
 
 def commission_galil(cell: CellSpec, ask: Asker, report: Report, opts: argparse.Namespace
                      ) -> None:
-    from ...hal.galil import make_galil
+    from feeder_bt.hal.galil import make_galil
     ctl, conveyors, io = make_galil(cell, RealClock())
     t = cell.galil.timeout_s + 1
     try:
