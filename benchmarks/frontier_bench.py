@@ -50,7 +50,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))      # honest_bench, also when load
 
 from honest_bench import FRESH_SEED0, run_all  # noqa: E402
 
-from feeder_bt.scenario.loader import RETRIEVE_POLICIES  # noqa: E402
+from feeder_bt.config.loader import RETRIEVE_POLICIES  # noqa: E402
 from feeder_bt.tuning.objective import Job  # noqa: E402
 from feeder_bt.tuning.search import describe  # noqa: E402
 from feeder_bt.tuning.space import MAX_INCLINE_PCT  # noqa: E402
@@ -69,9 +69,9 @@ def preflight(scenario: str, overlays: list[dict]) -> None:
     not after the screen's other runs."""
     import tempfile
 
-    from feeder_bt.errors import FeederError
-    from feeder_bt.scenario import load_scenario
-    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.config import load_scenario
+    from feeder_bt.config.overlay import write_overlay
+    from feeder_bt.core.errors import FeederError
     with tempfile.TemporaryDirectory(prefix="frontier-") as d:
         path = Path(d) / "overlay.yaml"
         for ov in overlays:

@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from feeder_bt.run import RunOptions, run_job  # noqa: E402
+from feeder_bt.app.run import RunOptions, run_job  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "plate_lenses.yaml"
 FIXED = ROOT / "benchmarks" / "plate_fixed.yaml"

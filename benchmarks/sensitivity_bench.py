@@ -64,7 +64,7 @@ def _set(doc: dict, dotted: str, value: Any) -> None:
 
 
 def _run(feeder: str, label: str, key: str | None, value: Any, seed: int) -> dict[str, Any]:
-    from feeder_bt.run import RunOptions, run_job
+    from feeder_bt.app.run import RunOptions, run_job
 
     scenario, cell, duration = FEEDERS[feeder]
     tmp = None

@@ -27,14 +27,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from feeder_bt.run import RunOptions, run_job  # noqa: E402
-from feeder_bt.scenario.faults import ERROR_KINDS  # noqa: E402
+from feeder_bt.app.run import RunOptions, run_job  # noqa: E402
+from feeder_bt.config.faults import ERROR_KINDS  # noqa: E402
 
 BAR_RATIO = 0.90
 
 
 def exit_code(report: dict) -> int:
-    """What ``feeder run`` exits with for this report (feeder_bt/cli.py)."""
+    """What ``feeder run`` exits with for this report (feeder_bt/cli/main.py)."""
     if report["parts"].get("accounting"):
         return 4
     return 3 if report["fault"] else 0

@@ -25,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from feeder_bt.run import RunOptions, run_job  # noqa: E402
+from feeder_bt.app.run import RunOptions, run_job  # noqa: E402
 
 #: The adjust section each adjuster is benchmarked with (None: the scenario's own).
 ADJUST_SECTIONS: dict[str, str | None] = {

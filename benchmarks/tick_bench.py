@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 
 from throughput_bench import variant  # noqa: E402
 
-from feeder_bt.run import RunOptions, run_job  # noqa: E402
+from feeder_bt.app.run import RunOptions, run_job  # noqa: E402
 
 SCENARIOS = ("lenses", "lenses+best", "squares", "lenses_and_squares", "original_cwru_lenses")
 

@@ -61,13 +61,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from feeder_bt.geometry import place_outline, pose_outline  # noqa: E402
-from feeder_bt.hal.sim.render import Renderer  # noqa: E402
-from feeder_bt.scenario import load_scenario  # noqa: E402
-from feeder_bt.scenario.model import PartSpec, VisionRecipe  # noqa: E402
-from feeder_bt.tools.render_cmd import render_frames  # noqa: E402
-from feeder_bt.vision.calibration import Calibration  # noqa: E402
+from feeder_bt.cli.render_cmd import render_frames  # noqa: E402
+from feeder_bt.config import load_scenario  # noqa: E402
+from feeder_bt.core.geometry import place_outline, pose_outline  # noqa: E402
+from feeder_bt.core.model import PartSpec, VisionRecipe  # noqa: E402
+from feeder_bt.sim.render import Renderer  # noqa: E402
 from feeder_bt.vision.locator import Locator  # noqa: E402
+from feeder_bt.vision.pixels import Calibration  # noqa: E402
 
 try:
     import skimage

@@ -34,9 +34,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from vision_bench import BlobPipeline, Ours, write_report  # noqa: E402
 
-from feeder_bt.scenario import load_scenario  # noqa: E402
-from feeder_bt.tools.render_cmd import render_frames  # noqa: E402
-from feeder_bt.vision.calibration import Calibration  # noqa: E402
+from feeder_bt.cli.render_cmd import render_frames  # noqa: E402
+from feeder_bt.config import load_scenario  # noqa: E402
+from feeder_bt.vision.pixels import Calibration  # noqa: E402
 
 
 class OpenCvClock:

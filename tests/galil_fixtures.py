@@ -16,15 +16,15 @@ from types import SimpleNamespace
 
 from serial.urlhandler import protocol_socket
 
-from feeder_bt.clock import RealClock
+from feeder_bt.config.loader import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.model import CellSpec, IoSignal, SimImperfections
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.galil import GalilEmulator
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.galil.emulator import GalilEmulator
 from feeder_bt.hal.galil import GalilController, GalilConveyor, GalilIO, make_galil
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
-from feeder_bt.jobs import Job
-from feeder_bt.scenario.loader import load_scenario
-from feeder_bt.scenario.model import CellSpec, IoSignal, SimImperfections
+from feeder_bt.sim.realtime import Plant
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "lenses.yaml"
 JAM_BIT = 3                  # a Galil input added to the cell for the tests

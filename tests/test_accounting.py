@@ -10,13 +10,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from feeder_bt.cli import EXIT_ACCOUNTING, main
-from feeder_bt.clock import SimClock
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import EXIT_ACCOUNTING, main
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.hal.sim.world import RECYCLE_S
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.devices import make_sim_hal
+from feeder_bt.sim.world import RECYCLE_S
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -156,7 +156,7 @@ def test_a_dropped_part_touches_the_part_it_lands_against(lenses):
 
 def test_a_run_that_loses_a_part_exits_with_its_own_code_naming_it(tmp_path, capsys,
                                                                     monkeypatch):
-    from feeder_bt.hal.sim import world as world_mod
+    from feeder_bt.sim import world as world_mod
 
     original = world_mod.World._fall
 

@@ -11,15 +11,15 @@ import time
 
 import pytest
 
-from feeder_bt.clock import RealClock
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import CommsLost, EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.core.jobs import Job, JobState
 from feeder_bt.emulators.adept import AdeptEmulator, serve
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.errors import CommsLost, EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.hal.adept import AdeptController, VplusError
 from feeder_bt.hal.interfaces import PickResult, PickTarget, Pose
-from feeder_bt.jobs import Job, JobState
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 
 BELT_COUNTS_S = 8000          # both belts at 400 mm/s (20 counts/mm): parts arrive fast
 # The belts run this long (world seconds) at once after they are started (Plant.run_ahead):

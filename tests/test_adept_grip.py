@@ -12,12 +12,12 @@ import dataclasses
 
 import pytest
 
+from feeder_bt.config import load_scenario
+from feeder_bt.core.geometry import wrap_deg
 from feeder_bt.emulators.adept import AdeptEmulator
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.geometry import wrap_deg
 from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 from tests.test_adept_driver import pickable_target, wait_job
 from tests.test_vplus_frames import _ask, _close, _rig
 

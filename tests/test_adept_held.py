@@ -10,15 +10,15 @@ import socket
 
 import pytest
 
-from feeder_bt.clock import RealClock
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import CommsLost, ServoTimeout
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.errors import CommsLost, ServoTimeout
 from feeder_bt.hal.adept import AdeptController
 from feeder_bt.hal.adept.robot import AdeptRobot
 from feeder_bt.hal.interfaces import Held, Pose
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 from tests.test_adept_driver import (
     BELT_COUNTS_S,
     MOTION_TIMEOUT_S,

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.errors import CommsLost, EnvelopeError, HalError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import CommsLost, EnvelopeError, HalError, MissedGrab, ServoTimeout
 from feeder_bt.hal.adept import protocol as P
 from feeder_bt.hal.adept.client import Backoff, LineSocket, ServerClient
 from feeder_bt.hal.adept.protocol import ProtocolError, VplusError
@@ -339,7 +339,7 @@ def test_backoff_doubles_to_two_seconds_and_resets():
 def _cell_with(tmp_path, adept: str):
     from pathlib import Path
 
-    from feeder_bt.scenario import load_scenario
+    from feeder_bt.config import load_scenario
     root = Path(__file__).resolve().parents[1]
     cell = tmp_path / "cell.yaml"
     cell.write_text((root / "cells" / "sim.yaml").read_text() + "\nadept:\n" + adept)
@@ -347,8 +347,8 @@ def _cell_with(tmp_path, adept: str):
 
 
 def test_adept_safety_and_polling_settings_have_safe_defaults_and_are_checked(tmp_path):
-    from feeder_bt.errors import ConfigError
-    from feeder_bt.scenario.model import AdeptSpec
+    from feeder_bt.core.errors import ConfigError
+    from feeder_bt.core.model import AdeptSpec
 
     spec = AdeptSpec()
     assert spec.recover_power_on is False            # the operator turns arm power on
@@ -363,7 +363,7 @@ def test_adept_safety_and_polling_settings_have_safe_defaults_and_are_checked(tm
 
 
 def test_a_pick_needs_a_positive_part_id():
-    from feeder_bt.clock import RealClock
+    from feeder_bt.core.clock import RealClock
     from feeder_bt.hal.adept.robot import AdeptRobot
     from feeder_bt.hal.interfaces import PickTarget
 

@@ -6,7 +6,7 @@ import dataclasses
 
 import pytest
 
-from feeder_bt.adjusters import (
+from feeder_bt.policy.adjusters import (
     ADJUSTERS,
     Adjuster,
     AdjusterParamError,
@@ -45,7 +45,7 @@ def test_registry_holds_the_three_algorithms():
 
 
 def test_scenario_default_algorithm_is_registered():
-    from feeder_bt.scenario.model import AdjustParams
+    from feeder_bt.core.model import AdjustParams
 
     assert AdjustParams().algorithm in ADJUSTERS
 

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.errors import MAX_PROBLEMS, ConfigError
-from feeder_bt.scenario.loader import load_cell, load_fault_plan, load_scenario
+from feeder_bt.cli.main import main
+from feeder_bt.config.loader import load_cell, load_fault_plan, load_scenario
+from feeder_bt.core.errors import MAX_PROBLEMS, ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "cells" / "sim.yaml"

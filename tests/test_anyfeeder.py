@@ -11,13 +11,13 @@ import time
 
 import pytest
 
-from feeder_bt.clock import RealClock
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import CommsLost, PlateFault
 from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.errors import CommsLost, PlateFault
 from feeder_bt.hal.anyfeeder.driver import AnyFeeder
 from feeder_bt.hal.anyfeeder.protocol import ProtocolError, parse_command, parse_reply
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 
 LONG = 30.0
 
@@ -227,7 +227,7 @@ def test_feeder_emulate_plate_serves_the_feeder_on_loopback(capsys):
     import re
     import threading
 
-    from feeder_bt.cli import build_parser
+    from feeder_bt.cli.main import build_parser
     args = build_parser().parse_args(["emulate", "plate", "--port", "0"])
     stop = threading.Event()
     t = threading.Thread(target=args.handler, args=(args, stop), daemon=True)

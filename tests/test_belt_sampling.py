@@ -9,9 +9,9 @@ import math
 
 import yaml
 
-from feeder_bt.encoder import DriftWatch, EncoderSync, wrap
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.core.encoder import DriftWatch, EncoderSync, wrap
 
 CPM = 20.0
 T = 0.016
@@ -52,8 +52,8 @@ def test_without_the_allowance_a_held_sample_at_full_speed_looks_like_drift():
 
 def test_the_simulated_robot_count_is_held_for_a_cycle_and_tracking_carries_it(tmp_path):
     scenario, cell = load_scenario("scenarios/lenses.yaml")
-    from feeder_bt.clock import SimClock
-    from feeder_bt.hal.sim.devices import make_sim_hal
+    from feeder_bt.core.clock import SimClock
+    from feeder_bt.sim.devices import make_sim_hal
 
     assert cell.sim.robot_sample_s == T and cell.encoder.robot_sample_s == T
     hal = make_sim_hal(scenario, cell, SimClock(), 1)

@@ -10,14 +10,14 @@ import os
 import numpy as np
 import pytest
 
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.devices import SimConveyor
-from feeder_bt.hal.sim.imperfect import Imperfections
-from feeder_bt.hal.sim.slip import G_MM_S2, slide
-from feeder_bt.hal.sim.world import World
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import SimImperfections
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.model import SimImperfections
+from feeder_bt.sim.devices import SimConveyor
+from feeder_bt.sim.imperfect import Imperfections
+from feeder_bt.sim.slip import G_MM_S2, slide
+from feeder_bt.sim.world import World
 
 MU_S, MU_K = 0.3, 0.2
 
@@ -225,8 +225,8 @@ def test_nothing_lost_with_slip_and_loading_clumps(tmp_path):
 
 
 def test_kinetic_friction_above_static_is_refused(tmp_path):
-    from feeder_bt.errors import ConfigError
-    from feeder_bt.scenario import load_cell
+    from feeder_bt.config import load_cell
+    from feeder_bt.core.errors import ConfigError
     f = tmp_path / "c.yaml"
     f.write_text(open("cells/sim.yaml").read()
                  + "\nsim: {belt_mu_static: 0.2, belt_mu_kinetic: 0.3}\n")
@@ -269,7 +269,7 @@ def test_friction_per_part_type():
 
 
 def test_a_parts_kinetic_friction_above_its_static_is_refused(tmp_path):
-    from feeder_bt.errors import ConfigError
+    from feeder_bt.core.errors import ConfigError
     text = open("scenarios/lenses.yaml").read().replace(
         "cell: ../cells/sim.yaml", f"cell: {os.path.abspath('cells/sim.yaml')}")
     text = text.replace("    tool_offset: [0, 0, 0]\n",

@@ -28,13 +28,13 @@ from feeder_bt.calibration import (
 )
 from feeder_bt.calibration.belt import unwrap_counts
 from feeder_bt.calibration.camera import TargetPose, centred_pose, target_points_mm
-from feeder_bt.cli import _Parser
-from feeder_bt.errors import ConfigError, FeederError
-from feeder_bt.hal.sim.target import TargetCamera, target_polygons
-from feeder_bt.scenario import load_cell
-from feeder_bt.scenario.model import CameraCalibration
-from feeder_bt.tools import calibrate
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.cli import calibrate
+from feeder_bt.cli.main import _Parser
+from feeder_bt.config import load_cell
+from feeder_bt.core.errors import ConfigError, FeederError
+from feeder_bt.core.model import CameraCalibration
+from feeder_bt.sim.target import TargetCamera, target_polygons
+from feeder_bt.vision.pixels import Calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM_CELL = ROOT / "cells" / "sim.yaml"

@@ -11,9 +11,9 @@ import pytest
 
 from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.drivers import OperatorTouch, real_waiter
-from feeder_bt.cli import main
-from feeder_bt.scenario import load_cell
-from feeder_bt.tools import calibrate
+from feeder_bt.cli import calibrate
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_cell
 
 ROOT = Path(__file__).resolve().parents[1]
 # the simulated cell with generous controller time-outs (cell settings): a reply on a loaded
@@ -96,6 +96,6 @@ def test_operator_touch_ends_on_enter_and_fails_without_a_terminal():
 
 
 def test_waiter_gives_up_with_one_line():
-    from feeder_bt.jobs import Job
+    from feeder_bt.core.jobs import Job
     with pytest.raises(CalibrationError, match="did not finish within 0.05 s"):
         real_waiter(timeout_s=0.05)(Job("never"))

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import yaml
 
-from feeder_bt.cli import main
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 TRUTH = {"origin_mm": [83.0, -17.0], "mm_per_px": 1.015, "rotation_deg": 0.4}

@@ -15,10 +15,10 @@ from feeder_bt.calibration import CalibrationError, calibrate_camera_image, wind
 from feeder_bt.calibration.camera import TargetPose, centred_pose
 from feeder_bt.calibration.lens import fit_lens
 from feeder_bt.calibration.targets import DEFAULT_TARGETS, Target, parse_board
-from feeder_bt.cli import main
-from feeder_bt.hal.sim.target import TargetCamera
-from feeder_bt.scenario import load_cell
-from feeder_bt.tools import calibrate
+from feeder_bt.cli import calibrate
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_cell
+from feeder_bt.sim.target import TargetCamera
 
 ROOT = Path(__file__).resolve().parents[1]
 SIM_CELL = ROOT / "cells" / "sim.yaml"
@@ -193,7 +193,7 @@ def test_saved_views_calibrate_from_images(tmp_path, capsys):
 
 
 def test_cell_target_board_is_checked(tmp_path):
-    from feeder_bt.errors import ConfigError
+    from feeder_bt.core.errors import ConfigError
     text = SIM_CELL.read_text().replace(
         "  render:\n", "  target: {kind: charuco, board: [1, 7], pitch_mm: 50}\n  render:\n", 1)
     p = tmp_path / "cell.yaml"

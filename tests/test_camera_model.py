@@ -23,16 +23,16 @@ from feeder_bt.calibration.camera_model import calibrate_camera_views
 from feeder_bt.calibration.files import read_camera_calibration
 from feeder_bt.calibration.intrinsics import calibrate_views, find_views
 from feeder_bt.calibration.targets import Target, detect_points
-from feeder_bt.cli import main
-from feeder_bt.errors import ConfigError
-from feeder_bt.geometry import place_outline, pose_outline
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.hal.sim.target import TargetCamera
-from feeder_bt.scenario import load_cell, load_scenario
-from feeder_bt.scenario.model import CameraCalibration
-from feeder_bt.tools import calibrate
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.cli import calibrate
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_cell, load_scenario
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.core.geometry import place_outline, pose_outline
+from feeder_bt.core.model import CameraCalibration
+from feeder_bt.sim.render import Renderer
+from feeder_bt.sim.target import TargetCamera
 from feeder_bt.vision.locator import Locator
+from feeder_bt.vision.pixels import Calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 PHOTOS = sorted((ROOT / "tests" / "data" / "chessboard_9x6").glob("left*.jpg"))

@@ -10,9 +10,9 @@ from treeutil import DT, bb_get, bb_set, fail, frame, pending, scenario
 pytest.importorskip("feeder_bt.vision.locator",
                     reason="feeder_bt.vision.locator.Locator not written yet")
 
-from feeder_bt.cell import Cell, CellCommandError, CellState  # noqa: E402
-from feeder_bt.clock import SimClock  # noqa: E402
-from feeder_bt.errors import ConveyorFault, HalError, ServoTimeout  # noqa: E402
+from feeder_bt.control.cell import Cell, CellCommandError, CellState  # noqa: E402
+from feeder_bt.core.clock import SimClock  # noqa: E402
+from feeder_bt.core.errors import ConveyorFault, HalError, ServoTimeout  # noqa: E402
 from feeder_bt.hal.mock.hal import MockHal  # noqa: E402
 
 SETUP_CALLS = ["robot.set_speed", "robot.move_safe", "horizontal.stop", "incline.stop",

@@ -24,7 +24,7 @@ import numpy as np
 
 from feeder_bt.calibration.intrinsics import calibrate_views, find_views
 from feeder_bt.calibration.targets import Target
-from feeder_bt.cli import main
+from feeder_bt.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"

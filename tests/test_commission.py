@@ -13,7 +13,7 @@ import pytest
 import yaml
 from commission_person import ROOT, Emulator, Person, commission, free_block, write_cell
 
-from feeder_bt.cli import main
+from feeder_bt.cli.main import main
 
 
 @pytest.fixture
@@ -196,7 +196,7 @@ def test_the_emulator_serves_on_after_its_standard_input_ends(cell_and_emulator)
 
 
 def test_frame_fit_recovers_a_turned_and_moved_base():
-    from feeder_bt.tools.commission.frame import fit_frame
+    from feeder_bt.cli.commission.frame import fit_frame
     a = math.radians(2.0)
     base = (1375.0, 302.0)
     cell_pts = [(903.0, 50.0), (903.0, 560.0), (1169.0, 305.0), (1000.0, 200.0)]
@@ -215,8 +215,8 @@ def test_frame_fit_recovers_a_turned_and_moved_base():
 
 
 def test_the_robot_frame_file_replaces_the_cells_base(tmp_path):
-    from feeder_bt.errors import ConfigError
-    from feeder_bt.scenario import load_cell
+    from feeder_bt.config import load_cell
+    from feeder_bt.core.errors import ConfigError
     data = yaml.safe_load((ROOT / "cells" / "sim.yaml").read_text())
     data["robot"]["frame_file"] = "calibration/robot.yaml"
     (tmp_path / "cell.yaml").write_text(yaml.safe_dump(data))
@@ -239,7 +239,7 @@ def test_the_robot_frame_file_replaces_the_cells_base(tmp_path):
 
 
 def test_fresh_anchor_pairs_only_fresh_counts_at_rest():
-    from feeder_bt.encoder import FreshAnchor
+    from feeder_bt.core.encoder import FreshAnchor
     a = FreshAnchor(32, 24, max_age_s=0.5)
     assert a.offer(10.0, 1000, 2.0, 50, 0.0) is None and "not fresh" in a.why
     assert a.offer(10.1, 1000, 0.05, 50, 0.02) is None          # one read of each so far
@@ -249,7 +249,7 @@ def test_fresh_anchor_pairs_only_fresh_counts_at_rest():
 
 
 def test_questions_are_answered_from_the_file_then_standard_input():
-    from feeder_bt.tools.commission import Asker
+    from feeder_bt.cli.commission import Asker
     out = io.StringIO()
     ask = Asker({"latch": "done"}, io.StringIO("yes\n"), out)
     assert ask("latch", "Fire the trigger") == "done"             # from the answers file
@@ -274,8 +274,8 @@ def test_a_runs_sync_waits_for_fresh_reads_and_says_why_it_gave_up():
     from py_trees.common import Status
 
     from feeder_bt.behaviours.setup import SyncEncoders
-    from feeder_bt.clock import SimClock
-    from feeder_bt.encoder import EncoderSync
+    from feeder_bt.core.clock import SimClock
+    from feeder_bt.core.encoder import EncoderSync
 
     clock = SimClock()
     conv = SimpleNamespace(count=5000, age=3.0)

@@ -19,11 +19,11 @@ import pytest
 from floodutil import IdleFlood
 from uiutil import Client, FeederUi, make_users
 
-from feeder_bt.cell import CellState
+from feeder_bt.control.cell import CellState
+from feeder_bt.control.conns import ConnLimits
+from feeder_bt.control.ticker import Ticker
 from feeder_bt.plant.client import PartClient
 from feeder_bt.plant.part_server import PartServer
-from feeder_bt.ticker import Ticker
-from feeder_bt.ui.conns import ConnLimits
 
 WAIT_S = 60.0
 GOT_THROUGH_S = ConnLimits().header_s      # faster than the deadline could have made room

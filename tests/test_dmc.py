@@ -8,7 +8,7 @@ import threading
 import pytest
 from galil_fixtures import wait_until
 
-from feeder_bt.emulators.dmc import (
+from feeder_bt.emulators.galil.dmc import (
     DmcError,
     DmcInterpreter,
     Program,

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.scenario import load_scenario
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_scenario
 
 DOCS = [Path("README.md"), *sorted(Path("docs").glob("*.md"))]
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,8 +9,8 @@ import threading
 
 import pytest
 
-import feeder_bt.run as run_mod
-from feeder_bt.run import RunOptions, run_job
+import feeder_bt.app.run as run_mod
+from feeder_bt.app.run import RunOptions, run_job
 
 
 def _capture_hal(monkeypatch) -> dict:

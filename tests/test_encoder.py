@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.encoder import EncoderSync, diff, wrap
+from feeder_bt.core.encoder import EncoderSync, diff, wrap
 
 I32_MIN, I32_MAX = -(2**31), 2**31 - 1
 I24_MIN, I24_MAX = -(2**23), 2**23 - 1

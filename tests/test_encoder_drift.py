@@ -7,9 +7,9 @@ import re
 
 import pytest
 
-from feeder_bt.encoder import DriftWatch, EncoderSync, wrap
-from feeder_bt.errors import ConfigError
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.core.encoder import DriftWatch, EncoderSync, wrap
+from feeder_bt.core.errors import ConfigError
 
 CPM = 20.0
 
@@ -108,7 +108,7 @@ def test_a_clean_run_sees_no_drift():
 
 
 def test_a_warning_above_the_limit_is_refused(tmp_path):
-    from feeder_bt.scenario.loader import load_cell
+    from feeder_bt.config.loader import load_cell
     text = open("cells/sim.yaml").read()
     assert "\nencoder:" in text
     cell = tmp_path / "c.yaml"

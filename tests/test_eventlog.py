@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from feeder_bt import run as run_mod
-from feeder_bt.behaviours.common import Stats
-from feeder_bt.cli import main as cli_main
-from feeder_bt.eventlog import EventLog, EventLogError, open_readonly
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.tools.runs_db import rolling_ppm
+from feeder_bt.app import run as run_mod
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.behaviours.base import Stats
+from feeder_bt.cli.main import main as cli_main
+from feeder_bt.records.eventlog import EventLog, EventLogError, open_readonly
+from feeder_bt.records.runs_db import rolling_ppm
 
 LENSES = str(Path("scenarios/lenses.yaml").resolve())
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -103,7 +103,7 @@ def test_plot_writes_png_with_labelled_axes(logged, tmp_path, capsys):
     assert cli_main(["report", str(db), "--run", "1", "--plot", str(out)]) == 0
     data = out.read_bytes()
     assert data.startswith(PNG_MAGIC) and len(data) > 20_000
-    from feeder_bt.tools.plots import plot_run
+    from feeder_bt.cli.plots import plot_run
     conn = open_readonly(db)
     fig = plot_run(conn, 1)
     speed, queue, ppm = fig.axes

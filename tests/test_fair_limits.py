@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.adjusters import ADJUSTERS
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import ConfigError, HalError
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import ConfigError, HalError
+from feeder_bt.policy.adjusters import ADJUSTERS
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.devices import make_sim_hal
 
 ROOT = Path(__file__).resolve().parent.parent
 LENSES = ROOT / "scenarios" / "lenses.yaml"
@@ -142,7 +142,7 @@ def test_an_axis_asked_too_much_saturates_and_counts_it():
 
 
 OVERDRIVE = '''
-from feeder_bt.adjusters import Adjuster, Speeds
+from feeder_bt.policy.adjusters import Adjuster, Speeds
 
 class Overdrive(Adjuster):
     """A plugin adjuster the loader cannot see into: it asks for 600 mm/s."""
@@ -164,7 +164,7 @@ def test_a_plugin_adjuster_beyond_the_limit_faults_the_run(tmp_path, monkeypatch
 
 
 def test_feeder_check_refuses_it_in_one_line(tmp_path, capsys):
-    from feeder_bt.cli import main
+    from feeder_bt.cli.main import main
     p = with_adjust(tmp_path, "adjust:\n  algorithm: supply_queue\n  params: {max_mm_s: 400, "
                               "max_incline_pct: 150}\n")
     assert main(["check", str(p)]) == 2

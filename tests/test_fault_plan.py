@@ -9,9 +9,8 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario import loader as L
-from feeder_bt.scenario.faults import (
+from feeder_bt.config import loader as L
+from feeder_bt.config.faults import (
     FAULT_KINDS,
     RATE_UNITS,
     FaultPlanSpec,
@@ -19,6 +18,7 @@ from feeder_bt.scenario.faults import (
     ScriptedFault,
     load_fault_plan,
 )
+from feeder_bt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIFT = ROOT / "faults" / "shift.yaml"

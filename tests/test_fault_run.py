@@ -8,8 +8,8 @@ import sqlite3
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main
 
 PLAN = """\
 seed: 5

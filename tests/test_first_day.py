@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt import cli
-from feeder_bt.didyoumean import hint, nearest
-from feeder_bt.view import LEGEND
+from feeder_bt.app.view import LEGEND
+from feeder_bt.cli import main as cli
+from feeder_bt.core.didyoumean import hint, nearest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -45,7 +45,7 @@ def test_ctrl_c_while_the_tools_are_imported_is_one_line(raise_, monkeypatch, ca
     real = importlib.import_module
 
     def interrupted(name, package=None):
-        if name.startswith(".tools."):
+        if name.startswith("feeder_bt.cli."):
             raise raise_()
         return real(name, package)
 
@@ -106,7 +106,7 @@ def test_the_live_view_shows_the_legend_when_there_is_room():
 
     from test_view import _cell
 
-    from feeder_bt.view import STATUS_LEGEND, LiveView
+    from feeder_bt.app.view import STATUS_LEGEND, LiveView
     cell, ticker = _cell()
     cell.start()
     ticker.run(until=30.0)

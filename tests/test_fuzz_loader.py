@@ -18,10 +18,10 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.loader import LEAF_RE
-from feeder_bt.scenario.model import Scenario
+from feeder_bt.config import load_scenario
+from feeder_bt.config.loader import LEAF_RE
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.core.model import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "scenarios").glob("*.yaml"))

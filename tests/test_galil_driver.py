@@ -11,15 +11,15 @@ from pathlib import Path
 import pytest
 from galil_fixtures import JAM_BIT, TIMEOUT_S, WAIT_S, plant_and_emulator, rig, wait_job, wait_until
 
-from feeder_bt.clock import RealClock
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import CommsLost, ConveyorFault, HalError
+from feeder_bt.core.jobs import JobState
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.galil import GalilEmulator, serve
-from feeder_bt.errors import CommsLost, ConveyorFault, HalError
+from feeder_bt.emulators.galil.emulator import GalilEmulator, serve
 from feeder_bt.hal.galil import DownloadError, GalilController, GalilError
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.hal.galil.protocol import DistanceEvent, InputsEvent, Message, read_programs
 from feeder_bt.hal.interfaces import IoChange
-from feeder_bt.jobs import JobState
 
 CPM = 20.0
 

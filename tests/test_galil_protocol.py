@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.errors import CommsLost, HalError
+from feeder_bt.core.errors import CommsLost, HalError
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR
 from feeder_bt.hal.galil.protocol import (
     MAX_LABELS,

@@ -13,13 +13,13 @@ from pathlib import Path
 import pytest
 from galil_fixtures import WAIT_S, plant_and_emulator, rig, wait_job, wait_until
 
-from feeder_bt.clock import RealClock, SimClock
-from feeder_bt.errors import ConveyorFault
+from feeder_bt.config.loader import check_files
+from feeder_bt.core.clock import RealClock, SimClock
+from feeder_bt.core.errors import ConveyorFault
+from feeder_bt.core.jobs import JobState
+from feeder_bt.core.model import GalilSpec, IoSignal
 from feeder_bt.hal.galil import GalilConveyor, make_galil
 from feeder_bt.hal.galil.driver import AxisStatus
-from feeder_bt.jobs import JobState
-from feeder_bt.scenario.loader import check_files
-from feeder_bt.scenario.model import GalilSpec, IoSignal
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -299,7 +299,7 @@ def test_a_program_on_another_thread_is_never_halted():
     since DL is refused while it runs, the reconnect fails saying so."""
     with rig() as r:
         prog = r.emu.interp.program
-        from feeder_bt.emulators.dmc import Program
+        from feeder_bt.emulators.galil.dmc import Program
         r.emu.interp.program = Program.parse(prog.lines + ["#SAFETY", "WT 10", "JP #SAFETY"])
         r.emu.interp.execute("#SAFETY", 3)
         r.emu.drop_clients()

@@ -18,15 +18,15 @@ import pytest
 from galil_fixtures import WAIT_S, plant_and_emulator, rig, wait_job, wait_until
 from treeutil import bb_get, make_ctx
 
-from feeder_bt.clock import RealClock
-from feeder_bt.emulators.dmc import Program
-from feeder_bt.emulators.galil_axes import _Axis
-from feeder_bt.errors import CommsLost, ConveyorFault
+from feeder_bt.config.loader import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import CommsLost, ConveyorFault
+from feeder_bt.core.jobs import JobState
+from feeder_bt.core.model import IoSignal
+from feeder_bt.emulators.galil.axes import _Axis
+from feeder_bt.emulators.galil.dmc import Program
 from feeder_bt.hal.galil import make_galil
 from feeder_bt.hal.galil.startup import MAX_RESTARTS
-from feeder_bt.jobs import JobState
-from feeder_bt.scenario.loader import load_scenario
-from feeder_bt.scenario.model import IoSignal
 from feeder_bt.trees import present
 
 TICK_S = 0.02                # the tree is ticked at 50 Hz, as a run does

@@ -1,4 +1,4 @@
-"""The inflow bound (feeder_bt.supply_bound): when placed parts leave the cell and new ones
+"""The inflow bound (feeder_bt.policy.supply_bound): when placed parts leave the cell and new ones
 come only in totes, no feeder places more than ``min over s of A(s) + R (T - s) + 1``."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import summary
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.supply_bound import ceiling, inflow_bound_parts
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import summary
+from feeder_bt.policy.supply_bound import ceiling, inflow_bound_parts
 
 ROOT = Path(__file__).resolve().parents[1]
 R = 109.598                   # lenses' robot bound, parts/min

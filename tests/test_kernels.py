@@ -15,9 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.vision.calibration import Calibration
 from feeder_bt.vision.chains import WINDOW, _chain_steps
 from feeder_bt.vision.jit import kernels
+from feeder_bt.vision.pixels import Calibration
 
 K = kernels()
 _SIM = (K.SIMILARITY, np.zeros((1, 4, 3)), np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))
@@ -97,7 +97,7 @@ def test_blob_stats_leave_specks_unmeasured():
 
 @given(st.lists(st.tuples(st.floats(-50, 700), st.floats(-50, 530)), min_size=1, max_size=40))
 def test_points_to_mm_through_a_similarity_are_the_calibrations(uv):
-    from feeder_bt.scenario.model import CameraCalibration
+    from feeder_bt.core.model import CameraCalibration
     cal = Calibration(CameraCalibration(origin_mm=(80.3, -14.6), mm_per_px=0.9994,
                                         rotation_deg=-2.5))
     uv = np.array(uv, dtype=float)
@@ -136,7 +136,7 @@ def test_foreground_rectangles_are_cut_until_tight():
     mask = np.zeros((80, 100), np.uint8)
     mask[10:70, 10:30] = 255
     mask[20:30, 60:80] = 255
-    from feeder_bt.scenario.model import VisionRecipe
+    from feeder_bt.core.model import VisionRecipe
     from feeder_bt.vision.segment import Segmenter
     seg = Segmenter(VisionRecipe())
     seg._margin = 3
@@ -147,7 +147,7 @@ def test_foreground_rectangles_are_cut_until_tight():
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 10**6), st.integers(1, 6), st.integers(60, 140))
 def test_foreground_rectangles_follow_the_rule(seed, margin, width):
-    from feeder_bt.scenario.model import VisionRecipe
+    from feeder_bt.core.model import VisionRecipe
     from feeder_bt.vision.segment import Segmenter
     mask = _mask(seed, w=width)
     seg = Segmenter(VisionRecipe())
@@ -260,10 +260,10 @@ def _run(code: str, **env: str) -> str:
 
 def test_commands_that_never_locate_do_not_import_numba():
     code = ("import sys, contextlib, io\n"
-            "from feeder_bt.cli import main\n"
+            "from feeder_bt.cli.main import main\n"
             "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
             "    main(['--help'])\n"
-            "import feeder_bt.vision.locator, feeder_bt.vision.calibration\n"
+            "import feeder_bt.vision.locator, feeder_bt.vision.pixels\n"
             "print('numba' in sys.modules)\n")
     assert _run(code).strip() == "False"
 

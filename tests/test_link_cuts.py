@@ -11,9 +11,9 @@ import pytest
 import yaml
 from treeutil import bb_get, fail, finish, ideal_cell, make_ctx, part, pending, tick
 
-from feeder_bt.errors import CommsLost
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario.faults import PHASES
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config.faults import PHASES
+from feeder_bt.core.errors import CommsLost
 from feeder_bt.trees import retrieve
 
 LOST = CommsLost("robot controller (Adept): connection lost")
@@ -109,7 +109,7 @@ def test_cut_during_or_after_the_place(released):
 
 
 def test_a_link_cut_during_the_servo_recoverys_place_goes_to_the_link_branch():
-    from feeder_bt.errors import ServoTimeout
+    from feeder_bt.core.errors import ServoTimeout
     ctx, root, p = _picking()
     finish(ctx.hal, "robot", "pick")
     tick(root, ctx)
@@ -134,7 +134,7 @@ def test_a_link_cut_during_the_recovery_program_is_recovered_by_the_next_motion(
     """RECOVER's reply is lost: the controller may have finished it, but only a motion
     that succeeds proves the arm's power back, so the servo fault is recovered then,
     not when the link's reply comes (eight-hour shift, seed 4)."""
-    from feeder_bt.errors import ServoTimeout
+    from feeder_bt.core.errors import ServoTimeout
     ctx, root, p = _picking()
     nxt = part(300.0)
     ctx.queue.put(nxt)
@@ -217,9 +217,9 @@ def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monk
     """The real Adept driver against the V+ emulator (real time, ~40 s): the motion
     server's link cut before a PICK is carried out, after the grip, during a PLACE and
     after the release. Each lost reply is settled with HELD and feeding goes on."""
-    from feeder_bt import run as run_mod
+    from feeder_bt.app import run as run_mod
+    from feeder_bt.app.factory import start_emulated
     from feeder_bt.emulators.faults import FaultPlan
-    from feeder_bt.hal.factory import start_emulated
 
     plan = FaultPlan()
     plan.add("drop", "adept", "PICK", nth=2)

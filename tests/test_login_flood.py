@@ -13,9 +13,9 @@ import time
 
 from uiutil import Browser, Client, FeederUi, make_ui, make_users
 
-from feeder_bt.ui import guard as guard_mod
-from feeder_bt.ui.control import LoginLimiter
-from feeder_bt.ui.guard import Attempt, LoginGuard
+from feeder_bt.control import guard as guard_mod
+from feeder_bt.control.guard import Attempt, LoginGuard
+from feeder_bt.control.sessions import LoginLimiter
 
 
 def test_strangers_may_hold_only_part_of_the_password_checks(tmp_path):

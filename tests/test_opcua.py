@@ -19,16 +19,16 @@ from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256  # noq
 from asyncua.ua.uaerrors import BadUserAccessDenied, UaError  # noqa: E402
 from cryptography.x509.oid import ExtendedKeyUsageOID  # noqa: E402
 
-from feeder_bt.cell import Cell  # noqa: E402
-from feeder_bt.clock import SimClock  # noqa: E402
-from feeder_bt.errors import FeederError  # noqa: E402
-from feeder_bt.hal.sim.devices import make_sim_hal  # noqa: E402
+from feeder_bt.app.run import RunOptions, run_job  # noqa: E402
+from feeder_bt.config import load_scenario  # noqa: E402
+from feeder_bt.control.cell import Cell  # noqa: E402
+from feeder_bt.control.ticker import Ticker  # noqa: E402
+from feeder_bt.control.users import UsersFile  # noqa: E402
+from feeder_bt.core.clock import SimClock  # noqa: E402
+from feeder_bt.core.errors import FeederError  # noqa: E402
 from feeder_bt.plant.adapters import PlantOptions  # noqa: E402
 from feeder_bt.plant.opcua import CellUaServer  # noqa: E402
-from feeder_bt.run import RunOptions, run_job  # noqa: E402
-from feeder_bt.scenario import load_scenario  # noqa: E402
-from feeder_bt.ticker import Ticker  # noqa: E402
-from feeder_bt.ui.users import UsersFile  # noqa: E402
+from feeder_bt.sim.devices import make_sim_hal  # noqa: E402
 
 LENSES = "scenarios/lenses.yaml"
 ALICE, BOB = ("alice", "alice-pass-1"), ("bob", "bob-pass-123")

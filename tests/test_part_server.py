@@ -11,25 +11,25 @@ import threading
 
 import pytest
 
-from feeder_bt.behaviours.serve import Desk
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.interfaces import PickTarget
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.part_protocol import (
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.behaviours.desk import Desk
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.part_protocol import (
     Offer,
     ProtocolError,
     parse_offer,
     parse_reply,
     parse_request,
 )
+from feeder_bt.hal.interfaces import PickTarget
 from feeder_bt.plant.adapters import PlantOptions
 from feeder_bt.plant.client import LoopLink, PartClient, PartServerError
 from feeder_bt.plant.part_server import PartServer, install
 from feeder_bt.plant.sim_robot import SimRobotProgram
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
+from feeder_bt.sim.devices import make_sim_hal
 
 LENSES = "scenarios/lenses.yaml"
 
@@ -310,7 +310,7 @@ def test_requests_while_stopped_are_answered():
 
 
 def test_a_bad_part_server_address_is_one_line(capsys):
-    from feeder_bt.cli import main
+    from feeder_bt.cli.main import main
     code = main(["run", LENSES, "--fast", "--duration", "1", "--view", "none", "--no-db",
                  "--part-server", "127.0.0.1:99999"])
     err = capsys.readouterr().err
@@ -465,7 +465,7 @@ def test_robot_faults_under_the_part_server_lose_nothing(tmp_path):
 def test_a_part_server_port_in_use_is_one_line(capsys):
     import socket
 
-    from feeder_bt.cli import main
+    from feeder_bt.cli.main import main
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()

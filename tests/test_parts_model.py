@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main
+from feeder_bt.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -47,7 +47,7 @@ def test_check_names_either_end_of_a_range_that_misses(tmp_path, capsys, edit):
 
 
 def _run(path: Path, seconds: float = 150.0) -> dict:
-    from feeder_bt.run import RunOptions, run_job
+    from feeder_bt.app.run import RunOptions, run_job
     return run_job(RunOptions(scenario=str(path), duration=seconds, fast=True, seed=1,
                               view="none"))
 
@@ -56,7 +56,7 @@ def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_ar
     """Issue 27, shown 1: the chain-link plate (180° symmetric) placed turned to 0 by its
     long axis: with ``symmetry: 2`` none misoriented; without, about half, and the
     summary line says so."""
-    from feeder_bt.cli import summary
+    from feeder_bt.cli.main import summary
     report = _run(ROOT / "scenarios" / "chain_links.yaml")
     placed = report["parts"]["retrieved"]["link"]
     assert placed > 50 and report["parts"]["misoriented"] == 0
@@ -68,8 +68,8 @@ def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_ar
 
 
 def test_symmetry_is_checked_and_sets_the_period(tmp_path):
-    from feeder_bt.errors import ConfigError
-    from feeder_bt.scenario.loader import load_scenario
+    from feeder_bt.config.loader import load_scenario
+    from feeder_bt.core.errors import ConfigError
     sc, _ = load_scenario(ROOT / "scenarios" / "chain_links.yaml")
     assert sc.parts["link"].period_deg == 180.0 and sc.parts["link"].mirror_symmetric
     p = _scenario(tmp_path, "chain_links.yaml", ("symmetry: 2", "symmetry: 0"))
@@ -81,11 +81,11 @@ def test_the_locator_reports_a_symmetric_part_modulo_its_period():
     """The plate's angle comes back in (-90, 90] whatever way round it lies."""
     import numpy as np
 
-    from feeder_bt.geometry import place_outline, pose_outline
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.config.loader import load_scenario
+    from feeder_bt.core.geometry import place_outline, pose_outline
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(ROOT / "scenarios" / "chain_links.yaml")
     loc = Locator(sc.vision, sc.parts, Calibration(cell.camera.calibration))
     ren = Renderer(cell.camera)
@@ -134,11 +134,11 @@ def _three_lenses(path: Path, gap_mm: float):
     """A lens with a neighbour ``gap_mm`` away along x and another along y: its results."""
     import numpy as np
 
-    from feeder_bt.geometry import place_outline, pose_outline
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.config.loader import load_scenario
+    from feeder_bt.core.geometry import place_outline, pose_outline
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(path)
     loc = Locator(sc.vision, sc.parts, Calibration(cell.camera.calibration))
     ren = Renderer(cell.camera)
@@ -167,11 +167,11 @@ def test_a_part_whose_every_grip_is_blocked_is_not_offered(tmp_path):
     assert _three_lenses(two, 5.0)[(200, 250)].reason == "gripper blocked"
     import numpy as np
 
-    from feeder_bt.geometry import place_outline, pose_outline
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.config.loader import load_scenario
+    from feeder_bt.core.geometry import place_outline, pose_outline
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(two)
     loc = Locator(sc.vision, sc.parts, Calibration(cell.camera.calibration))
     ren = Renderer(cell.camera)
@@ -218,8 +218,8 @@ def test_on_a_crowded_belt_grips_on_a_neighbour_fall_to_zero(tmp_path):
 
 
 def test_grips_are_mirrored_with_a_face_down_part():
-    from feeder_bt.gripper import footprint, grip_poses
-    from feeder_bt.scenario.model import Finger, Grip, PickSpec
+    from feeder_bt.core.model import Finger, Grip, PickSpec
+    from feeder_bt.robot.gripper import footprint, grip_poses
     pick = PickSpec(grips=[Grip((10.0, 5.0), 30.0)], fingers=[Finger((0.0, 4.0), (2.0, 2.0))])
     (x, y, a), = grip_poses(pick, 100.0, 50.0, 90.0, mirrored=False)
     assert (x, y, a) == pytest.approx((95.0, 60.0, 120.0))
@@ -234,7 +234,7 @@ def test_grips_are_mirrored_with_a_face_down_part():
 def _brackets(**part_edits):
     import dataclasses
 
-    from feeder_bt.scenario.loader import load_scenario
+    from feeder_bt.config.loader import load_scenario
     sc, cell = load_scenario(ROOT / "scenarios" / "brackets_frontlit.yaml")
     vision = dataclasses.replace(sc.vision, orientation="outline")
     if part_edits:
@@ -247,10 +247,10 @@ def _locate_layout(sc, cell, vision, outlines, seed):
     nearest each, in order."""
     import numpy as np
 
-    from feeder_bt.geometry import place_outline
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.core.geometry import place_outline
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     loc = Locator(vision, sc.parts, Calibration(cell.camera.calibration))
     ren = Renderer(cell.camera)
     rng = np.random.default_rng(seed)
@@ -267,7 +267,7 @@ def test_face_down_l_brackets_over_360_are_located_with_their_face_and_angle():
     located with the right face (``mirrored``) and its angle within 2°."""
     import numpy as np
 
-    from feeder_bt.geometry import pose_outline, wrap_deg
+    from feeder_bt.core.geometry import pose_outline, wrap_deg
     sc, cell, vision = _brackets()
     up = pose_outline(sc.parts["bracket"], "flat")
     down = np.column_stack([up[::-1, 0], -up[::-1, 1]])     # as a mirror pose lies
@@ -290,8 +290,8 @@ def test_a_nearly_symmetric_outline_is_rejected_not_guessed():
     the same, so it is rejected with that reason; declared mirror_symmetric, it is
     located (its face does not matter) at the right angle."""
 
-    from feeder_bt.geometry import pose_outline, wrap_deg
-    from feeder_bt.scenario.model import Shape
+    from feeder_bt.core.geometry import pose_outline, wrap_deg
+    from feeder_bt.core.model import Shape
     equal = Shape(kind="polygon",
                   points_mm=[(-13.0, -13.0), (22.0, -13.0), (22.0, -3.0), (-3.0, -3.0),
                              (-3.0, 22.0), (-13.0, 22.0)])
@@ -321,11 +321,11 @@ def _touching_pairs(name: str, part: str, pose: str, split: bool, frames: int = 
 
     import numpy as np
 
-    from feeder_bt.geometry import place_outline, pose_outline
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.config.loader import load_scenario
+    from feeder_bt.core.geometry import place_outline, pose_outline
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(ROOT / "scenarios" / f"{name}.yaml")
     ren = Renderer(cell.camera)
     out = pose_outline(sc.parts[part], pose)
@@ -372,9 +372,9 @@ def test_the_locators_pixel_table_is_the_lens_mapping():
     local scales within 1e-5."""
     import numpy as np
 
-    from feeder_bt.scenario.loader import load_scenario
-    from feeder_bt.vision.calibration import Calibration, PixelGrid
+    from feeder_bt.config.loader import load_scenario
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration, PixelGrid
     sc, cell = load_scenario(ROOT / "scenarios" / "squares.yaml")
     cal = Calibration(cell.camera.calibration)
     assert not cal.linear                       # the cell has a lens model

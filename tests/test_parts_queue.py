@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.parts import Part, PartsQueue
+from feeder_bt.core.parts import Part, PartsQueue
 
 SAFETY_S = 30.0   # only a net against a hung test; nothing asserts on elapsed time
 

@@ -8,8 +8,8 @@ import io
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.ui.users import UsersError, check_password
+from feeder_bt.cli.main import main
+from feeder_bt.control.users import UsersError, check_password
 
 WEAK = [("Password1!", "bob"), ("P@ssw0rd", "bob"), ("Summer2024", "bob"),
         ("alice123", "alice"), ("Alice2024!", "alice"), ("Feeder2024!", "bob"),

@@ -19,7 +19,7 @@ pytest.importorskip("asyncua")
 
 from asyncua import Client  # noqa: E402
 
-from feeder_bt.ui.users import UsersFile  # noqa: E402
+from feeder_bt.control.users import UsersFile  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 WAIT_S = 90.0

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
 
 
 @pytest.mark.soak
@@ -28,9 +28,9 @@ def test_a_servo_error_in_an_emulated_run_is_reset_and_feeding_goes_on(monkeypat
     """The AnyFeeder emulator ends the plate's third action with ``m13`` (a fault plan's
     ``servo_timeout`` for controller ``plate``): the real driver reports it in the manual's
     words, the present tree resets and homes the plate, and feeding goes on."""
-    from feeder_bt import run as run_mod
+    from feeder_bt.app import run as run_mod
+    from feeder_bt.app.factory import start_emulated
     from feeder_bt.emulators.faults import FaultPlan
-    from feeder_bt.hal.factory import start_emulated
 
     plan = FaultPlan()
     plan.add("servo_timeout", "plate", "", nth=3)

@@ -4,13 +4,13 @@ minute goes to the operator (FAULT) with the manual's words."""
 
 from __future__ import annotations
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import PlateFault
-from feeder_bt.hal.sim.plate import make_plate_sim_hal
-from feeder_bt.jobs import DoneJob
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import PlateFault
+from feeder_bt.core.jobs import DoneJob
+from feeder_bt.sim.plate import make_plate_sim_hal
 
 SERVO = ("AnyFeeder plate.flip: m13: Motor 1 servo error: possibly overloaded; check for "
          "obstructions or hardware problems; error must be reset before operation can "

@@ -8,13 +8,13 @@ from types import SimpleNamespace
 
 import pytest
 
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.plate import PURGE_TRANSIT_S, make_plate_sim_hal
-from feeder_bt.jobs import JobState
-from feeder_bt.plate_policy import PlateView, next_actions, view_of
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.jobs import JobState
+from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.policy.plate import PlateView, next_actions, view_of
+from feeder_bt.sim.plate import PURGE_TRANSIT_S, make_plate_sim_hal
 
 SCENARIO = "scenarios/plate_lenses.yaml"
 

@@ -13,9 +13,9 @@ from treeutil import bb_set, finish, make_ctx, part, pending, tick
 
 from feeder_bt.behaviours.policies import POLICIES, Lookahead, ShortestCycle
 from feeder_bt.behaviours.retrieve import NextPart
+from feeder_bt.config.loader import RETRIEVE_POLICIES
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.robot_model import RobotModel
-from feeder_bt.scenario.loader import RETRIEVE_POLICIES
+from feeder_bt.robot.model import RobotModel
 from feeder_bt.trees import retrieve
 from feeder_bt.trees.build import Loop
 

@@ -10,8 +10,8 @@ import threading
 import numpy as np
 import pytest
 
-from feeder_bt.errors import ConfigError, GrabFailed
-from feeder_bt.scenario.model import PylonSpec
+from feeder_bt.core.errors import ConfigError, GrabFailed
+from feeder_bt.core.model import PylonSpec
 
 pytest.importorskip("pypylon", reason="pypylon is not installed (pip install -e '.[pylon]')")
 

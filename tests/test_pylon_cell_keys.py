@@ -9,10 +9,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.jobs import DoneJob
-from feeder_bt.scenario.loader import load_cell
-from feeder_bt.scenario.model import CameraSpec
+from feeder_bt.config.loader import load_cell
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.core.jobs import DoneJob
+from feeder_bt.core.model import CameraSpec
 
 
 def cell_with(tmp_path, camera_lines: str):
@@ -23,7 +23,7 @@ def cell_with(tmp_path, camera_lines: str):
 
 
 def test_cell_file_keys_are_checked_with_file_and_line(tmp_path):
-    from feeder_bt.scenario.loader import load_cell
+    from feeder_bt.config.loader import load_cell
     p = cell_with(tmp_path, "  source: 'pylon:'\n  pylon: {trigger: Line9, gain_db: 60}\n")
     with pytest.raises(ConfigError) as e:
         load_cell(p)
@@ -49,7 +49,7 @@ def test_the_trigger_signal_must_be_an_output_and_a_line_trigger(tmp_path):
 
 
 def test_a_line_trigger_pulses_the_named_output_once_per_grab():
-    from feeder_bt.hal.factory import wire_line_trigger
+    from feeder_bt.app.factory import wire_line_trigger
     cell = SimpleNamespace(camera=SimpleNamespace(pylon=SimpleNamespace(
         trigger_signal="trigger")), galil=SimpleNamespace(timeout_s=1.0))
     sets = []

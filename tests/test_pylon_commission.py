@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.tools.commission.pylon_steps import blur
+from feeder_bt.cli.commission.pylon_steps import blur
+from feeder_bt.cli.main import main
 
 pytest.importorskip("pypylon", reason="pypylon is not installed (pip install -e '.[pylon]')")
 
@@ -27,10 +27,10 @@ def pylon_cell(tmp_path: Path, exposure_ms: float) -> Path:
     """cells/sim.yaml with a pylon camera serving the target, as the simulated camera
     draws it lying centred in the view (what the calibration step asks the person for)."""
     from feeder_bt.calibration.camera import centred_pose
-    from feeder_bt.hal.sim.target import TargetCamera
-    from feeder_bt.scenario.loader import load_cell
-    from feeder_bt.tools.commission.camera import cell_target
-    from feeder_bt.tools.common import write_image
+    from feeder_bt.cli.commission.camera import cell_target
+    from feeder_bt.cli.inputs import write_image
+    from feeder_bt.config.loader import load_cell
+    from feeder_bt.sim.target import TargetCamera
 
     cell = load_cell(ROOT / "cells" / "sim.yaml", calibration_files=False)
     cam = cell.camera

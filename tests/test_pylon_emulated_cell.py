@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from feeder_bt.scenario.loader import load_scenario
+from feeder_bt.config.loader import load_scenario
 from tests.galil_fixtures import wait_job, wait_until
 
 pytest.importorskip("pypylon", reason="pypylon is not installed (pip install -e '.[pylon]')")
@@ -22,7 +22,7 @@ def camemu(monkeypatch):
 
 @pytest.mark.parametrize("trigger", ["Line1", "Software"])
 def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch(trigger):
-    from feeder_bt.hal.factory import start_emulated
+    from feeder_bt.app.factory import start_emulated
     sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
     assert cell.camera.source == "pylon:" and cell.camera.pylon.trigger == "Line1"
     cell.camera.pylon.trigger = trigger      # Line1: bridged at the Galil pulse
@@ -61,8 +61,8 @@ def test_emulated_cell_frames_come_through_pylon_paired_with_the_galil_latch(tri
 
 
 def test_a_pylon_cell_without_a_camera_is_a_one_line_error(monkeypatch):
-    from feeder_bt.errors import ConfigError
-    from feeder_bt.hal.factory import start_emulated
+    from feeder_bt.app.factory import start_emulated
+    from feeder_bt.core.errors import ConfigError
     monkeypatch.setenv("PYLON_CAMEMU", "0")
     sc, cell = load_scenario("scenarios/lenses.yaml", cell=CELL)
     with pytest.raises(ConfigError, match=r"camera.source: pylon:: no such pylon camera "
@@ -72,7 +72,7 @@ def test_a_pylon_cell_without_a_camera_is_a_one_line_error(monkeypatch):
 
 @pytest.mark.soak          # real time: two minutes of wall clock through the TCP drivers
 def test_pylon_emulated_run_feeds_like_the_simulated_cell():
-    from feeder_bt.run import RunOptions, run_job
+    from feeder_bt.app.run import RunOptions, run_job
     opts = dict(scenario="scenarios/lenses.yaml", duration=120.0, seed=1, view="none", db=None)
     emulated = run_job(RunOptions(hal="emulated", cell=CELL, **opts))
     simulated = run_job(RunOptions(hal="sim", fast=True, **opts))
@@ -91,8 +91,8 @@ def test_injected_camera_faults_are_one_line_each_and_never_mis_paired():
     a trigger brings no frame, a second pulse comes on the wire, the pixel format is
     changed behind the cell's back. Each costs one grab with one line; every frame that
     is delivered is the image of the very pulse whose count the Galil latched."""
+    from feeder_bt.app.factory import start_emulated
     from feeder_bt.emulators.faults import FaultPlan
-    from feeder_bt.hal.factory import start_emulated
     plan = FaultPlan()
     # a rule counts the triggers no earlier rule fired on: at triggers 2, 4, 6 and 8
     for nth, kind in ((2, "drop"), (3, "no_frame"), (4, "extra_trigger"), (5, "wrong_format")):
@@ -145,11 +145,11 @@ def test_injected_camera_faults_are_one_line_each_and_never_mis_paired():
 def _run_with_camera_dropped(monkeypatch, unplugged: bool) -> dict:
     """A 20 s emulated run whose camera is closed at the fifth trigger; ``unplugged``: and
     no longer enumerated after that (PYLON_CAMEMU=0), so it cannot be opened again."""
-    from feeder_bt import run as run_mod
+    from feeder_bt.app import run as run_mod
+    from feeder_bt.app.factory import start_emulated
+    from feeder_bt.app.run import RunOptions, run_job
     from feeder_bt.emulators import pylon_camera
     from feeder_bt.emulators.faults import FaultPlan
-    from feeder_bt.hal.factory import start_emulated
-    from feeder_bt.run import RunOptions, run_job
     inject = pylon_camera.PylonPlantCamera._inject
 
     def inject_and_unplug(self, kind):

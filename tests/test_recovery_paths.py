@@ -7,8 +7,8 @@ import pytest
 from test_cell import Rig
 from treeutil import bb_get, fail, finish, frame, make_ctx, part, pending, tick
 
-from feeder_bt.cell import CellCommandError, CellState
-from feeder_bt.errors import CommsLost, GrabFailed, ServoTimeout
+from feeder_bt.control.cell import CellCommandError, CellState
+from feeder_bt.core.errors import CommsLost, GrabFailed, ServoTimeout
 from feeder_bt.trees import locate, retrieve
 
 MOTION = ("robot.pick", "robot.place", "robot.move_safe", "robot.recover")

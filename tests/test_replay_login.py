@@ -8,7 +8,7 @@ import urllib.request
 import pytest
 from uiutil import LENSES, PASSWORD, Client, ReplayUi, feeder_cli
 
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
 
 
 @pytest.fixture(scope="module")

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from treeutil import make_ctx, part
 
+from feeder_bt.analysis.report import robot_bound
+from feeder_bt.app.run import RunOptions, run_job
 from feeder_bt.behaviours.policies import ShortestCycle
+from feeder_bt.config import load_cell, load_scenario
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.report import robot_bound
-from feeder_bt.robot_fit import K_BOUNDS, RobotFit, Timing, pricing_model, robot_fit
-from feeder_bt.robot_model import RobotModel, with_speed_factor
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scara import world_arm
-from feeder_bt.scenario import load_cell, load_scenario
+from feeder_bt.robot.fit import K_BOUNDS, RobotFit, Timing, pricing_model, robot_fit
+from feeder_bt.robot.model import RobotModel, with_speed_factor
+from feeder_bt.robot.scara import world_arm
 
 ROOT = Path(__file__).resolve().parent.parent
 CELL = load_cell(ROOT / "cells" / "sim.yaml")
@@ -108,7 +108,7 @@ def _learnt(tmp_path: Path, factor: float) -> tuple[dict, float]:
 
 @pytest.mark.parametrize("factor", [0.8, 1.25])
 def test_a_simulated_run_learns_the_arm(tmp_path, factor):
-    """The simulated arm (a SCARA, feeder_bt.scara) moves ``factor`` times as fast as the
+    """The simulated arm (a SCARA, feeder_bt.robot.scara) moves ``factor`` times as fast as the
     cell's; the learner fits its Cartesian model to it. The world is no longer of the
     model's form (issue 30), so the fit is compared with the same run at factor 1: after
     a simulated minute the time scale follows the arm within 6 %, and the fitted corner

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import summary
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario.loader import load_cell
-from feeder_bt.supply_bound import transport_lag_s
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import summary
+from feeder_bt.config.loader import load_cell
+from feeder_bt.policy.supply_bound import transport_lag_s
 
 ROOT = Path(__file__).resolve().parents[1]
 # fast belts (a fixed setting within the cell's limits); starved: 30 lenses at the start and

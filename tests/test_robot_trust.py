@@ -12,15 +12,15 @@ import threading
 import pytest
 from test_part_server import Serving, Talk, _serving_with_parts
 
-from feeder_bt.errors import FeederError
-from feeder_bt.part_protocol import parse_offer
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.part_protocol import parse_offer
 from feeder_bt.plant.adapters import PlantOptions, _world_check
 from feeder_bt.plant.client import LoopLink, PartClient, PartServerError, TcpLink
 from feeder_bt.plant.part_server import PartServer
 from feeder_bt.plant.robots import RobotsError, RobotTrust
 from feeder_bt.plant.robots import main as robots_main
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.ticker import Ticker
 
 LENSES = "scenarios/lenses.yaml"
 
@@ -145,7 +145,7 @@ def test_a_placed_the_world_did_not_see_is_a_mismatch():
 
 
 def test_the_report_shows_mismatches_and_the_honest_sim_robot_has_none(capsys):
-    from feeder_bt.cli import summary
+    from feeder_bt.cli.main import summary
     r = run_job(RunOptions(scenario=LENSES, duration=60.0, fast=True, seed=2, view="none",
                            db=None, plant=PlantOptions(part_server="127.0.0.1:0")))
     ps = r["part_server"]

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.geometry import place_outline, pose_outline
-from feeder_bt.scenario.loader import load_scenario
-from feeder_bt.scenario.model import Ruler
+from feeder_bt.cli.main import main
+from feeder_bt.config.loader import load_scenario
+from feeder_bt.core.geometry import place_outline, pose_outline
+from feeder_bt.core.model import Ruler
 from feeder_bt.vision.features import FEATURES
 from feeder_bt.vision.rulers import circle_arcs, line_mm, measure
 
@@ -68,9 +68,9 @@ def test_a_circle_ruler_counts_the_arcs_that_lie_on_the_part(part, teeth):
 def _drawn_frames(classes_edit=None, frames: int = 5):
     """Sprockets of both kinds, turned at random, drawn by the simulated camera and located
     by the recipe: (truth type, located type or the rejection, every feature) for each."""
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(SPROCKETS)
     vision = sc.vision if classes_edit is None else classes_edit(sc.vision)
     loc = Locator(vision, sc.parts, Calibration(cell.camera.calibration))
@@ -121,7 +121,7 @@ def test_sprockets_on_drawn_frames_are_told_apart_by_their_teeth_and_not_without
 
 
 def _run(path: Path, seconds: float = 150.0) -> dict:
-    from feeder_bt.run import RunOptions, run_job
+    from feeder_bt.app.run import RunOptions, run_job
     return run_job(RunOptions(scenario=str(path), duration=seconds, fast=True, seed=1,
                               view="none"))
 
@@ -203,11 +203,11 @@ def test_a_line_ruler_on_drawn_triangles_reads_the_true_outline_within_a_pixel()
     from pixels, against the same rulers on the true outline."""
     import cv2
 
-    from feeder_bt.hal.sim.render import Renderer
-    from feeder_bt.scenario.model import Ruler
+    from feeder_bt.core.model import Ruler
+    from feeder_bt.sim.render import Renderer
     from feeder_bt.vision.blobs import principal_angle
-    from feeder_bt.vision.calibration import Calibration
     from feeder_bt.vision.locator import Locator
+    from feeder_bt.vision.pixels import Calibration
     sc, cell = load_scenario(ROOT / "examples" / "gussets.yaml")
     rulers = {"across": Ruler(line_deg=90.0), "along": Ruler(line_deg=0.0)}
     vision = dataclasses.replace(

@@ -13,10 +13,10 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.adjusters import ADJUSTERS
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario import CellSpec, Scenario, check_files, load_cell, load_scenario
-from feeder_bt.scenario import loader as L
+from feeder_bt.config import CellSpec, Scenario, check_files, load_cell, load_scenario
+from feeder_bt.config import loader as L
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.policy.adjusters import ADJUSTERS
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "cells" / "sim.yaml"
@@ -192,9 +192,9 @@ def test_plain_exponent_is_a_number_and_merge_keys_work(tmp_path: Path) -> None:
 
 def test_valid_leaf_is_accepted(tmp_path: Path) -> None:
     p = write(tmp_path, edit(BASE, ("  policy: fifo", "  policy: fifo\n"
-                                                      "  leaf: feeder_bt.errors:ConfigError")))
+                                                      "  leaf: feeder_bt.core.errors:ConfigError")))
     sc, _ = load_scenario(p)
-    assert sc.retrieve.leaf == "feeder_bt.errors:ConfigError"
+    assert sc.retrieve.leaf == "feeder_bt.core.errors:ConfigError"
 
 
 # ---------------------------------------------------------------- malformed scenarios
@@ -346,11 +346,11 @@ SCENARIO_CASES: dict[str, tuple[list[tuple[str, str]], int, str, list[str]]] = {
         [("frame_spacing_mm: 300", "frame_spacing_mm: 300\n  leaf: just_a_name")],
         24, "locate.leaf", ["package.module:Class"]),
     "leaf_missing_class": (
-        [("frame_spacing_mm: 300", "frame_spacing_mm: 300\n  leaf: feeder_bt.errors:ConfigEror")],
+        [("frame_spacing_mm: 300", "frame_spacing_mm: 300\n  leaf: feeder_bt.core.errors:ConfigEror")],
         24, "locate.leaf", ["no class 'ConfigEror'", "did you mean 'ConfigError'"]),
     "leaf_not_a_class": (
         [("frame_spacing_mm: 300",
-          "frame_spacing_mm: 300\n  leaf: feeder_bt.scenario.loader:load_cell")],
+          "frame_spacing_mm: 300\n  leaf: feeder_bt.config.loader:load_cell")],
         24, "locate.leaf", ["not a class"]),
     "missing_cell_file": (
         [(f"cell: {CELL}", "cell: ../cells/nope.yaml")], 2, "cell",
@@ -657,7 +657,7 @@ _SCALARS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=12),
     st.sampled_from(["lens", "square", "flat", "face_up", "fifo", "otsu", "none",
-                     "feeder_bt.errors:ConfigError", "no.such:Thing", "1e3", "[]", "{}"]),
+                     "feeder_bt.core.errors:ConfigError", "no.such:Thing", "1e3", "[]", "{}"]),
 )
 
 

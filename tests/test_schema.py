@@ -12,10 +12,10 @@ import jsonschema
 import pytest
 import yaml
 
-from feeder_bt.cli import main
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario.loader import load_cell, load_fault_plan, load_scenario
-from feeder_bt.scenario.schema import KINDS, file_kind, schema
+from feeder_bt.cli.main import main
+from feeder_bt.config.loader import load_cell, load_fault_plan, load_scenario
+from feeder_bt.config.schema import KINDS, file_kind, schema
+from feeder_bt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = {

@@ -11,8 +11,10 @@ import dataclasses
 
 import pytest
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import (
+from feeder_bt.config import load_scenario
+from feeder_bt.config.faults import FaultPlanSpec, FaultRate, ScriptedFault
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import (
     CommsLost,
     ConfigError,
     ConveyorFault,
@@ -21,14 +23,12 @@ from feeder_bt.errors import (
     MissedGrab,
     ServoTimeout,
 )
+from feeder_bt.core.jobs import JobState
+from feeder_bt.core.model import SimImperfections
 from feeder_bt.hal.interfaces import Held, PickTarget, Pose
 from feeder_bt.hal.mock.hal import MockHal
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.hal.sim.faults import POWER_OFF, FaultInjector, inject_faults
-from feeder_bt.jobs import JobState
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.faults import FaultPlanSpec, FaultRate, ScriptedFault
-from feeder_bt.scenario.model import SimImperfections
+from feeder_bt.sim.devices import make_sim_hal
+from feeder_bt.sim.faults import POWER_OFF, FaultInjector, inject_faults
 
 EPS = 1e-6
 WARM_S = 30.0          # belts running this long put pickable parts in the robot's reach

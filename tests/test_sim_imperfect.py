@@ -9,18 +9,18 @@ import math
 import numpy as np
 import pytest
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import ConfigError, MissedGrab
-from feeder_bt.geometry import place_outline, pose_outline
+from feeder_bt.config import load_cell, load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import ConfigError, MissedGrab
+from feeder_bt.core.geometry import place_outline, pose_outline
+from feeder_bt.core.model import SimImperfections
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.hal.sim.imperfect import Imperfections, true_calibration
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.hal.sim.world import World
-from feeder_bt.scenario import load_cell, load_scenario
-from feeder_bt.scenario.model import SimImperfections
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.sim.devices import make_sim_hal
+from feeder_bt.sim.imperfect import Imperfections, true_calibration
+from feeder_bt.sim.render import Renderer
+from feeder_bt.sim.world import World
 from feeder_bt.vision.locator import Locator
+from feeder_bt.vision.pixels import Calibration
 
 
 @pytest.fixture(scope="module")

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.sim.devices import make_sim_hal
 
 
 def run(scenario: str, duration: float, seed: int = 1, **kw) -> dict:

@@ -6,13 +6,13 @@ import math
 
 import pytest
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import EnvelopeError, MissedGrab
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import EnvelopeError, MissedGrab
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.world import World
-from feeder_bt.robot_model import RobotModel
-from feeder_bt.scenario import load_scenario
+from feeder_bt.robot.model import RobotModel
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.world import World
 
 
 @pytest.fixture(scope="module")

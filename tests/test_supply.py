@@ -8,19 +8,19 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cell import Cell
-from feeder_bt.cli import main
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import ConfigError, FeederError
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_scenario
+from feeder_bt.config.schema import file_kind, schema
+from feeder_bt.config.supply import SupplyPlanSpec, Totes, load_supply_plan
+from feeder_bt.control.cell import Cell
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import ConfigError, FeederError
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.hal.sim.supply import apply_supply, tote_counts, with_start
-from feeder_bt.hal.sim.world import RECYCLE_S, World
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.schema import file_kind, schema
-from feeder_bt.scenario.supply import SupplyPlanSpec, Totes, load_supply_plan
-from feeder_bt.supply_bound import ReachWindow
+from feeder_bt.policy.supply_bound import ReachWindow
+from feeder_bt.sim.devices import make_sim_hal
+from feeder_bt.sim.supply import apply_supply, tote_counts, with_start
+from feeder_bt.sim.world import RECYCLE_S, World
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANS = sorted((ROOT / "supply").glob("*.yaml"))
@@ -267,12 +267,12 @@ def test_friction_lowers_the_lift_and_a_zero_lift_stops_the_release(lenses):
 
 
 def load_plan_friction(lift: float) -> SupplyPlanSpec:
-    from feeder_bt.scenario.supply import FrictionChange
+    from feeder_bt.config.supply import FrictionChange
     return SupplyPlanSpec(friction=[FrictionChange(at_s=0.0, lift=lift)])
 
 
 def test_a_friction_ramp_steps_the_lift(lenses):
-    from feeder_bt.scenario.supply import FrictionChange
+    from feeder_bt.config.supply import FrictionChange
     plan = SupplyPlanSpec(friction=[FrictionChange(at_s=10.0, lift=0.5, ramp_s=20.0)])
     hal, clock, driver = _hal(lenses, plan)
     _to(hal, clock, 21.0)
@@ -285,8 +285,8 @@ def test_a_friction_ramp_steps_the_lift(lenses):
 
 
 def test_the_operator_slows_the_robot_for_a_while(lenses):
-    from feeder_bt.hal.sim.faults import _event_time
-    from feeder_bt.scenario.supply import OperatorSlow
+    from feeder_bt.config.supply import OperatorSlow
+    from feeder_bt.sim.faults import _event_time
     plan = SupplyPlanSpec(operator=[OperatorSlow(at_s=10.0, override_pct=50.0, for_s=20.0)])
     hal, clock, _ = _hal(lenses, plan)
     w = hal.world
@@ -410,7 +410,7 @@ def test_the_supply_bound_matches_the_worlds_truth(plain):
 
 
 def test_the_summary_names_the_ceiling_in_80_columns(plain):
-    from feeder_bt.cli import summary
+    from feeder_bt.cli.main import summary
     r = plain[0]
     lines = summary(r).splitlines()
     i = next(i for i, s in enumerate(lines) if s.startswith("  ceiling "))

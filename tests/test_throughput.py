@@ -10,14 +10,14 @@ import pytest
 from py_trees.common import Status
 from treeutil import make_ctx, part, pending, tick
 
-from feeder_bt.adjusters import AdjusterParamError, AdjustInputs, make_adjuster
+from feeder_bt.app.run import RunOptions, run_job
 from feeder_bt.behaviours.locate import QueueEmpty
 from feeder_bt.behaviours.policies import POLICIES, ShortestCycle
+from feeder_bt.config import load_scenario
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.hal.sim import devices
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scara import world_arm
-from feeder_bt.scenario import load_scenario
+from feeder_bt.policy.adjusters import AdjusterParamError, AdjustInputs, make_adjuster
+from feeder_bt.robot.scara import world_arm
+from feeder_bt.sim import devices
 from feeder_bt.trees import retrieve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -123,7 +123,7 @@ def test_incremental_look_waits_until_the_taken_part_is_dealt_with():
 
 
 def test_robot_bound_is_sixty_over_the_shortest_cycle():
-    """The corner bound, priced with the world's arm (a SCARA, feeder_bt.scara): 60 over
+    """The corner bound, priced with the world's arm (a SCARA, feeder_bt.robot.scara): 60 over
     the cycle to the window's best point, and no point of a coarse grid of the window
     (searched here, apart from the model's own search) gives a shorter cycle."""
     r = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "lenses.yaml"), duration=20.0,

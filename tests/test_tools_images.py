@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main
-from feeder_bt.scenario import load_scenario
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 WASHERS = str(ROOT / "scenarios/washers.yaml")

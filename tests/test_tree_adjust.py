@@ -5,7 +5,7 @@ from __future__ import annotations
 from py_trees.common import Status
 from treeutil import bb_get, make_ctx, part, tick
 
-from feeder_bt.adjusters import make_adjuster
+from feeder_bt.policy.adjusters import make_adjuster
 from feeder_bt.trees import adjust
 
 

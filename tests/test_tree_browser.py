@@ -15,7 +15,7 @@ import pytest
 from browser_helpers import new_page, require_browser
 from uiutil import PASSWORD, ROOT, Client, FeederUi, ReplayUi, feeder_cli, make_users
 
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
 
 pytestmark = pytest.mark.browser
 

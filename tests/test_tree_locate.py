@@ -6,7 +6,7 @@ import pytest
 from py_trees.common import Status
 from treeutil import bb_get, detection, fail, finish, frame, make_ctx, pending, result, tick
 
-from feeder_bt.errors import CommsLost, GrabFailed, HalError
+from feeder_bt.core.errors import CommsLost, GrabFailed, HalError
 from feeder_bt.trees import locate
 
 CONV0 = 1_000                 # conveyor count at the encoder reset

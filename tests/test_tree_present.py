@@ -6,7 +6,7 @@ import pytest
 from py_trees.common import Status
 from treeutil import bb_get, bb_set, fail, finish, make_ctx, tick
 
-from feeder_bt.errors import ConveyorFault, HalError
+from feeder_bt.core.errors import ConveyorFault, HalError
 from feeder_bt.trees import present
 
 

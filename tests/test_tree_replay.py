@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 from py_trees.common import Status
 
-from feeder_bt.cli import main
-from feeder_bt.eventlog import open_readonly
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.tools.replay_cmd import node_paths
-from feeder_bt.treelog import STATUS_NAMES, TreeTrace, read_trace
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main
+from feeder_bt.cli.replay_cmd import node_paths
+from feeder_bt.records.eventlog import open_readonly
+from feeder_bt.records.treelog import STATUS_NAMES, TreeTrace, read_trace
 
 LENSES = str(Path("scenarios/lenses.yaml").resolve())
 FAULT_AT = 40.0
@@ -153,7 +153,7 @@ def test_status_codes_cover_py_trees():
 def test_the_dashboards_memory_is_bounded_and_agrees_with_the_log(tmp_path, monkeypatch):
     """The live view (what the dashboard's timeline reads) keeps the newest chunks within
     MAX_LIVE_BYTES and shows the same states as the event log."""
-    import feeder_bt.treelog as treelog
+    import feeder_bt.records.treelog as treelog
     monkeypatch.setattr(treelog, "MAX_LIVE_BYTES", 4000)
     traces: list[TreeTrace] = []
     orig = TreeTrace.__init__

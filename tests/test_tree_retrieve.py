@@ -8,9 +8,9 @@ import pytest
 from py_trees.common import Status
 from treeutil import bb_get, bb_set, fail, finish, make_ctx, part, pending, scenario, tick
 
-from feeder_bt.errors import EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.core.parts import Part
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.parts import Part
 from feeder_bt.trees import retrieve
 
 MOTION = ("robot.pick", "robot.place", "robot.move_to", "robot.move_safe", "robot.recover")

@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from feeder_bt.cli import main
-from feeder_bt.errors import ConfigError
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main
+from feeder_bt.config import load_scenario
+from feeder_bt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 LENSES = str(ROOT / "scenarios" / "lenses.yaml")
@@ -77,7 +77,7 @@ def test_every_point_of_a_space_is_a_legal_scenario(tmp_path, space):
     (bounds from the cell's axis limits), so no trial is refused or clamped."""
     import optuna
 
-    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.config.overlay import write_overlay
     from feeder_bt.tuning.space import Limits, suggest
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     for path in (LENSES, SQUARES):
@@ -147,7 +147,7 @@ def test_a_new_study_starts_from_the_scenario_as_written(study_file, tmp_path):
 
     import optuna
 
-    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.config.overlay import write_overlay
     db = study_file[0]
     first = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}").trials[0]
     assert first.user_attrs["start"] == "scenario"
@@ -322,7 +322,7 @@ def test_a_kit_scenario_is_tuned_for_kits_per_minute(tmp_path, capsys):
     assert "kits/min" in said and "parts/min" not in said.split("best:")[1]
     study = optuna.load_study(study_name="kits_lenses_squares:ours", storage=f"sqlite:///{db}")
     assert study.user_attrs["unit"] == "kits/min"
-    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.config.overlay import write_overlay
     best = study.best_trial
     write_overlay(tmp_path / "o.yaml", best.user_attrs["overlay"])
     r = run_job(RunOptions(scenario=kits, duration=120.0, fast=True, seed=1, view="none",

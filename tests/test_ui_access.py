@@ -15,12 +15,12 @@ from typing import Any
 import pytest
 from uiutil import PASSWORDS, Browser, Recorder, make_ui, write_users
 
-from feeder_bt.cli import main
-from feeder_bt.ui.access import Settings, allowed_hosts, host_name
+from feeder_bt.cli.main import main
+from feeder_bt.control.access import Settings, allowed_hosts, host_name
+from feeder_bt.control.sessions import Sessions
+from feeder_bt.control.users import UsersError, UsersFile, check_password
 from feeder_bt.ui.app import check_users
-from feeder_bt.ui.control import Sessions
 from feeder_bt.ui.server import UiApp
-from feeder_bt.ui.users import UsersError, UsersFile, check_password
 
 # ---------------------------------------------------------------------------- lock-outs
 

@@ -19,10 +19,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from uiutil import Browser, FakeClock, SimRig, make_ui, write_users
 
-from feeder_bt.cli import main
-from feeder_bt.eventlog import EventLog
-from feeder_bt.ui.access import BadBody, parse_body
-from feeder_bt.ui.bridge import Bridge, Command
+from feeder_bt.cli.main import main
+from feeder_bt.control.access import BadBody, parse_body
+from feeder_bt.control.bridge import Bridge, Command
+from feeder_bt.records.eventlog import EventLog
 from feeder_bt.ui.server import UiApp
 
 # ---------------------------------------------------------------------------- bodies

@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 from uiutil import FakeClock
 
+from feeder_bt.control.bridge import SHUTTING_DOWN, Bridge, Command, Message, Outcome
+from feeder_bt.control.users import UsersFile
 from feeder_bt.ui import server as ui_server
-from feeder_bt.ui.bridge import SHUTTING_DOWN, Bridge, Command, Message, Outcome
-from feeder_bt.ui.users import UsersFile
 
 # ---------------------------------------------------------------------- bridge
 
@@ -28,7 +28,7 @@ def make_bridge(log: list, wall: FakeClock | None = None) -> Bridge:
         if cmd.name == "boom":
             raise RuntimeError("bug")
         if cmd.name == "bad":
-            from feeder_bt.errors import FeederError
+            from feeder_bt.core.errors import FeederError
             raise FeederError("cannot start while RUNNING")
         return Outcome.done(f"{cmd.name} done")
 

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from uiutil import Client, FakeClock, ServedRig
 
-from feeder_bt.ui.access import parse_setting
+from feeder_bt.control.access import parse_setting
+from feeder_bt.control.users import UsersError
 from feeder_bt.ui.camera import Pacer
-from feeder_bt.ui.users import UsersError
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.pixels import Calibration
 
 
 @pytest.fixture(scope="module")

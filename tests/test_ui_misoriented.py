@@ -10,13 +10,13 @@ import re
 from pathlib import Path
 from types import SimpleNamespace
 
-from feeder_bt.cell import Cell
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
-from feeder_bt.ui.operate import Limits
-from feeder_bt.ui.status import CellPanel
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell
+from feeder_bt.control.operate import Limits
+from feeder_bt.control.status import CellPanel
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.sim.devices import make_sim_hal
 
 ROOT = Path(__file__).resolve().parents[1]
 

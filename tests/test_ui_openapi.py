@@ -9,8 +9,8 @@ from pathlib import Path
 from starlette.routing import Mount
 from uiutil import Browser, make_ui
 
+from feeder_bt.control.operate import COMMANDS
 from feeder_bt.ui.openapi import LOGIN_FIELDS, spec
-from feeder_bt.ui.operate import COMMANDS
 
 ROOT = Path(__file__).resolve().parent.parent
 

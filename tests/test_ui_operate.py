@@ -14,12 +14,12 @@ import socket
 import pytest
 from uiutil import LENSES, ROOT, SimRig
 
-from feeder_bt.cell import CellState
-from feeder_bt.cli import build_parser, main
-from feeder_bt.scenario import load_scenario
+from feeder_bt.cli.main import build_parser, main
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import CellState
+from feeder_bt.control.operate import Limits, parse_speeds
+from feeder_bt.control.users import UsersFile
 from feeder_bt.ui import parse_bind
-from feeder_bt.ui.operate import Limits, parse_speeds
-from feeder_bt.ui.users import UsersFile
 
 # ---------------------------------------------------------------- --ui options
 
@@ -193,7 +193,7 @@ def test_dashboard_snapshot():
 
 
 def test_ui_report_feed_time_is_the_time_between_starts_and_stops():
-    from feeder_bt.run import _FeedSpan
+    from feeder_bt.app.run import _FeedSpan
 
     rig = SimRig()
     span = _FeedSpan(rig.cell)

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 from uiutil import FakeClock
 
-from feeder_bt.cli import main
-from feeder_bt.ui.control import Control, LoginLimiter, Sessions
-from feeder_bt.ui.users import UsersError, UsersFile, hash_password, verify_password
+from feeder_bt.cli.main import main
+from feeder_bt.control.sessions import Control, LoginLimiter, Sessions
+from feeder_bt.control.users import UsersError, UsersFile, hash_password, verify_password
 
 # ----------------------------------------------------------------------- users
 

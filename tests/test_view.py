@@ -9,13 +9,13 @@ import re
 
 import pytest
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.factory import make_hal
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
-from feeder_bt.view import LiveView, status_line, tree_lines
+from feeder_bt.app.factory import make_hal
+from feeder_bt.app.view import LiveView, status_line, tree_lines
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.sim.devices import make_sim_hal
 
 
 def _cell(path: str = "scenarios/lenses.yaml", seed: int = 1) -> tuple[Cell, Ticker]:

@@ -17,19 +17,19 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from feeder_bt.geometry import circumradius, place_outline, pose_outline, wrap_deg
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.scenario import load_cell, load_scenario
-from feeder_bt.scenario.model import (
+from feeder_bt.config import load_cell, load_scenario
+from feeder_bt.core.geometry import circumradius, place_outline, pose_outline, wrap_deg
+from feeder_bt.core.model import (
     CameraCalibration,
     CameraSpec,
     PartSpec,
     Threshold,
     VisionRecipe,
 )
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.sim.render import Renderer
 from feeder_bt.vision.features import FEATURES
 from feeder_bt.vision.locator import LocateResult, Locator
+from feeder_bt.vision.pixels import Calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 POS_TOL_MM = 1.0

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from feeder_bt.geometry import (
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.config import load_scenario
+from feeder_bt.core.geometry import (
     circumradius,
     near,
     place_outline,
@@ -24,13 +26,11 @@ from feeder_bt.geometry import (
     region_centroid,
     rings,
 )
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import Threshold
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.core.model import Threshold
+from feeder_bt.sim.render import Renderer
 from feeder_bt.vision.diagnose import why_nothing
 from feeder_bt.vision.locator import LocateResult, Locator
+from feeder_bt.vision.pixels import Calibration
 from feeder_bt.vision.watch import AFTER_S, RecipeWatch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -102,7 +102,7 @@ def test_polygon_with_a_hole_is_centred_on_the_region(tmp_path):
 
 
 def test_a_hole_outside_its_polygon_is_one_clear_error(tmp_path):
-    from feeder_bt.errors import ConfigError
+    from feeder_bt.core.errors import ConfigError
     text = WASHERS.read_text().replace(
         "shape: {disc: {diameter_mm: 24, hole_mm: 10}}",
         "shape: {polygon: {points_mm: [[0, 0], [40, 0], [40, 20], [0, 20]], "
@@ -195,7 +195,7 @@ def test_otsus_moved_golden_images_are_kept_for_the_levels_last_used(monkeypatch
     # frames); each moved golden image is a pass over the frame, so the recent ones are kept
     import cv2
 
-    from feeder_bt.scenario.model import VisionRecipe
+    from feeder_bt.core.model import VisionRecipe
     from feeder_bt.vision import segment
     seg = segment.Segmenter(VisionRecipe(threshold=Threshold("otsu", value=40),
                                          foreground="light" if light else "dark"))
@@ -248,7 +248,7 @@ def test_dark_recipe_without_golden_image_says_the_belt_is_foreground():
 
 
 def test_adaptive_c_has_opencv_sign(tmp_path):
-    from feeder_bt.errors import ConfigError
+    from feeder_bt.core.errors import ConfigError
     text = BRACKETS.read_text().replace("threshold: {method: fixed, value: 50}",
                                         "threshold: {method: adaptive, block_px: 51, c: 5}")
     text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")

@@ -1,6 +1,6 @@
 """One meaning per word (issue 29): a *fault* stops or degrades the cell, a *miss* is a grab or
 pick the trees retry, an *alarm* is a fault that stopped the cell until the reset. The words
-are defined once (docs/faults.md, as feeder_bt/vocabulary.py says), and no doc, CLI or UI
+are defined once (docs/faults.md, as feeder_bt/core/vocabulary.py says), and no doc, CLI or UI
 string uses one in another's meaning; the report, its plot and replay keep them apart."""
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt import vocabulary
-from feeder_bt.cli import main, summary
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.tools.replay_cmd import faults as replay_faults
-from feeder_bt.tools.runs_db import series
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.replay_cmd import faults as replay_faults
+from feeder_bt.core import vocabulary
+from feeder_bt.records.runs_db import series
 
 ROOT = Path(__file__).resolve().parent.parent
 LENSES = str(ROOT / "scenarios/lenses.yaml")
@@ -40,7 +40,7 @@ def test_each_word_is_defined_once_and_as_the_code_says():
     found = {w: [p for p, t in texts().items() if re.search(rf"an? \*\*{w}\*\* ", t)]
              for w in WORDS}
     docs = ROOT / "docs/faults.md"
-    vocab = ROOT / "feeder_bt/vocabulary.py"
+    vocab = ROOT / "feeder_bt/core/vocabulary.py"
     for w in WORDS:
         assert sorted(found[w]) == sorted([docs, vocab]), (w, found[w])
         d = _definition(docs.read_text(), w)

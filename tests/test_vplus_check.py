@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from feeder_bt.emulators.adept import AdeptEmulator
-from feeder_bt.emulators.vplus_check import (
+from feeder_bt.emulators.vplus.check import (
     VPLUS_DIR,
     VplusRefused,
     check_dir,

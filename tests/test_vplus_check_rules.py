@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.emulators.vplus_check import VPLUS_DIR, check_dir, check_text, main
+from feeder_bt.emulators.vplus.check import VPLUS_DIR, check_dir, check_text, main
 
 
 # ---------------------------------------------------------------------------- helpers

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.run import RunOptions, run_job
+from feeder_bt.app.run import RunOptions, run_job
 
 ROOT = Path(__file__).resolve().parents[1]
 

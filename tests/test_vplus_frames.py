@@ -14,14 +14,14 @@ import time
 
 import pytest
 
-from feeder_bt.clock import RealClock
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.errors import EnvelopeError, MissedGrab, ServoTimeout
 from feeder_bt.emulators.adept import AdeptEmulator
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.emulators.vplus_check import VPLUS_DIR
-from feeder_bt.errors import EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.emulators.vplus.check import VPLUS_DIR
 from feeder_bt.hal.adept import AdeptController, VplusError
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 from tests.test_adept_driver import (
     BELT_COUNTS_S,
     MOTION_TIMEOUT_S,
@@ -243,7 +243,7 @@ def _stop_during_a_pick(programs, expect_stop: bool) -> list[str]:
 def test_the_estop_polarity_comes_from_the_cell_file(active_low):
     """``io.estop`` with ``active_low``: the driver sends ESTOP -1001, the V+ program
     tests SIG(-1001); a motion is refused (-9007) exactly while the e-stop is active."""
-    from feeder_bt.hal.factory import adept_estop
+    from feeder_bt.app.factory import adept_estop
 
     scenario, cell = load_scenario("scenarios/lenses.yaml")
     io = dict(cell.io)

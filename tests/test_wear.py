@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.cli import main, summary
-from feeder_bt.errors import ConfigError
-from feeder_bt.run import RunOptions, run_job
-from feeder_bt.scenario.loader import load_scenario
+from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.cli.main import main, summary
+from feeder_bt.config.loader import load_scenario
+from feeder_bt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,14 +11,14 @@ import numpy as np
 import py_trees
 from py_trees.common import Access
 
-from feeder_bt.adjusters import make_adjuster
-from feeder_bt.behaviours.common import Ctx, Stats, init_blackboard
-from feeder_bt.clock import SimClock
-from feeder_bt.encoder import EncoderSync
+from feeder_bt.behaviours.base import Ctx, Stats, init_blackboard
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.encoder import EncoderSync
+from feeder_bt.core.parts import Part, PartsQueue
 from feeder_bt.hal.interfaces import Frame
 from feeder_bt.hal.mock.hal import MockHal, MockJob
-from feeder_bt.parts import Part, PartsQueue
-from feeder_bt.scenario import load_scenario
+from feeder_bt.policy.adjusters import make_adjuster
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

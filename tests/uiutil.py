@@ -22,17 +22,17 @@ from http.cookiejar import CookieJar
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
+from feeder_bt.config import load_scenario
+from feeder_bt.control.bridge import Command, Outcome
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.operate import CellOps
+from feeder_bt.control.status import CellPanel
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.control.users import FORMAT, UsersFile, hash_password
+from feeder_bt.core.clock import SimClock
+from feeder_bt.sim.devices import make_sim_hal
 from feeder_bt.ui.app import OperatorUi
-from feeder_bt.ui.bridge import Command, Outcome
-from feeder_bt.ui.operate import CellOps
 from feeder_bt.ui.server import UiApp
-from feeder_bt.ui.status import CellPanel
-from feeder_bt.ui.users import FORMAT, UsersFile, hash_password
 
 ROOT = Path(__file__).resolve().parent.parent
 LENSES = ROOT / "scenarios" / "lenses.yaml"

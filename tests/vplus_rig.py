@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import functools
 
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.config import load_scenario
 from feeder_bt.emulators.vplus.program import load_text
 from feeder_bt.emulators.vplus.runtime import Runtime
 from feeder_bt.emulators.vplus.task import Cell, Task
 from feeder_bt.emulators.vplus.trans import Trans
-from feeder_bt.scenario import load_scenario
+from feeder_bt.sim.realtime import Plant
 
 
 @functools.lru_cache(maxsize=1)

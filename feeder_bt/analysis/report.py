@@ -8,14 +8,19 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.cell import Cell
-from feeder_bt.kits import KitTracker, kits_report
-from feeder_bt.robot_bounds import Pricing, mean_bound, selection_bound
-from feeder_bt.robot_model import RobotModel
-from feeder_bt.scenario.model import CellSpec, Scenario
-from feeder_bt.supply_bound import ceiling, inflow_bound_parts, supply_bound_ppm, transport_lag_s
-from feeder_bt.ticker import Ticker
-from feeder_bt.vocabulary import split
+from feeder_bt.analysis.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.control.cell import Cell
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.vocabulary import split
+from feeder_bt.policy.kits import KitTracker, kits_report
+from feeder_bt.policy.supply_bound import (
+    ceiling,
+    inflow_bound_parts,
+    supply_bound_ppm,
+    transport_lag_s,
+)
+from feeder_bt.robot.model import RobotModel
 
 
 def _pct(values: list[float], q: float) -> float:
@@ -25,7 +30,7 @@ def _pct(values: list[float], q: float) -> float:
 def pick_window(cell_spec: CellSpec, scenario: Scenario) -> tuple[float, float, float, float]:
     """Where a part's centre can be when picked: along the belt up to ``too_far`` (or the
     belt's end), across it inside the side rails. (x_lo, x_hi, y_lo, y_hi) in mm."""
-    from feeder_bt.hal.sim.world import EDGE_MARGIN_MM
+    from feeder_bt.sim.world import EDGE_MARGIN_MM
 
     belt = cell_spec.conveyors["horizontal"]
     x_hi = min(scenario.retrieve.too_far_mm, belt.length_mm)
@@ -56,7 +61,7 @@ Inflow = tuple[int, list[tuple[float, int]]]      # parts at the start, (s, part
 def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds: float,
            inflow: Inflow | None = None, span_s: float | None = None,
            selection_ppm: float | None = None, lag_s: float = 0.0) -> dict[str, Any]:
-    """The supply bound (``feeder_bt.supply_bound``) beside the robot's, and the inflow
+    """The supply bound (``feeder_bt.policy.supply_bound``) beside the robot's, and the inflow
     bound when parts enter only by totes; the lowest is the ceiling, and parts/min as a %
     of it. The inflow bound counts parts over the run's whole ``span_s``, each arrival
     ``lag_s`` late (the ride to the robot), and is put per minute of feeding, like
@@ -78,7 +83,7 @@ def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds
 def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
                        feed_seconds: float, sim_seconds: float) -> dict[str, Any]:
     """The selection-aware robot bounds over the simulated world's record of the run
-    (``feeder_bt.robot_bounds``), with the world's own arm: the mean cycle over where the
+    (``feeder_bt.analysis.robot_bounds``), with the world's own arm: the mean cycle over where the
     robot picked, and nearest-first over the parts that passed."""
     since = _record_since(world, sim_seconds)
     if since is not None:
@@ -155,7 +160,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
     # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
-    # (feeder_bt.scara), or on a real cell the cell's description (issue 30)
+    # (feeder_bt.robot.scara), or on a real cell the cell's description (issue 30)
     arm = world.robot_model if world is not None else None
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario, arm) if cell.scenario
                               else (0.0, 0.0))

@@ -3,8 +3,8 @@ really had, not with a part always waiting at the best corner of its window.
 
 ``robot_bound_ppm`` (``report.robot_bound``) is 60 over the shortest pick-and-place cycle
 anywhere in the pick window: the corner case, which no part may ever offer. Two bounds
-closer to a run, from the simulated world's record of it (``hal/sim/passlog.py``), priced
-with the world's own arm (a SCARA, ``feeder_bt.scara``):
+closer to a run, from the simulated world's record of it (``sim/passlog.py``), priced
+with the world's own arm (a SCARA, ``feeder_bt.robot.scara``):
 
 - ``mean_bound``: 60 over the mean cycle (place pose → pick → place pose, with settle,
   grip and release) over where the run's robot really picked: the rate at which this
@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.kits import KitTracker
-from feeder_bt.robot_model import RobotModel
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.policy.kits import KitTracker
+from feeder_bt.robot.model import RobotModel
 
 
 @dataclass

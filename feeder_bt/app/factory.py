@@ -11,11 +11,11 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from feeder_bt.clock import Clock, RealClock, SimClock
-from feeder_bt.errors import ConfigError, HalError
+from feeder_bt.core.clock import Clock, RealClock, SimClock
+from feeder_bt.core.errors import ConfigError, HalError
+from feeder_bt.core.jobs import DoneJob, Job
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import Hal, IoChange
-from feeder_bt.jobs import DoneJob, Job
-from feeder_bt.scenario.model import CellSpec, Scenario
 
 HAL_KINDS = ("sim", "emulated", "real")
 PROGRAMS_DIR = Path(__file__).resolve().parents[2] / "galil_programs"
@@ -163,11 +163,11 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
     if kind == "sim" and cell.presentation == "plate":      # issue 31
-        from feeder_bt.hal.sim.plate import make_plate_sim_hal
+        from feeder_bt.sim.plate import make_plate_sim_hal
         clock = SimClock()
         return make_plate_sim_hal(scenario, cell, clock, seed), clock
     if kind == "sim":
-        from feeder_bt.hal.sim.devices import make_sim_hal
+        from feeder_bt.sim.devices import make_sim_hal
         clock = SimClock()
         return make_sim_hal(scenario, cell, clock, seed), clock
     if kind == "real":
@@ -187,8 +187,8 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     """Emulators on loopback over the simulated cell in real time, and the real drivers."""
     from feeder_bt.emulators.adept import AdeptEmulator
     from feeder_bt.emulators.camera import PlantCameraSource
-    from feeder_bt.emulators.galil import GalilEmulator
-    from feeder_bt.emulators.plant import Plant
+    from feeder_bt.emulators.galil.emulator import GalilEmulator
+    from feeder_bt.sim.realtime import Plant
 
     plant = Plant(scenario, cell, seed).start()
     galil = GalilEmulator(plant, faults=faults).start()

@@ -12,16 +12,16 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import RealClock, SimClock
-from feeder_bt.errors import ConfigError, FeederError
-from feeder_bt.eventlog import EventLog
-from feeder_bt.hal.factory import make_hal
-from feeder_bt.report import build_report, write_report
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import Scenario
-from feeder_bt.ticker import Ticker
-from feeder_bt.view import LiveView, Progress
+from feeder_bt.analysis.report import build_report, write_report
+from feeder_bt.app.factory import make_hal
+from feeder_bt.app.view import LiveView, Progress
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import RealClock, SimClock
+from feeder_bt.core.errors import ConfigError, FeederError
+from feeder_bt.core.model import Scenario
+from feeder_bt.records.eventlog import EventLog
 
 STOP_GRACE_S = 30.0        # clock time allowed for the clean-up tree after a stop
 DEFAULT_DB = "runs/feeder.db"   # the command line's event log unless --db / --no-db
@@ -40,7 +40,7 @@ class RunOptions:
     skip_idle: bool = True
     db: str | None = None          # SQLite event log; None or "" for none (CLI: DEFAULT_DB)
     ui: str | None = None          # "HOST:PORT": serve the operator UI (docs/operator-ui.md)
-    users: str | None = None       # the UI's users file (default: feeder_bt.ui.users)
+    users: str | None = None       # the UI's users file (default: feeder_bt.control.users)
     start: bool | None = None      # start feeding at once; None: yes, unless --ui
     faults: str | None = None      # a fault plan (docs/faults.md) for the simulated cell
     supply: str | None = None      # a supply plan (docs/supply.md) for the simulated cell
@@ -58,8 +58,8 @@ def add_db_options(parser: argparse.ArgumentParser) -> None:
 
 def add_ui_options(parser: argparse.ArgumentParser) -> None:
     """``--ui [HOST:PORT]``, ``--users FILE``, ``--start`` for ``feeder run``."""
+    from feeder_bt.control.users import default_path
     from feeder_bt.ui import DEFAULT_BIND, parse_bind
-    from feeder_bt.ui.users import default_path
 
     def bind(text: str) -> str:
         parse_bind(text)                 # one-line usage error now, not after the HAL opens
@@ -298,15 +298,15 @@ def _prepare(opts: RunOptions) -> _Prepared:
         _check_opcua(opts)
     prep = _Prepared(scenario, cell_spec, duration, start)
     if opts.faults:
-        from feeder_bt.scenario.faults import load_fault_plan
+        from feeder_bt.config.faults import load_fault_plan
         prep.plan = load_fault_plan(opts.faults)
         if opts.hal != "sim":
             raise ConfigError("fault plans drive the simulated cell; the emulators take "
                               "their faults from tests (feeder_bt.emulators.faults)",
                               key="faults")
     if opts.supply:
-        from feeder_bt.hal.sim.supply import with_start
-        from feeder_bt.scenario.supply import check_against_scenario, load_supply_plan
+        from feeder_bt.config.supply import check_against_scenario, load_supply_plan
+        from feeder_bt.sim.supply import with_start
         prep.supply_plan = load_supply_plan(opts.supply)
         if opts.hal != "sim":
             raise ConfigError("supply plans drive the simulated cell; on an emulated or "
@@ -337,16 +337,16 @@ class _Run:
         opts, prep = self.opts, self.prep
         self.hal, clock = make_hal(opts.hal, prep.scenario, prep.cell_spec, opts.seed)
         if prep.plan is not None:
-            from feeder_bt.hal.sim.faults import inject_faults
+            from feeder_bt.sim.faults import inject_faults
             self.injector = inject_faults(self.hal, prep.plan)  # type: ignore[arg-type]
         if prep.supply_plan is not None:
-            from feeder_bt.hal.sim.supply import apply_supply
+            from feeder_bt.sim.supply import apply_supply
             self.supply = apply_supply(self.hal, prep.supply_plan)
         self.clock = clock if isinstance(clock, SimClock) else RealClock()
         self.cell = Cell(prep.cell_spec, self.hal, self.clock)
         self.broken = _watch_accounting(self.cell)
         if self.log or opts.ui:     # the trees' history, for `feeder replay` and the timeline
-            from feeder_bt.treelog import TreeTrace
+            from feeder_bt.records.treelog import TreeTrace
             self.trace = TreeTrace(self.cell, live=bool(opts.ui), logged=bool(self.log))
         if self.log:
             _start_log(self.log, opts, prep.scenario, self.cell)

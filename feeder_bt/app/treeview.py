@@ -7,14 +7,14 @@ import shutil
 
 import py_trees
 
-from feeder_bt.behaviours.common import Ctx, Stats, init_blackboard
-from feeder_bt.clock import SimClock
-from feeder_bt.encoder import EncoderSync
-from feeder_bt.errors import FeederError
+from feeder_bt.behaviours.base import Ctx, Stats, init_blackboard
+from feeder_bt.config import load_scenario
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.encoder import EncoderSync
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.model import Scenario
+from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.mock import MockHal
-from feeder_bt.parts import PartsQueue
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import Scenario
 from feeder_bt.trees import build_cleanup, build_feeding, build_setup
 
 

@@ -20,7 +20,7 @@ from typing import TextIO
 import py_trees
 from py_trees.common import Status
 
-from feeder_bt.cell import Cell, CellState
+from feeder_bt.control.cell import Cell, CellState
 
 CLEAR = "\x1b[H\x1b[J"
 MIN_ROWS = 6                 # below this the view shows only the header and status lines

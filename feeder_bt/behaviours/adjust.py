@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.adjusters import AdjustInputs
-from feeder_bt.behaviours.common import Ctx, Leaf, client
-from feeder_bt.encoder import DriftWatch
+from feeder_bt.behaviours.base import Ctx, Leaf, client
+from feeder_bt.core.encoder import DriftWatch
+from feeder_bt.policy.adjusters import AdjustInputs
 
 SPEED_KEYS = ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct")
 GOLDEN = 0.6180339887498949    # the golden ratio's fraction: evenly spread, never repeating

@@ -14,13 +14,13 @@ from typing import Any
 import py_trees
 from py_trees.common import Access, Status
 
-from feeder_bt.clock import EPS, Clock
-from feeder_bt.encoder import EncoderSync
-from feeder_bt.errors import HalError
+from feeder_bt.core.clock import EPS, Clock
+from feeder_bt.core.encoder import EncoderSync
+from feeder_bt.core.errors import HalError
+from feeder_bt.core.jobs import Job, JobState
+from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
-from feeder_bt.jobs import Job, JobState
-from feeder_bt.parts import PartsQueue
-from feeder_bt.scenario.model import CellSpec, Scenario
 
 
 @dataclass

@@ -23,11 +23,11 @@ from dataclasses import dataclass, field
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.common import Ctx
+from feeder_bt.behaviours.base import Ctx
+from feeder_bt.behaviours.desk_trust import CUT_OFF_S, TrustRules, robot_of
 from feeder_bt.behaviours.retrieve import NextPart, count_retrieved
-from feeder_bt.behaviours.serve_trust import CUT_OFF_S, TrustRules, robot_of
-from feeder_bt.clock import Clock
-from feeder_bt.part_protocol import (
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.part_protocol import (
     USAGE,
     Offer,
     ProtocolError,
@@ -36,7 +36,7 @@ from feeder_bt.part_protocol import (
     parse_request,
     status_line,
 )
-from feeder_bt.parts import Part
+from feeder_bt.core.parts import Part
 
 PICK_GRACE_S = 5.0        # after a part passes too_far, before its record expires
 PLACE_TIMEOUT_S = 30.0    # from PICKED to PLACED, before a held part's record expires

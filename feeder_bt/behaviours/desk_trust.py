@@ -16,7 +16,7 @@ from collections.abc import Callable, Hashable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from feeder_bt.behaviours.serve import Handed
+    from feeder_bt.behaviours.desk import Handed
 
 CUT_OFF_S = 600.0         # a robot whose parts expire unreported is refused this long
 

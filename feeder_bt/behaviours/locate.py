@@ -7,12 +7,12 @@ import math
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
-from feeder_bt.encoder import diff
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.parts import Part
 from feeder_bt.hal.interfaces import Frame
-from feeder_bt.jobs import Job
-from feeder_bt.parts import Part
-from feeder_bt.supply_bound import ReachWindow
+from feeder_bt.policy.supply_bound import ReachWindow
 from feeder_bt.vision.latest import hand_over
 from feeder_bt.vision.watch import recipe_watch
 

@@ -15,11 +15,11 @@ from __future__ import annotations
 import py_trees
 from py_trees.common import Access, Status
 
-from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
-from feeder_bt.errors import HalError, PlateFault
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.core.errors import HalError, PlateFault
+from feeder_bt.core.jobs import Job, JobState
 from feeder_bt.hal.interfaces import PlateFeeder
-from feeder_bt.jobs import Job, JobState
-from feeder_bt.plate_policy import next_actions, part_area_mm2, view_of
+from feeder_bt.policy.plate import next_actions, part_area_mm2, view_of
 
 LOOK, PLAN = "/plate/look", "/plate/plan"
 

@@ -2,7 +2,7 @@
 
 ``fifo`` and ``earliest_deadline`` need only the queue. ``shortest_cycle`` and
 ``lookahead`` price every part by the robot model fitted online from the robot's measured
-move times (``feeder_bt.robot_fit``; thesis Figure 8-5, "does location matter"): the seconds from now until the part is released at its place pose, with the
+move times (``feeder_bt.robot.fit``; thesis Figure 8-5, "does location matter"): the seconds from now until the part is released at its place pose, with the
 intercept on the moving belt predicted from the belt speed. All parts of a choice are
 priced at once with numpy, so a choice over a long queue stays well inside a tick.
 """
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.behaviours.common import Ctx
-from feeder_bt.parts import Part
-from feeder_bt.robot_fit import pricing_model
+from feeder_bt.behaviours.base import Ctx
+from feeder_bt.core.parts import Part
+from feeder_bt.robot.fit import pricing_model
 
 XNow = Callable[[Part], float]
 
@@ -81,7 +81,7 @@ class ShortestCycle(Policy):
 
     def __init__(self, ctx: Ctx | None = None) -> None:
         super().__init__(ctx)
-        # fitted online from measured move times (feeder_bt/robot_fit.py), not the
+        # fitted online from measured move times (feeder_bt/robot/fit.py), not the
         # simulator's model; the cell's nominal model with retrieve.learn_robot: false
         self.model = pricing_model(ctx) if ctx is not None else None
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
-from feeder_bt.jobs import Job, JobState
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.core.jobs import Job, JobState
 
 
 class RunConveyors(Leaf):

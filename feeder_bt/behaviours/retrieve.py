@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
 from feeder_bt.behaviours.policies import POLICIES
-from feeder_bt.errors import HalError, UnknownPart
-from feeder_bt.geometry import wrap_deg
+from feeder_bt.core.errors import HalError, UnknownPart
+from feeder_bt.core.geometry import wrap_deg
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.parts import Part
 from feeder_bt.hal.interfaces import Held, PickTarget, Pose
-from feeder_bt.jobs import Job
-from feeder_bt.kits import KitTracker
-from feeder_bt.parts import Part
-from feeder_bt.robot_fit import Timing, robot_fit
+from feeder_bt.policy.kits import KitTracker
+from feeder_bt.robot.fit import Timing, robot_fit
 
 
 def belt_x_now(ctx: Ctx, part: Part) -> float:
@@ -113,7 +113,7 @@ class PartJob(JobLeaf):
     """A robot job about the part the retriever chose (``/retrieve/part``).
 
     A pick or place is timed on the cell's clock (``timing``) for the robot model fitted
-    online (``feeder_bt.robot_fit``); only one that ends by itself, successfully, counts."""
+    online (``feeder_bt.robot.fit``); only one that ends by itself, successfully, counts."""
 
     fault_key = "/retrieve/error"
 

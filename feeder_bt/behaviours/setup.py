@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.common import Ctx, JobLeaf, Leaf
-from feeder_bt.encoder import FreshAnchor
-from feeder_bt.jobs import Job
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
+from feeder_bt.core.encoder import FreshAnchor
+from feeder_bt.core.jobs import Job
 
 
 class SetSignal(JobLeaf):

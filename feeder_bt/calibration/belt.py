@@ -2,7 +2,7 @@
 
 A marker stuck on the belt is touched by the robot at several belt positions; each touch
 records the robot's tool position and the robot controller's belt count (24-bit, wrapping:
-counts are unwrapped with ``feeder_bt.encoder.diff``, right as long as the belt moves less
+counts are unwrapped with ``feeder_bt.core.encoder.diff``, right as long as the belt moves less
 than half a wrap between touches). The touches lie on a line ``p = p0 + c * m`` where ``c``
 is counts since the first touch and ``m`` the belt's motion per count in the robot frame;
 ``counts_per_mm = 1 / |m|`` and the direction is the angle of ``m``.
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
-from feeder_bt.encoder import diff
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Hal
-from feeder_bt.jobs import Job
 
 MIN_TOUCHES = 3
 MIN_TRAVEL_MM = 50.0

@@ -1,6 +1,6 @@
 """Camera <-> belt frame: fit the cell's ``CameraCalibration`` from an image of a target.
 
-The model is the one ``feeder_bt.vision.calibration`` uses, a similarity *with reflection*
+The model is the one ``feeder_bt.vision.pixels`` uses, a similarity *with reflection*
 (the image's v axis runs along the belt)::
 
     x = ox + s (v cos r - u sin r) = ox + a v - b u
@@ -31,9 +31,9 @@ import numpy as np
 
 from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
 from feeder_bt.calibration.targets import DEFAULT_TARGETS, Target, detect_points
+from feeder_bt.core.model import CameraCalibration
 from feeder_bt.hal.interfaces import Camera, Frame
-from feeder_bt.scenario.model import CameraCalibration
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.pixels import Calibration
 
 __all__ = ["DEFAULT_TARGETS", "CameraFit", "Target", "TargetPose", "calibrate_camera_image",
            "camera_procedure", "centred_pose", "correspondences", "detect_target",

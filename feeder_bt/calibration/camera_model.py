@@ -29,7 +29,7 @@ from feeder_bt.calibration.intrinsics import (
     fit_belt_plane,
 )
 from feeder_bt.calibration.targets import Target
-from feeder_bt.scenario.model import CameraCalibration
+from feeder_bt.core.model import CameraCalibration
 
 DEFAULT_MAX_RMS_PX = 1.0       # reprojection rms of the lens model over all views
 DEFAULT_MAX_BELT_MM = 0.3      # rms of the belt plane over the target's points

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import FeederError
-from feeder_bt.jobs import Job
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.jobs import Job
 
 Waiter = Callable[[Job], Any]
 

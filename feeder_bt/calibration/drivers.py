@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 
 from feeder_bt.calibration.common import CalibrationError, Waiter
+from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Hal, Pose
-from feeder_bt.jobs import Job
 
 POLL_S = 0.005
 

@@ -24,8 +24,8 @@ import numpy as np
 import yaml
 from yaml.nodes import MappingNode, ScalarNode, SequenceNode
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario.model import CameraCalibration, CellSpec
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.core.model import CameraCalibration, CellSpec
 
 REQUIRED = ("origin_mm", "mm_per_px", "rotation_deg")
 _CONSTRUCT = yaml.constructor.SafeConstructor()

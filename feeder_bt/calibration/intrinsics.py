@@ -31,7 +31,7 @@ import numpy as np
 from feeder_bt.calibration.camera import fit_camera
 from feeder_bt.calibration.common import CalibrationError, rms_max
 from feeder_bt.calibration.targets import Target, detect_points
-from feeder_bt.scenario.model import CameraCalibration
+from feeder_bt.core.model import CameraCalibration
 
 MIN_VIEWS = 3
 FULL_VIEWS = 5            # from this many views k3 is estimated too
@@ -218,7 +218,7 @@ def fit_belt_plane(px: np.ndarray, mm: np.ndarray, lens: CameraModel | None = No
         dist = lens.dist
     base = CameraCalibration(intrinsics=intrinsics if any(dist) else None,
                              dist=[float(d) for d in dist] if intrinsics else [])
-    from feeder_bt.vision.calibration import Calibration
+    from feeder_bt.vision.pixels import Calibration
 
     und = Calibration(base).undistort(px)
     sim = fit_camera(und, mm)                     # checks the points; the nearest similarity

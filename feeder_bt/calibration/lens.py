@@ -1,6 +1,6 @@
 """Lens distortion from several views of a calibration target (``cv2.calibrateCamera``).
 
-The cell's camera model (``feeder_bt.vision.calibration``) has no distortion: it maps
+The cell's camera model (``feeder_bt.vision.pixels``) has no distortion: it maps
 pixels to the belt by a similarity. This estimates how far the lens bends the image, so
 the user knows whether that model is good enough: the views (the target anywhere in the
 window, turned, at least three) give radial distortion ``k1`` (``k2`` too with

@@ -317,7 +317,7 @@ def _check_geometry(px: np.ndarray, index: np.ndarray, target: Target) -> None:
 
 def board_rings(target: Target) -> list[np.ndarray]:
     """The target's dark features as outlines in the board frame (mm): squares, dots, or the
-    ChArUco board's black regions (rings parted by NaN rows: ``feeder_bt.geometry``). For
+    ChArUco board's black regions (rings parted by NaN rows: ``feeder_bt.core.geometry``). For
     drawing test boards (the simulated camera renders them)."""
     if target.kind == "charuco":
         return _charuco_rings(target)
@@ -341,7 +341,7 @@ def _charuco_rings(target: Target) -> list[np.ndarray]:
     """OpenCV draws the board; its dark squares are read off the drawing (a pixel in each
     square's corner, clear of any marker) and drawn exactly, and the markers (each clear of
     the squares) become outlines with their white cells as holes."""
-    from feeder_bt.geometry import join_rings
+    from feeder_bt.core.geometry import join_rings
 
     k, p = BOARD_PX_PER_MM, target.pitch_mm
     nsx, nsy = target.nx + 1, target.ny + 1

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
-from feeder_bt.geometry import wrap_deg
+from feeder_bt.core.geometry import wrap_deg
+from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Hal
-from feeder_bt.jobs import Job
 
 MIN_TOUCHES = 2
 MIN_SPREAD_DEG = 20.0

@@ -1,1 +1,2 @@
-"""Operator tools beyond `feeder run`, one module per sub-command (wired in cli.py)."""
+"""The ``feeder`` command (``main``) and its sub-commands, one module each. The top layer:
+may import every other."""

@@ -53,11 +53,11 @@ from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from feeder_bt.calibration.files import calibration_path, write_calibration_file
 from feeder_bt.calibration.targets import parse_board
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import FeederError
-from feeder_bt.jobs import Job
-from feeder_bt.scenario import load_cell
-from feeder_bt.scenario.model import CameraCalibration, CellSpec, Scenario, VisionRecipe
+from feeder_bt.config import load_cell
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.model import CameraCalibration, CellSpec, Scenario, VisionRecipe
 
 BELT_MARKER_MM = (800.0, 305.0)      # in reach of the robot, steps of 80 mm stay in reach
 TOOL_POINT_MM = (1150.0, 305.0)      # a fixed point (fixture) in the robot's reach
@@ -247,7 +247,7 @@ def _camera(args: argparse.Namespace, cell: CellSpec) -> int:
         _need_sim(cell, "camera")
         base = true_camera(cell)                    # the simulated camera's real mapping
         truth = sim_truth(base, *args.sim_truth)
-        from feeder_bt.hal.sim.target import SIM_LENS_VIEWS
+        from feeder_bt.sim.target import SIM_LENS_VIEWS
 
         n = args.views if args.views else (SIM_LENS_VIEWS if truth.intrinsics else 0)
         images = sim_images(cell, target, pose, truth, seed=args.seed, views=n,
@@ -308,7 +308,7 @@ def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCa
                seed: int = 1, views: int = 0, save: str | None = None
                ) -> list[tuple[str, np.ndarray]]:
     """The simulated camera's images of the target (``hal.sim.target.sim_images``)."""
-    from feeder_bt.hal.sim.target import sim_images as images
+    from feeder_bt.sim.target import sim_images as images
 
     return images(cell, target, pose, truth, seed, views, save)
 
@@ -316,7 +316,7 @@ def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCa
 def true_camera(cell: CellSpec) -> CameraCalibration:
     """How the simulated camera really maps (``hal.sim.imperfect.true_calibration`` without
     the residual error a calibration leaves: the camera, lens and tilt a calibration finds)."""
-    from feeder_bt.hal.sim.imperfect import true_calibration
+    from feeder_bt.sim.imperfect import true_calibration
 
     return true_calibration(cell, residual=False)
 
@@ -325,7 +325,7 @@ def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
               deg: float = 0.0, scale_pct: float = 0.0) -> CameraCalibration:
     """The cell's calibration with an error added: how the simulated camera really maps
     (a full calibration's homography gets the same error in the belt frame)."""
-    from feeder_bt.hal.sim.imperfect import shifted
+    from feeder_bt.sim.imperfect import shifted
 
     return shifted(nominal, (dx, dy), scale_pct, deg)
 
@@ -335,12 +335,12 @@ def sim_camera(cell: CellSpec, target, pose: TargetPose,
                prior: bool = True, save: str | None = None) -> CameraFit:
     """Calibrate the simulated camera (really mapping by ``truth``) from a target at ``pose``
     (``save``: also write the image it grabbed to this file)."""
-    from feeder_bt.hal.sim.target import TargetCamera
+    from feeder_bt.sim.target import TargetCamera
 
     camera = TargetCamera(cell.camera, truth, seed=seed)
     camera.place(target, pose)
     if save:
-        from feeder_bt.tools.common import write_image
+        from feeder_bt.cli.inputs import write_image
         write_image(save, camera.grab().result.image)
         camera.frames = 0                       # the procedure grabs the same image again
     return camera_procedure(camera, lambda job: job.result if job.ok else _raise(job),
@@ -352,7 +352,7 @@ def _raise(job):
 
 
 def _sim_cell(cell: CellSpec, seed: int, counts_per_mm: float | None = None):
-    from feeder_bt.hal.sim.devices import make_sim_hal
+    from feeder_bt.sim.devices import make_sim_hal
 
     if counts_per_mm is not None:
         if not counts_per_mm > 0:
@@ -371,7 +371,7 @@ def _sim_cell(cell: CellSpec, seed: int, counts_per_mm: float | None = None):
 def sim_belt(cell: CellSpec, seed: int = 1, noise_mm: float = 0.05,
              counts_per_mm: float | None = None, frame_deg: float = 0.0) -> BeltFit:
     """Belt calibration on the simulated cell: a marker at ``BELT_MARKER_MM``, 5 touches."""
-    from feeder_bt.hal.sim.target import RobotFrameView, SimToucher
+    from feeder_bt.sim.target import RobotFrameView, SimToucher
 
     hal, wait = _sim_cell(cell, seed, counts_per_mm)
     try:
@@ -387,7 +387,7 @@ def sim_belt(cell: CellSpec, seed: int = 1, noise_mm: float = 0.05,
 def sim_tool(cell: CellSpec, tool_offset_mm: tuple[float, float] = (0.0, 0.0), seed: int = 1,
              noise_mm: float = 0.05, angles_deg=(-90.0, -30.0, 30.0, 90.0)) -> ToolFit:
     """Tool calibration on the simulated cell: a fixed point touched at ``angles_deg``."""
-    from feeder_bt.hal.sim.target import SimToucher
+    from feeder_bt.sim.target import SimToucher
 
     hal, wait = _sim_cell(cell, seed)
     try:
@@ -403,7 +403,7 @@ def sim_tool(cell: CellSpec, tool_offset_mm: tuple[float, float] = (0.0, 0.0), s
 
 def _driver_hal(cell: CellSpec, kind: str, seed: int):
     """The cell behind its drivers: the emulators (``emulated``) or the real controllers."""
-    from feeder_bt.hal.factory import make_hal
+    from feeder_bt.app.factory import make_hal
 
     empty = Scenario(name="calibration", path=Path("-"), cell_path=Path(cell.path), parts={},
                      hopper={}, vision=VisionRecipe())

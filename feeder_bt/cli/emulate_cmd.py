@@ -21,7 +21,7 @@ import sys
 import threading
 from typing import TextIO
 
-from feeder_bt.scenario import load_scenario
+from feeder_bt.config import load_scenario
 
 DEFAULT_SCENARIO = "scenarios/lenses.yaml"
 GRIP_SYNC_S = 0.02           # how often the grip sensor follows the vacuum and a held part
@@ -89,11 +89,11 @@ def read_actions(operator, stdin: TextIO, out: TextIO, lock: threading.Lock) -> 
 
 def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
                 stdin: TextIO | None = None) -> int:
+    from feeder_bt.cli.commission.camera import cell_target
     from feeder_bt.emulators.camera_server import CameraScene, CameraServer
-    from feeder_bt.emulators.galil import GalilEmulator
+    from feeder_bt.emulators.galil.emulator import GalilEmulator
     from feeder_bt.emulators.operator import Operator
-    from feeder_bt.emulators.plant import Plant
-    from feeder_bt.tools.commission.camera import cell_target
+    from feeder_bt.sim.realtime import Plant
 
     if args.controller == "plate":
         return emulate_plate(args, stop)
@@ -154,7 +154,7 @@ def emulate_plate(args: argparse.Namespace, stop: threading.Event | None = None)
     """``feeder emulate plate``: the AnyFeeder emulator over a simulated plate, its bytes
     raw on ``--port`` (a serial-to-Ethernet bridge), until Ctrl-C or SIGTERM."""
     from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
-    from feeder_bt.emulators.plant import Plant
+    from feeder_bt.sim.realtime import Plant
 
     path = PLATE_SCENARIO if args.scenario == DEFAULT_SCENARIO else args.scenario
     scenario, cell = load_scenario(path, args.cell)

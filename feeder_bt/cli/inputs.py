@@ -8,13 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from feeder_bt.didyoumean import hint
-from feeder_bt.errors import FeederError
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import CellSpec, Scenario
-from feeder_bt.scenario.plugins import load_class
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.config import load_scenario
+from feeder_bt.config.plugins import load_class
+from feeder_bt.core.didyoumean import hint
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.vision.locator import Locator
+from feeder_bt.vision.pixels import Calibration
 
 
 class BadInput(FeederError):

@@ -16,7 +16,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.tools.common import (
+from feeder_bt.cli.inputs import (
     check_size,
     load_golden,
     read_image,

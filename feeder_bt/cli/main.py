@@ -10,11 +10,11 @@ import os
 import sys
 from pathlib import Path
 
-from feeder_bt.argtypes import positive
-from feeder_bt.errors import ConfigError, FeederError
-from feeder_bt.vocabulary import story_text
+from feeder_bt.cli.argtypes import positive
+from feeder_bt.core.errors import ConfigError, FeederError
+from feeder_bt.core.vocabulary import story_text
 
-# feeder_bt/tools/<module>.py, each with add_parser(subparsers) setting a `handler`
+# feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
          "users_cmd", "commission", "tune", "replay_cmd")
 
@@ -98,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="live tree view in real-time runs (default unicode)")
     r.add_argument("--no-skip", dest="skip_idle", action="store_false",
                    help="fast runs: tick every tick even when nothing can change")
-    from feeder_bt.run import add_db_options, add_ui_options
+    from feeder_bt.app.run import add_db_options, add_ui_options
     add_db_options(r)
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a partial scenario merged over SCENARIO before it is checked, e.g. "
                         "the settings `feeder tune --out` found")
     add_ui_options(r)
-    from feeder_bt.run import add_plant_options
+    from feeder_bt.app.run import add_plant_options
     add_plant_options(r)
 
     t = sub.add_parser("tree", help="draw the feeding trees of a scenario")
@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--images", metavar="DIR", help="also run each scenario's recipe on the "
                    "images in DIR (golden.png there: the golden image) and report the finds")
 
-    from feeder_bt.scenario.schema import KINDS
+    from feeder_bt.config.schema import KINDS
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
                        "that checks YAML as you type (docs/getting-started.md)")
     s.add_argument("kind", choices=list(KINDS))
@@ -140,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(handler=cmd_check)
     s.set_defaults(handler=cmd_schema)
     for tool in TOOLS:                  # each tool module adds its own sub-command
-        importlib.import_module(f".tools.{tool}", __package__).add_parser(sub)
+        importlib.import_module(f"feeder_bt.cli.{tool}").add_parser(sub)
     return p
 
 
@@ -161,7 +161,7 @@ def _check_run_args(args: argparse.Namespace) -> None:
 
 def expect_kind(path: str, kind: str, how: str) -> None:
     """A file given where another kind was expected is named as what it is."""
-    from feeder_bt.scenario.schema import describe, file_kind
+    from feeder_bt.config.schema import describe, file_kind
     found = file_kind(path)
     if found is None or found == kind:
         return                    # the loader reports anything else in its own words
@@ -177,7 +177,7 @@ def expect_kind(path: str, kind: str, how: str) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from feeder_bt.run import RunOptions, plant_options, run_job
+    from feeder_bt.app.run import RunOptions, plant_options, run_job
     _check_run_args(args)
     report = run_job(RunOptions(scenario=args.scenario, cell=args.cell, duration=args.duration,
                                 fast=args.fast, seed=args.seed, report=args.report,
@@ -209,7 +209,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def summary(report: dict) -> str:
-    """The run's summary (with its faults, misses and alarms: feeder_bt/vocabulary.py), lines that fit 80 columns; its parts/min is the report's and the
+    """The run's summary (with its faults, misses and alarms: feeder_bt/core/vocabulary.py), lines that fit 80 columns; its parts/min is the report's and the
     live view's last."""
     p = report["parts"]
     how = " (interrupted)" if report.get("interrupted") else ""
@@ -250,7 +250,7 @@ def _robot_time_line(report: dict) -> str:
 
 def _kits_line(report: dict) -> str:
     """Kits (retrieve.kit or sequence): how many, how fast, against the kit ceiling."""
-    from feeder_bt.kits import describe_kits
+    from feeder_bt.policy.kits import describe_kits
     k = report.get("kits")
     return f"\n  {describe_kits(k)}" if k else ""
 
@@ -293,8 +293,8 @@ def _ceiling_line(report: dict) -> str:
 
 
 def cmd_tree(args: argparse.Namespace) -> int:
-    from feeder_bt.treeview import render_tree
-    from feeder_bt.view import LEGEND
+    from feeder_bt.app.treeview import render_tree
+    from feeder_bt.app.view import LEGEND
     if args.legend:
         print("\n".join(LEGEND))
         return 0
@@ -318,8 +318,8 @@ def cmd_check(args: argparse.Namespace) -> int:
     """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
     one is every problem the loader finds in it, one line each on stderr in file order (the
     first says which kind the file was read as), then a count on stdout."""
-    from feeder_bt.scenario.loader import check_file
-    from feeder_bt.scenario.schema import describe, file_kind
+    from feeder_bt.config.loader import check_file
+    from feeder_bt.config.schema import describe, file_kind
     bad = found = 0
     for path in args.files:
         kind, told, problems = check_file(path)   # told None: not a mapping of keys
@@ -344,7 +344,7 @@ def cmd_check(args: argparse.Namespace) -> int:
               f"file{'s' if len(args.files) > 1 else ''}")
     if bad or not args.images:
         return 2 if bad else 0
-    from feeder_bt.tools.check_images import check_images
+    from feeder_bt.cli.check_images import check_images
     scenarios = [f for f in args.files if (file_kind(f) or "scenario") == "scenario"]
     if not scenarios:
         raise UsageError("--images runs a scenario's recipe: give a scenario file")
@@ -352,7 +352,7 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    from feeder_bt.scenario.schema import schema
+    from feeder_bt.config.schema import schema
     text = json.dumps(schema(args.kind), indent=2) + "\n"
     if args.output:
         Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.tools.runs_db import rolling_ppm, series, summary
+from feeder_bt.records.runs_db import rolling_ppm, series, summary
 
 WINDOW_S = 60.0
 

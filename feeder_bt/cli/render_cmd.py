@@ -18,16 +18,16 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.clock import SimClock
-from feeder_bt.geometry import outer, place_outline
+from feeder_bt.cli.inputs import BadInput, write_image
+from feeder_bt.config import load_scenario
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.geometry import outer, place_outline
+from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Frame
-from feeder_bt.hal.sim.devices import make_sim_hal
-from feeder_bt.jobs import Job
-from feeder_bt.scenario import load_scenario
-from feeder_bt.ticker import Ticker
-from feeder_bt.tools.common import BadInput, write_image
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.sim.devices import make_sim_hal
+from feeder_bt.vision.pixels import Calibration
 
 MAX_RUN_S = 900.0          # virtual seconds to wait for enough frames with parts in them
 STOP_GRACE_S = 30.0

@@ -10,10 +10,10 @@ import sqlite3
 import sys
 from typing import Any
 
-from feeder_bt.eventlog import EventLogError, open_readonly
-from feeder_bt.tools.runs_db import run_ids
-from feeder_bt.treelog import STATUS_NAMES, TraceView, TreeState, read_trace
-from feeder_bt.vocabulary import MISS_KINDS
+from feeder_bt.core.vocabulary import MISS_KINDS
+from feeder_bt.records.eventlog import EventLogError, open_readonly
+from feeder_bt.records.runs_db import run_ids
+from feeder_bt.records.treelog import STATUS_NAMES, TraceView, TreeState, read_trace
 
 MARK = {"invalid": "[-]", "running": "[*]", "success": "[✓]", "failure": "[✕]"}
 SHAPE = {"sequence": "{-}", "selector": "{o}", "parallel": "/_/", "decorator": "-^-",

@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.eventlog import ACCESS_KINDS, EventLogError, open_readonly
-from feeder_bt.kits import describe_kits
-from feeder_bt.tools.runs_db import run_ids, summary
+from feeder_bt.policy.kits import describe_kits
+from feeder_bt.records.eventlog import ACCESS_KINDS, EventLogError, open_readonly
+from feeder_bt.records.runs_db import run_ids, summary
 
 COLUMNS = ("run", "scenario", "seed", "state", "duration_s", "parts/min", "retrieved",
            "located", "missed", "lost", "misoriented", "scrapped", "faults", "misses")
@@ -124,7 +124,7 @@ def write_plot(conn: Any, run_id: int, out: str | Path) -> None:
         import matplotlib  # noqa: F401
     except ImportError:
         raise EventLogError("--plot needs matplotlib: pip install 'matplotlib>=3.7'") from None
-    from feeder_bt.tools.plots import plot_run
+    from feeder_bt.cli.plots import plot_run
     fig = plot_run(conn, run_id)
     try:
         Path(out).parent.mkdir(parents=True, exist_ok=True)

@@ -13,8 +13,8 @@ import time
 from contextlib import ExitStack
 from typing import Any
 
-from feeder_bt.argtypes import non_negative, positive, positive_int
-from feeder_bt.errors import FeederError
+from feeder_bt.cli.argtypes import non_negative, positive, positive_int
+from feeder_bt.core.errors import FeederError
 from feeder_bt.tuning.space import SPACES
 
 DEFAULT_STUDY = "runs/tune.db"
@@ -116,7 +116,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
           f"{time.monotonic() - wall0:.0f} s wall)")
     if args.out:
-        from feeder_bt.scenario.overlay import write_overlay
+        from feeder_bt.config.overlay import write_overlay
         header = (f"feeder tune {args.scenario}: best of study {study.study_name!r} in "
                   f"{args.study}\ntrial {best.number}: {best.value:.2f} {unit}, the mean "
                   f"of seeds 1-{args.seeds} ({per_seed}), {args.duration:g} s each"
@@ -127,6 +127,6 @@ def cmd_tune(args: argparse.Namespace) -> int:
     return 0
 
 
-def main() -> None:  # pragma: no cover - `python -m feeder_bt.tools.tune` for debugging
-    from feeder_bt.cli import main as cli_main
+def main() -> None:  # pragma: no cover - `python -m feeder_bt.cli.tune` for debugging
+    from feeder_bt.cli.main import main as cli_main
     sys.exit(cli_main(["tune", *sys.argv[1:]]))

@@ -17,8 +17,8 @@ import json
 import sys
 from typing import Any
 
-from feeder_bt.ui.access import SETTINGS, Settings, parse_setting
-from feeder_bt.ui.users import (
+from feeder_bt.control.access import SETTINGS, Settings, parse_setting
+from feeder_bt.control.users import (
     ROLES,
     UsersError,
     UsersFile,

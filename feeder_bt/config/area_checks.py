@@ -17,16 +17,16 @@ import math
 
 import numpy as np
 
-from feeder_bt.scenario.model import CellSpec, Scenario
-from feeder_bt.scenario.tables import _num
-from feeder_bt.scenario.walker import _Ctx
+from feeder_bt.config.tables import _num
+from feeder_bt.config.walker import _Ctx
+from feeder_bt.core.model import CellSpec, Scenario
 
 SCALE_SLACK = 0.05             # the calibration's scale error, lens and tilt, as a fraction
 LINE_STEPS_DEG = 1.0           # a line ruler is tried at every turn of the axis this apart
 
 
 def _perimeter(outline: np.ndarray) -> float:
-    from feeder_bt.geometry import rings  # geometry imports the model: not at the top
+    from feeder_bt.core.geometry import rings  # geometry imports the model: not at the top
     return sum(float(np.linalg.norm(np.diff(np.vstack([r, r[:1]]), axis=0), axis=1).sum())
                for r in rings(outline))
 
@@ -35,7 +35,7 @@ def outline_area_span(sc: Scenario, part: str, pose: str, mm_per_px: float
                       ) -> tuple[float, float, float]:
     """The outline's area (mm²) and the lowest and highest area a blob of it can measure
     through a camera of ``mm_per_px``."""
-    from feeder_bt.geometry import polygon_area, pose_outline
+    from feeder_bt.core.geometry import polygon_area, pose_outline
     out = pose_outline(sc.parts[part], pose)
     area = polygon_area(out)
     edge = _perimeter(out) * mm_per_px
@@ -73,7 +73,7 @@ def check_class_rulers(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
     any turn of the long axis (an outline without a clear axis may be read at any), give
     or take the scale slack and two pixels. A range that cannot hold it would reject every
     blob of the part; the usual cause is a radius or angle for another part, or in inches."""
-    from feeder_bt.geometry import pose_outline, rings
+    from feeder_bt.core.geometry import pose_outline, rings
     from feeder_bt.vision.rulers import circle_arcs, line_mm
     s = cell.camera.calibration.mm_per_px
     for i, vc in enumerate(sc.vision.classes):

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import math
 
-from feeder_bt.adjusters import ADJUSTERS, AdjusterParamError
-from feeder_bt.scenario.area_checks import check_class_areas, check_class_rulers
-from feeder_bt.scenario.model import AdjustParams, CellSpec, Scenario
-from feeder_bt.scenario.special import part_size_mm
-from feeder_bt.scenario.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
-from feeder_bt.scenario.walker import _Ctx, _suggest
+from feeder_bt.config.area_checks import check_class_areas, check_class_rulers
+from feeder_bt.config.special import part_size_mm
+from feeder_bt.config.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
+from feeder_bt.config.walker import _Ctx, _suggest
+from feeder_bt.core.model import AdjustParams, CellSpec, Scenario
+from feeder_bt.policy.adjusters import ADJUSTERS, AdjusterParamError
 from feeder_bt.vision.features import FEATURES
 
 

@@ -2,7 +2,7 @@
 
 A fault plan is a YAML file (``docs/faults.md``) read by ``load_fault_plan`` with the
 scenario loader's machinery, so a mistake in it is one ``FILE:LINE: key: what`` line like a
-mistake in a scenario. ``feeder_bt.hal.sim.faults`` carries the plan out.
+mistake in a scenario. ``feeder_bt.sim.faults`` carries the plan out.
 
 Each kind of fault has one natural rate unit: a servo time-out happens to a pick, a failed
 grab to a frame, a dropped connection or a jam in the course of an hour. The plan accepts
@@ -157,8 +157,8 @@ def _check_only_for(ctx: Any, kind: str, path: str) -> None:
 
 
 def load_fault_plan(path: str | Path) -> FaultPlanSpec:
-    """Load and validate a fault plan (see ``feeder_bt.scenario.loader.load_fault_plan``)."""
-    from feeder_bt.scenario.loader import (
+    """Load and validate a fault plan (see ``feeder_bt.config.loader.load_fault_plan``)."""
+    from feeder_bt.config.loader import (
         load_fault_plan as load,  # the loader imports this module's classes
     )
 

@@ -16,7 +16,7 @@ concept:
   parameters), reused by the CLI, the JSON Schemas, docs and adjusters;
 - ``checks.py``: checks across keys, and of a scenario against its cell.
 
-This module re-exports the names other modules use, so ``feeder_bt.scenario.loader``
+This module re-exports the names other modules use, so ``feeder_bt.config.loader``
 stays the one place to import from.
 """
 
@@ -28,9 +28,7 @@ from pathlib import Path
 import yaml
 from yaml.nodes import MappingNode, ScalarNode
 
-from feeder_bt.didyoumean import hint
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario.checks import (  # noqa: F401 - re-exported
+from feeder_bt.config.checks import (  # noqa: F401 - re-exported
     GALIL_MAX_INPUT,
     GALIL_MAX_OUTPUT,
     _check_adjust,
@@ -39,14 +37,9 @@ from feeder_bt.scenario.checks import (  # noqa: F401 - re-exported
     _check_galil,
     _check_scenario,
 )
-from feeder_bt.scenario.faults import FaultPlanSpec, check_fault_plan
-from feeder_bt.scenario.model import (  # noqa: F401 - re-exported
-    AdjustParams,
-    CellSpec,
-    Scenario,
-)
-from feeder_bt.scenario.special import part_size_mm
-from feeder_bt.scenario.tables import (  # noqa: F401 - re-exported
+from feeder_bt.config.faults import FaultPlanSpec, check_fault_plan
+from feeder_bt.config.special import part_size_mm
+from feeder_bt.config.tables import (  # noqa: F401 - re-exported
     _EXTRA_KEYS,
     _IMPLIED_FIELDS,
     ADJUST_ALGORITHMS,
@@ -74,7 +67,7 @@ from feeder_bt.scenario.tables import (  # noqa: F401 - re-exported
     Range,
     _num,
 )
-from feeder_bt.scenario.walker import (  # noqa: F401 - re-exported
+from feeder_bt.config.walker import (  # noqa: F401 - re-exported
     _FIELD_BUILDERS,
     _SPECIAL_TYPES,
     _Ctx,
@@ -87,6 +80,13 @@ from feeder_bt.scenario.walker import (  # noqa: F401 - re-exported
     _required,
     _short,
     _suggest,
+)
+from feeder_bt.core.didyoumean import hint
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.core.model import (  # noqa: F401 - re-exported
+    AdjustParams,
+    CellSpec,
+    Scenario,
 )
 from feeder_bt.vision.features import FEATURES  # noqa: F401 - re-exported
 
@@ -178,7 +178,7 @@ def load_scenario(path: str | Path, cell: str | Path | None = None,
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
     if overlay is not None:
-        from feeder_bt.scenario.overlay import apply_overlay
+        from feeder_bt.config.overlay import apply_overlay
         root = apply_overlay(root, overlay, ctx, _compose, _Ctx)
     cell_path = ctx.collect(_cell_path, path, root, ctx, cell)
     scenario = ctx.collect(ctx.dataclass, Scenario, root, "",
@@ -232,7 +232,7 @@ def load_fault_plan(path: str | Path) -> FaultPlanSpec:
 
 
 def _load_supply_plan(path: str | Path):
-    from feeder_bt.scenario.supply import load_supply_plan  # it reads this module's walker
+    from feeder_bt.config.supply import load_supply_plan  # it reads this module's walker
 
     return load_supply_plan(path)
 
@@ -245,7 +245,7 @@ def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:
     """Validate one file of any kind, told by its keys (``schema.file_kind``): (the kind it
     was read as, that kind when its keys told it or None when it was a guess, every
     problem). A scenario is checked with its cell."""
-    from feeder_bt.scenario.schema import file_kind  # local: the schema reads this module
+    from feeder_bt.config.schema import file_kind  # local: the schema reads this module
 
     told = file_kind(path)
     kind = told or "scenario"

@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode
 
-from feeder_bt.errors import ConfigError
+from feeder_bt.core.errors import ConfigError
 
 #: Sections whose ``params`` go with their ``algorithm`` (the overlay's replaces them whole).
 _PARAMS_WITH_ALGORITHM = ("adjust",)

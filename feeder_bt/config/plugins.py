@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from feeder_bt.errors import ConfigError
+from feeder_bt.core.errors import ConfigError
 
 
 def import_near(mod_name: str, base: Path | None = None) -> ModuleType:

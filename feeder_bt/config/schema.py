@@ -23,10 +23,10 @@ from typing import Any
 import yaml
 from yaml.nodes import MappingNode, ScalarNode
 
-from feeder_bt.scenario import loader as L
-from feeder_bt.scenario.faults import _ONLY_FOR, RATE_UNITS, FaultPlanSpec, FaultRate
-from feeder_bt.scenario.model import CellSpec, ConveyorSpec, Scenario, Shape, VisionClass
-from feeder_bt.scenario.supply import SupplyPlanSpec, Totes
+from feeder_bt.config import loader as L
+from feeder_bt.config.faults import _ONLY_FOR, RATE_UNITS, FaultPlanSpec, FaultRate
+from feeder_bt.config.supply import SupplyPlanSpec, Totes
+from feeder_bt.core.model import CellSpec, ConveyorSpec, Scenario, Shape, VisionClass
 from feeder_bt.vision.features import FEATURES
 
 DRAFT = "http://json-schema.org/draft-07/schema#"

@@ -13,10 +13,9 @@ from typing import Any
 
 from yaml.nodes import Node
 
-from feeder_bt.scenario.faults import FaultPlanSpec, build_rates
-from feeder_bt.scenario.model import CellSpec, ConveyorSpec, PartSpec, Scenario, Shape, VisionClass
-from feeder_bt.scenario.tables import CONVEYOR_NAMES, SHAPE_KINDS, SHAPE_OPTIONAL, _num
-from feeder_bt.scenario.walker import (
+from feeder_bt.config.faults import FaultPlanSpec, build_rates
+from feeder_bt.config.tables import CONVEYOR_NAMES, SHAPE_KINDS, SHAPE_OPTIONAL, _num
+from feeder_bt.config.walker import (
     _FIELD_BUILDERS,
     _SPECIAL_TYPES,
     _Ctx,
@@ -24,6 +23,7 @@ from feeder_bt.scenario.walker import (
     _join,
     _required,
 )
+from feeder_bt.core.model import CellSpec, ConveyorSpec, PartSpec, Scenario, Shape, VisionClass
 from feeder_bt.vision.features import FEATURES
 
 

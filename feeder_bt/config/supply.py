@@ -6,7 +6,7 @@ mistake, unknown keys with a did-you-mean, ranges from the loader's tables). It 
 the conditions under which control matters and a fixed setting does not suffice: the hopper
 refilled in totes with placed parts leaving the cell, a part mix that drifts, an incline
 that lifts fewer parts as its friction changes, an operator who turns the robot down for a
-while. ``feeder_bt.hal.sim.supply`` carries a plan out on the simulated world.
+while. ``feeder_bt.sim.supply`` carries a plan out on the simulated world.
 
 Part types named by a plan are checked against the scenario it runs with
 (``check_against_scenario``) before the cell opens, with the plan's own file and line.
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario import loader as L
+from feeder_bt.config import loader as L
+from feeder_bt.core.errors import ConfigError
 
 
 @dataclass

@@ -9,8 +9,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from feeder_bt.scenario.faults import COMMS_DEVICES, FAULT_KINDS, PHASES, FaultRate, ScriptedFault
-from feeder_bt.scenario.model import (
+from feeder_bt.config.faults import COMMS_DEVICES, FAULT_KINDS, PHASES, FaultRate, ScriptedFault
+from feeder_bt.core.model import (
     AdeptSpec,
     AdjustParams,
     CameraCalibration,
@@ -38,7 +38,7 @@ from feeder_bt.scenario.model import (
     Threshold,
     VisionRecipe,
 )
-from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
 
 # ============================================================================ allowed values
 
@@ -240,7 +240,7 @@ RANGES: dict[tuple[type, str], Range] = {
     (SimImperfections, "grip_p_centre"): Range(0, 1),
     (SimImperfections, "grip_width_mm"): NON_NEGATIVE,
     (SimImperfections, "robot_time_cv"): Range(0, 0.5),
-    # fault plans (feeder_bt.scenario.faults)
+    # fault plans (feeder_bt.config.faults)
     (FaultRate, "per_pick"): Range(0, 1),
     (FaultRate, "per_frame"): Range(0, 1),
     (FaultRate, "per_hour"): NON_NEGATIVE,

@@ -28,9 +28,8 @@ from typing import Any, NoReturn
 import yaml
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from feeder_bt.errors import ConfigError
-from feeder_bt.scenario.plugins import import_near
-from feeder_bt.scenario.tables import (
+from feeder_bt.config.plugins import import_near
+from feeder_bt.config.tables import (
     _EXTRA_KEYS,
     _IMPLIED_FIELDS,
     ENUMS,
@@ -38,6 +37,7 @@ from feeder_bt.scenario.tables import (
     RANGES,
     _num,
 )
+from feeder_bt.core.errors import ConfigError
 
 # ============================================================================ helpers
 

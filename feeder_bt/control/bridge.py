@@ -25,7 +25,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 
 
 @dataclass(frozen=True)

@@ -18,18 +18,18 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
-from feeder_bt.adjusters import AdjustInputs, Speeds, make_adjuster
-from feeder_bt.behaviours.common import Ctx, Stats, init_blackboard
-from feeder_bt.clock import Clock
-from feeder_bt.encoder import EncoderSync
-from feeder_bt.errors import FeederError
+from feeder_bt.behaviours.base import Ctx, Stats, init_blackboard
+from feeder_bt.config.plugins import load_class
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.encoder import EncoderSync
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
-from feeder_bt.parts import PartsQueue
-from feeder_bt.scenario.model import CellSpec, Scenario
-from feeder_bt.scenario.plugins import load_class
+from feeder_bt.policy.adjusters import AdjustInputs, Speeds, make_adjuster
 from feeder_bt.trees import build_cleanup, build_feeding, build_setup
-from feeder_bt.vision.calibration import Calibration
 from feeder_bt.vision.locator import Locator
+from feeder_bt.vision.pixels import Calibration
 from feeder_bt.vision.worker import VisionWorker
 
 ESTOP = "estop"         # the cell description's e-stop input, if it has one

@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from feeder_bt.ui.control import LoginLimiter
+from feeder_bt.control.sessions import LoginLimiter
 
 KNOWN_COOKIE = "feeder_known_"          # + the user name; one cookie per user per browser
 KNOWN_MAX_AGE_S = 90 * 86400

@@ -15,12 +15,12 @@ from typing import Any
 
 import py_trees
 
-from feeder_bt.cell import Cell, CellCommandError, CellState
-from feeder_bt.errors import FeederError
-from feeder_bt.eventlog import ACCESS_KINDS
-from feeder_bt.scenario import load_scenario
-from feeder_bt.scenario.model import CellSpec
-from feeder_bt.ui.bridge import Command, Outcome
+from feeder_bt.config import load_scenario
+from feeder_bt.control.bridge import Command, Outcome
+from feeder_bt.control.cell import Cell, CellCommandError, CellState
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.model import CellSpec
+from feeder_bt.records.eventlog import ACCESS_KINDS
 
 SPEED_KEYS = ("horizontal_mm_s", "incline_pct", "robot_speed_pct")
 PCT_MAX = 200.0

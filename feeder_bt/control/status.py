@@ -12,13 +12,13 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from feeder_bt.behaviours.common import Event, Stats
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.eventlog import ACCESS_KINDS
-from feeder_bt.ui.bridge import Message, Snapshot
-from feeder_bt.ui.operate import Limits, blackboard_speeds
-from feeder_bt.view import figures, tree_text
-from feeder_bt.vocabulary import MISS_KINDS, split
+from feeder_bt.app.view import figures, tree_text
+from feeder_bt.behaviours.base import Event, Stats
+from feeder_bt.control.bridge import Message, Snapshot
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.operate import Limits, blackboard_speeds
+from feeder_bt.core.vocabulary import MISS_KINDS, split
+from feeder_bt.records.eventlog import ACCESS_KINDS
 
 QUIET = frozenset({"located", "retrieved", "speeds"})   # too many for a message window
 HISTORY_POINTS = 600           # 10 minutes at one sample a second

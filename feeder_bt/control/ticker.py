@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from feeder_bt.cell import Cell
-from feeder_bt.clock import EPS, SimClock
-from feeder_bt.jobs import Job
+from feeder_bt.control.cell import Cell
+from feeder_bt.core.clock import EPS, SimClock
+from feeder_bt.core.jobs import Job
 from feeder_bt.trees.build import Loop
 
 _STATUS = operator.attrgetter("status")

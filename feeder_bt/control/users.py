@@ -26,7 +26,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 
 FORMAT = "feeder_bt users 1"
 NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,31}")

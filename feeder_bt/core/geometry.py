@@ -15,7 +15,7 @@ import math
 import cv2
 import numpy as np
 
-from feeder_bt.scenario.model import PartSpec, Shape
+from feeder_bt.core.model import PartSpec, Shape
 
 DISC_SEGMENTS = 72
 

@@ -12,8 +12,8 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from typing import Any
 
-from feeder_bt.clock import EPS, Clock
-from feeder_bt.errors import HalError, JobCancelled
+from feeder_bt.core.clock import EPS, Clock
+from feeder_bt.core.errors import HalError, JobCancelled
 
 
 class JobState(enum.Enum):

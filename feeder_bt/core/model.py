@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
 
 # ---------------------------------------------------------------------------- parts
 
@@ -215,7 +215,7 @@ class RetrieveParams:
     open_kits: int = 1
     leaf: str | None = None              # "pkg.mod:Class": a leaf used instead of the pick step
     # price picks with the robot model fitted online from measured move times
-    # (feeder_bt/robot_fit.py); false: with the cell's nominal model (the fit is still reported)
+    # (feeder_bt/robot/fit.py); false: with the cell's nominal model (the fit is still reported)
     learn_robot: bool = True
     # picks failed (missed, out of reach) since the last part placed before the cell calls
     # the operator (FAULT): a wrong robot frame or a gripper with no vacuum; 0: never
@@ -261,7 +261,7 @@ class ConveyorSpec:
 class CameraCalibration:
     """Pixel (u, v) -> belt frame (x, y) in mm, at the latch.
 
-    x = origin_x + mm_per_px * (v cos r - u sin r)... see ``feeder_bt.vision.calibration``.
+    x = origin_x + mm_per_px * (v cos r - u sin r)... see ``feeder_bt.vision.pixels``.
     """
 
     origin_mm: tuple[float, float] = (80.0, -15.0)
@@ -279,7 +279,7 @@ class CameraCalibration:
 
 @dataclass
 class RenderSpec:
-    """How the simulated camera draws frames (``feeder_bt.hal.sim.render``)."""
+    """How the simulated camera draws frames (``feeder_bt.sim.render``)."""
 
     lighting: str = "backlit"            # backlit | frontlit
     backlight: float = 225.0             # backlit: grey of the lit, empty belt
@@ -459,7 +459,7 @@ class AdeptSpec:
 
 @dataclass
 class SimImperfections:
-    """What makes the simulated cell imperfect (``hal/sim/imperfect.py``); every figure
+    """What makes the simulated cell imperfect (``sim/imperfect.py``); every figure
     and its source is in docs/simulator.md. ``ideal: true`` turns them all off; a zero
     turns off one."""
 

@@ -14,7 +14,7 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-from feeder_bt.encoder import diff
+from feeder_bt.core.encoder import diff
 
 
 @dataclass

@@ -34,12 +34,12 @@ from pathlib import Path
 from typing import Any
 
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.vplus.check import VPLUS_DIR, require_loadable
 from feeder_bt.emulators.vplus.devices import cut
 from feeder_bt.emulators.vplus.program import load_dir
 from feeder_bt.emulators.vplus.runtime import Runtime
 from feeder_bt.emulators.vplus.trans import Trans
-from feeder_bt.emulators.vplus_check import VPLUS_DIR, require_loadable
+from feeder_bt.sim.realtime import Plant
 
 SERVERS = ("motion", "position", "io", "notify")
 VPLUS_PORTS = {"motion": 1401, "position": 1402, "io": 1403, "notify": 1404}  # init_constants

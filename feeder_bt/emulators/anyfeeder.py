@@ -22,9 +22,9 @@ from __future__ import annotations
 import socket
 import threading
 
+from feeder_bt.core.plate_model import PlateCommands
 from feeder_bt.emulators.faults import FaultPlan
 from feeder_bt.emulators.line_server import LineServer
-from feeder_bt.emulators.plant import Plant
 from feeder_bt.hal.anyfeeder.protocol import (
     BACKLIGHT_OFF,
     BACKLIGHT_ON,
@@ -37,7 +37,7 @@ from feeder_bt.hal.anyfeeder.protocol import (
     ProtocolError,
     parse_command,
 )
-from feeder_bt.scenario.plate_model import PlateCommands
+from feeder_bt.sim.realtime import Plant
 
 PLATE_FAULTS = ("servo_timeout",)    # the fault plan's kinds this emulator acts on
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.sim.realtime import Plant
 
 
 class PlantCameraSource:

@@ -23,10 +23,10 @@ import numpy as np
 from feeder_bt.calibration.camera import Target, TargetPose
 from feeder_bt.emulators.camera import PlantCameraSource
 from feeder_bt.emulators.line_server import LineServer
-from feeder_bt.emulators.plant import Plant
-from feeder_bt.hal.sim.imperfect import true_calibration
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.hal.sim.target import TargetCamera
+from feeder_bt.sim.imperfect import true_calibration
+from feeder_bt.sim.realtime import Plant
+from feeder_bt.sim.render import Renderer
+from feeder_bt.sim.target import TargetCamera
 
 MARKER_MM = 20.0            # diameter of the round calibration marker the person puts down
 

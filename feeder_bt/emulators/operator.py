@@ -26,7 +26,7 @@ from typing import Any
 
 from feeder_bt.calibration.camera import Target, TargetPose
 from feeder_bt.emulators.camera_server import CameraScene
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.sim.realtime import Plant
 
 HELP = ("actions: toggle NAME | press NAME | release NAME | look NAME | trigger | "
         "push BELT MM | touch X Y | power on|off | part on|off | marker X Y | marker off | "

@@ -24,9 +24,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.core.model import CameraSpec
 from feeder_bt.hal.camera.pylon import PylonSource
-from feeder_bt.scenario.model import CameraSpec
+from feeder_bt.sim.realtime import Plant
 
 RING = ("frame0.bmp", "frame1.bmp")      # BMP: the cheapest format to write and read
 

@@ -1,7 +1,7 @@
 """HAL interfaces (thesis 8.2.1.3: abstract server-level base classes).
 
 Anything that takes time returns a ``Job``; cheap reads return values. Implementations
-raise the typed errors of ``feeder_bt.errors`` through the job.
+raise the typed errors of ``feeder_bt.core.errors`` through the job.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from typing import Protocol
 
 import numpy as np
 
-from feeder_bt.errors import ConveyorFault, HalError
-from feeder_bt.jobs import DoneJob, Job
+from feeder_bt.core.errors import ConveyorFault, HalError
+from feeder_bt.core.jobs import DoneJob, Job
 
 
 @dataclass(frozen=True)

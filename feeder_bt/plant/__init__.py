@@ -1,8 +1,8 @@
 """Plant integration: the cell's outer adapters beside the operator UI (``ui/``).
 
 - ``part_server``: robots of any brand pull parts from the cell over a line-based TCP
-  protocol (``feeder run --part-server``; the protocol is ``feeder_bt.part_protocol``,
-  the server's side of the exchange is ``behaviours/serve.py`` and ``trees/serve.py``);
+  protocol (``feeder run --part-server``; the protocol is ``feeder_bt.core.part_protocol``,
+  the server's side of the exchange is ``behaviours/desk.py`` and ``trees/desk.py``);
 - ``client``: the reference robot client; ``sim_robot``: a robot program on the simulated
   robot, written against it;
 - ``opcua``: the cell as an OPC UA server (``feeder run --opcua``), commanded under the

@@ -12,10 +12,10 @@ import sys
 from dataclasses import dataclass
 from typing import Any
 
-from feeder_bt.behaviours.serve import Desk
-from feeder_bt.cell import Cell
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import FeederError
+from feeder_bt.behaviours.desk import Desk
+from feeder_bt.control.cell import Cell
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import FeederError
 
 
 @dataclass

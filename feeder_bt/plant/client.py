@@ -25,9 +25,9 @@ from collections import deque
 from collections.abc import Hashable
 from typing import Protocol
 
-from feeder_bt.clock import Clock
-from feeder_bt.errors import FeederError
-from feeder_bt.part_protocol import (
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.part_protocol import (
     MAX_LINE,
     Offer,
     ProtocolError,
@@ -111,7 +111,7 @@ class LoopLink:
     def send(self, line: str) -> None:
         if self.closed:
             raise PartServerError("link closed")
-        from feeder_bt.behaviours.serve import Pending
+        from feeder_bt.behaviours.desk import Pending
 
         def answer(text: str) -> None:
             self.sent.pop(id(item), None)

@@ -33,8 +33,15 @@ from asyncua.crypto.cert_gen import setup_self_signed_certificate
 from asyncua.server.internal_session import InternalSession
 from cryptography.x509.oid import ExtendedKeyUsageOID
 
-from feeder_bt.cell import Cell
-from feeder_bt.errors import FeederError
+from feeder_bt.control.access import AccessRecorder
+from feeder_bt.control.bridge import Bridge, Outcome
+from feeder_bt.control.cell import Cell
+from feeder_bt.control.conns import ConnGate, ConnLimits
+from feeder_bt.control.operate import SPEED_KEYS, CellOps
+from feeder_bt.control.sessions import Control, Session
+from feeder_bt.control.status import CellPanel
+from feeder_bt.control.users import UsersFile
+from feeder_bt.core.errors import FeederError
 from feeder_bt.plant.adapters import PlantOptions, parse_hostport
 from feeder_bt.plant.ua_security import (
     ACTIVATION_S,
@@ -47,13 +54,6 @@ from feeder_bt.plant.ua_security import (
     install_session_hooks,
     is_loopback,
 )
-from feeder_bt.ui.access import AccessRecorder
-from feeder_bt.ui.bridge import Bridge, Outcome
-from feeder_bt.ui.conns import ConnGate, ConnLimits
-from feeder_bt.ui.control import Control, Session
-from feeder_bt.ui.operate import SPEED_KEYS, CellOps
-from feeder_bt.ui.status import CellPanel
-from feeder_bt.ui.users import UsersFile
 
 NAMESPACE = "urn:feeder_bt"
 DEFAULT_PORT = 4840

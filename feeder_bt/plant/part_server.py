@@ -28,12 +28,12 @@ import threading
 from concurrent.futures import Future
 from typing import Any
 
-from feeder_bt.behaviours.serve import Desk, Pending
-from feeder_bt.cell import Cell, CellState
-from feeder_bt.part_protocol import MAX_LINE
+from feeder_bt.behaviours.desk import Desk, Pending
+from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.conns import ConnGate, ConnLimits, backlog, peer_ip
+from feeder_bt.core.part_protocol import MAX_LINE
 from feeder_bt.plant.robots import RobotTrust
-from feeder_bt.trees.serve import build_serving, build_serving_cleanup, build_serving_setup
-from feeder_bt.ui.conns import ConnGate, ConnLimits, backlog, peer_ip
+from feeder_bt.trees.desk import build_serving, build_serving_cleanup, build_serving_setup
 
 DEFAULT_PORT = 7600
 SWEEP_S = 1.0              # how often idle connections are looked for

@@ -30,11 +30,11 @@ from collections import deque
 from concurrent.futures import Future
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.control.conns import ConnGate, ConnLimits, backlog
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.jobs import Job, JobState
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.jobs import Job, JobState
 from feeder_bt.plant.ua_security import is_loopback
-from feeder_bt.ui.conns import ConnGate, ConnLimits, backlog
 
 MAX_LINE = 200
 

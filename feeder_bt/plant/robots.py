@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 
 FORMAT = "feeder_bt robots 1"
 NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_.-]{0,31}")

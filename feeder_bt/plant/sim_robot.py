@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from collections import deque
 
-from feeder_bt.clock import EPS, Clock
-from feeder_bt.errors import HalError
+from feeder_bt.core.clock import EPS, Clock
+from feeder_bt.core.errors import HalError
+from feeder_bt.core.jobs import Job, JobState
+from feeder_bt.core.model import Scenario
+from feeder_bt.core.part_protocol import Offer, parse_offer
 from feeder_bt.hal.interfaces import PickTarget, Pose, Robot
-from feeder_bt.jobs import Job, JobState
-from feeder_bt.part_protocol import Offer, parse_offer
 from feeder_bt.plant.client import PartClient, PartServerError
-from feeder_bt.scenario.model import Scenario
 
 WAIT_S = 5.0            # PART ... WAIT: the server holds the request this long
 

@@ -24,8 +24,8 @@ from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
 
-from feeder_bt.ui.guard import Attempt, LoginGuard
-from feeder_bt.ui.users import UsersFile, default_path
+from feeder_bt.control.guard import Attempt, LoginGuard
+from feeder_bt.control.users import UsersFile, default_path
 
 SESSION: contextvars.ContextVar[InternalSession | None] = contextvars.ContextVar(
     "feeder_ua_session", default=None)

@@ -16,8 +16,8 @@ import math
 from collections import Counter
 from collections.abc import Sequence
 
-from feeder_bt.scenario.model import RetrieveParams
-from feeder_bt.supply_bound import inflow_bound_parts
+from feeder_bt.core.model import RetrieveParams
+from feeder_bt.policy.supply_bound import inflow_bound_parts
 
 
 class KitTracker:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from feeder_bt.scenario.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
 
 Action = tuple[str, int]        # (PLATE_ACTIONS name, repetitions)
 

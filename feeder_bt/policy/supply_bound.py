@@ -5,7 +5,7 @@ the best point of its window; the supply bound says how fast parts the robot *co
 pass through its reachable window: parts the locator found pickable (a part touching
 another is one blob that fits no class, so a located part is singulated) whose path along
 the belt meets the reach before ``too_far``, per minute of feeding. No feeder setting can
-place parts faster than either; the lower one is the run's ceiling (``feeder_bt.report``).
+place parts faster than either; the lower one is the run's ceiling (``feeder_bt.analysis.report``).
 
 It is counted from what the controller sees (``Enqueue`` counts ``located_in_reach``), so
 it is the same on a real cell; ``tests/test_supply.py`` checks it against the simulated
@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.core.model import CellSpec, Scenario
 
 
 class ReachWindow:
@@ -105,7 +105,7 @@ def ceiling(robot_ppm: float, supply_ppm: float | None, inflow_ppm: float | None
             selection_ppm: float | None = None) -> tuple[str, float]:
     """(which bound, parts/min): the lowest bound known is the ceiling (``None``: that
     bound not known; the robot's corner bound always is). ``selection``: nearest-first
-    picking over the parts the run really had (``feeder_bt.robot_bounds``)."""
+    picking over the parts the run really had (``feeder_bt.analysis.robot_bounds``)."""
     known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm),
              ("selection", selection_ppm)]
     return min(((k, v) for k, v in known if v is not None), key=lambda kv: kv[1])

@@ -17,9 +17,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.behaviours.common import Event, Stats
-from feeder_bt.didyoumean import hint
-from feeder_bt.errors import FeederError
+from feeder_bt.behaviours.base import Event, Stats
+from feeder_bt.core.didyoumean import hint
+from feeder_bt.core.errors import FeederError
 
 SCHEMA_VERSION = 1
 FLUSH_EVERY = 5000          # buffered events that force a flush

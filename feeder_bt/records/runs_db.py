@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.eventlog import EventLogError
-from feeder_bt.vocabulary import MISS_KINDS, split, story
+from feeder_bt.core.vocabulary import MISS_KINDS, split, story
+from feeder_bt.records.eventlog import EventLogError
 
 
 @dataclass

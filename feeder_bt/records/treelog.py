@@ -33,7 +33,7 @@ from typing import Any
 import py_trees
 from py_trees.common import Status
 
-from feeder_bt.vocabulary import MISS_KINDS
+from feeder_bt.core.vocabulary import MISS_KINDS
 
 CHUNK_S = 10.0              # virtual seconds per chunk (one key frame each)
 BOARD_EVERY_S = 1.0         # virtual seconds between blackboard samples

@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.robot_model import RobotModel, with_speed_factor
-from feeder_bt.scenario.model import RobotSpec
+from feeder_bt.core.model import RobotSpec
+from feeder_bt.robot.model import RobotModel, with_speed_factor
 
 K_BOUNDS = (0.4, 2.5)          # the arm 2.5 times faster to 2.5 times slower than described
 C_BOUNDS = (-0.05, 0.25)       # s per move

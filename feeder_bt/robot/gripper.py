@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from feeder_bt.scenario.model import PickSpec
+from feeder_bt.core.model import PickSpec
 
 CUP_SEGMENTS = 24
 

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from feeder_bt.scenario.model import RobotSpec
+from feeder_bt.core.model import RobotSpec
 
 
 def trapezoid_time(d: float, v_max: float, a_max: float) -> float:
@@ -55,7 +55,7 @@ class RobotModel:
     def move_time(self, a: tuple[float, float], b: tuple[float, float],
                   speed_pct: float) -> float:
         """An arch from ``a`` to ``b`` (cell frame): here a function of the distance alone;
-        the world's SCARA (``feeder_bt.scara``) needs both ends."""
+        the world's SCARA (``feeder_bt.robot.scara``) needs both ends."""
         return self.arch_time(math.dist(a, b), speed_pct)
 
     def arch_times_from(self, start: tuple[float, float], x: np.ndarray, y: np.ndarray,

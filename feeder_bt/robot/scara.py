@@ -1,7 +1,7 @@
 """A two-link SCARA's move times from its joints: the plant's robot (issue 30).
 
 The controller prices moves with a Cartesian trapezoid (``robot_model.RobotModel``, and the
-fit of it the pick policies learn, ``robot_fit.py``). A real SCARA does not move like that:
+fit of it the pick policies learn, ``robot/fit.py``). A real SCARA does not move like that:
 its time follows the joints. This model is the *world's* arm — the simulated robot
 (``hal/sim``) and the V+ emulator's arm (``emulators/vplus/arm.py``) use it — so the
 controller's model only approximates it, as on a real cell.
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.robot_model import RobotModel
-from feeder_bt.scenario.model import RobotSpec
+from feeder_bt.core.model import RobotSpec
+from feeder_bt.robot.model import RobotModel
 
 # Cobra 600 class figures (docs/simulator.md, "Robot", says which are published and which
 # are assumptions). Speeds: the Cobra s600 data sheet's joint speeds (not confirmed by the

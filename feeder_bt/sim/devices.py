@@ -11,16 +11,16 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import HalError
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import HalError
+from feeder_bt.core.jobs import DoneJob, FutureJob, Job
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import Frame, Hal, IoChange, PickResult, PickTarget, Pose
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.imperfect import true_calibration
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.hal.sim.world import World
-from feeder_bt.jobs import DoneJob, FutureJob, Job
-from feeder_bt.scenario.model import CellSpec, Scenario
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.imperfect import true_calibration
+from feeder_bt.sim.render import Renderer
+from feeder_bt.sim.world import World
+from feeder_bt.vision.pixels import Calibration
 
 
 class TimedJob(Job):

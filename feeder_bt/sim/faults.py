@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.errors import (
+from feeder_bt.config.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
+from feeder_bt.core.errors import (
     CommsLost,
     ConfigError,
     ConveyorFault,
@@ -40,9 +41,10 @@ from feeder_bt.errors import (
     MissedGrab,
     ServoTimeout,
 )
+from feeder_bt.core.jobs import DoneJob, Job
 from feeder_bt.hal.interfaces import PickTarget, Pose, watchdog_stopped
-from feeder_bt.hal.sim.devices import SimHal, TimedJob
-from feeder_bt.hal.sim.faulty_devices import (
+from feeder_bt.sim.devices import SimHal, TimedJob
+from feeder_bt.sim.faulty_devices import (
     POWER_OFF,
     FaultyCamera,
     FaultyConveyor,
@@ -53,9 +55,7 @@ from feeder_bt.hal.sim.faulty_devices import (
     _event_time,
     _fail_timed,
 )
-from feeder_bt.hal.sim.world import World
-from feeder_bt.jobs import DoneJob, Job
-from feeder_bt.scenario.faults import FAULT_KINDS, FaultPlanSpec, FaultRate, ScriptedFault
+from feeder_bt.sim.world import World
 
 __all__ = [
     "POWER_OFF", "SERVO_FRACTION", "FaultInjector", "FaultyCamera", "FaultyConveyor",

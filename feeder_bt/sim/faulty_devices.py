@@ -13,14 +13,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from feeder_bt.errors import GrabFailed, HalError, ServoTimeout
+from feeder_bt.core.errors import GrabFailed, HalError, ServoTimeout
+from feeder_bt.core.jobs import DoneJob, Job, JobState
 from feeder_bt.hal.interfaces import IoChange, PickTarget, Pose
-from feeder_bt.hal.sim.devices import TimedJob
-from feeder_bt.hal.sim.world import World
-from feeder_bt.jobs import DoneJob, Job, JobState
+from feeder_bt.sim.devices import TimedJob
+from feeder_bt.sim.world import World
 
 if TYPE_CHECKING:
-    from feeder_bt.hal.sim.faults import FaultInjector
+    from feeder_bt.sim.faults import FaultInjector
 
 POWER_OFF = "robot power is off: run the recovery program"
 

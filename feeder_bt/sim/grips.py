@@ -19,18 +19,18 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from feeder_bt.encoder import diff
-from feeder_bt.errors import EnvelopeError, HalError, MissedGrab
-from feeder_bt.geometry import near, outer, place_outline, rings, wrap_deg
-from feeder_bt.gripper import footprint, grip_poses
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab
+from feeder_bt.core.geometry import near, outer, place_outline, rings, wrap_deg
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import Held, PickResult, PickTarget, Pose
-from feeder_bt.hal.sim.accounting import SimPart
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.imperfect import Imperfections
-from feeder_bt.hal.sim.passlog import PassLog
-from feeder_bt.jobs import Job
-from feeder_bt.scara import ScaraModel
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.robot.gripper import footprint, grip_poses
+from feeder_bt.robot.scara import ScaraModel
+from feeder_bt.sim.accounting import SimPart
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.imperfect import Imperfections
+from feeder_bt.sim.passlog import PassLog
 
 RECYCLE_S = 20.0                # placed parts go back to the hopper after this long
 PLACE_TOL_MM = 10.0             # a part released farther than this from its own type's

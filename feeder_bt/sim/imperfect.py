@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from feeder_bt.scenario.model import CameraCalibration, CellSpec, SimImperfections
+from feeder_bt.core.model import CameraCalibration, CellSpec, SimImperfections
 
 _MASK = (1 << 64) - 1
 

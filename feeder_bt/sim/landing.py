@@ -17,7 +17,7 @@ from collections import Counter
 import cv2
 import numpy as np
 
-from feeder_bt.geometry import (
+from feeder_bt.core.geometry import (
     is_convex,
     near,
     outer,
@@ -26,10 +26,10 @@ from feeder_bt.geometry import (
     pose_outline,
     wrap_deg,
 )
-from feeder_bt.hal.sim.accounting import SimPart
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.imperfect import Imperfections
-from feeder_bt.scenario.model import Scenario
+from feeder_bt.core.model import Scenario
+from feeder_bt.sim.accounting import SimPart
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.imperfect import Imperfections
 
 LAND_X_MM = (15.0, 45.0)        # where parts land on the horizontal belt, off the ramp
 EDGE_MARGIN_MM = 28.0           # side rails keep parts this far from the belt edges
@@ -53,7 +53,7 @@ class Landing:
 
     def outline(self, ptype: str, pose: str) -> np.ndarray:
         """A part's outline in a pose (part frame; with holes, NaN rows part its rings: see
-        ``feeder_bt.geometry``), made once per part type and pose."""
+        ``feeder_bt.core.geometry``), made once per part type and pose."""
         key = (ptype, pose)
         if key not in self._outlines:
             self._outlines[key] = pose_outline(self.scenario.parts[ptype], pose)

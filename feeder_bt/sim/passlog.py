@@ -9,7 +9,7 @@ landing). The belt's position is sampled at the world's steps, at most one in
 ``SAMPLE_S`` of virtual time; a fast run that skips idle ticks steps more seldom (lenses:
 about one sample in 0.18 s), and the replay interpolates linearly: up to about 13 mm off in
 the middle of a 0.27 s speed ramp, exact at constant speed. The report replays picking over
-this record (``feeder_bt.robot_bounds``); nothing here is seen by the controller.
+this record (``feeder_bt.analysis.robot_bounds``); nothing here is seen by the controller.
 """
 
 from __future__ import annotations

@@ -23,12 +23,15 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
-from feeder_bt.clock import SimClock
-from feeder_bt.errors import HalError
-from feeder_bt.geometry import circumradius, is_convex, outer, place_outline, wrap_deg
+from feeder_bt.core.clock import SimClock
+from feeder_bt.core.errors import HalError
+from feeder_bt.core.geometry import circumradius, is_convex, outer, place_outline, wrap_deg
+from feeder_bt.core.jobs import DoneJob, Job
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import PlateStatus
-from feeder_bt.hal.sim.accounting import SimPart
-from feeder_bt.hal.sim.devices import (
+from feeder_bt.robot.model import RobotModel, with_speed_factor
+from feeder_bt.sim.accounting import SimPart
+from feeder_bt.sim.devices import (
     SimCamera,
     SimConveyor,
     SimHal,
@@ -37,11 +40,8 @@ from feeder_bt.hal.sim.devices import (
     SimRobotPosition,
     TimedJob,
 )
-from feeder_bt.hal.sim.landing import TOUCH_GAP_MM, _grown
-from feeder_bt.hal.sim.world import World
-from feeder_bt.jobs import DoneJob, Job
-from feeder_bt.robot_model import RobotModel, with_speed_factor
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.sim.landing import TOUCH_GAP_MM, _grown
+from feeder_bt.sim.world import World
 
 PURGE_TRANSIT_S = 1.0      # a purged part falls back into the bulk container in this long
 

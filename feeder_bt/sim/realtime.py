@@ -13,12 +13,12 @@ import threading
 import time
 from collections.abc import Callable
 
-from feeder_bt.clock import Clock
-from feeder_bt.encoder import wrap
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.devices import SimHal, make_sim_hal
-from feeder_bt.jobs import Job
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.encoder import wrap
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.devices import SimHal, make_sim_hal
 
 STEP_S = 0.002          # how often the stepper thread advances the world (wall seconds)
 
@@ -63,7 +63,7 @@ class Plant:
     def _build(self, scenario: Scenario) -> None:
         make = make_sim_hal
         if self.cell.presentation == "plate":     # a vibratory-plate cell (issue 31)
-            from feeder_bt.hal.sim.plate import make_plate_sim_hal as make
+            from feeder_bt.sim.plate import make_plate_sim_hal as make
         self.hal: SimHal = make(scenario, self.cell, self.clock,  # type: ignore[arg-type]
                                 self.seed)
         self.world = self.hal.world

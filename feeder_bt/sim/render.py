@@ -23,9 +23,9 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from feeder_bt.geometry import rings
-from feeder_bt.scenario.model import CameraCalibration, CameraSpec
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.core.geometry import rings
+from feeder_bt.core.model import CameraCalibration, CameraSpec
+from feeder_bt.vision.pixels import Calibration
 
 SUPERSAMPLE = 4                      # sub-pixels per pixel, each axis, for anti-aliasing
 _SHIFT = 4                           # fillPoly fractional bits

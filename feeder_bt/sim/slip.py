@@ -25,8 +25,8 @@ from collections import Counter
 
 import numpy as np
 
-from feeder_bt.hal.sim.accounting import SimPart
-from feeder_bt.hal.sim.axis import Axis
+from feeder_bt.sim.accounting import SimPart
+from feeder_bt.sim.axis import Axis
 
 G_MM_S2 = 9806.65               # standard gravity, mm/s^2
 

@@ -20,12 +20,12 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
-from feeder_bt.errors import FeederError
-from feeder_bt.hal.sim.devices import SimHal
-from feeder_bt.hal.sim.faults import plan_rng
-from feeder_bt.hal.sim.world import World
-from feeder_bt.scenario.model import Scenario
-from feeder_bt.scenario.supply import SupplyPlanSpec, Totes
+from feeder_bt.config.supply import SupplyPlanSpec, Totes
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.model import Scenario
+from feeder_bt.sim.devices import SimHal
+from feeder_bt.sim.faults import plan_rng
+from feeder_bt.sim.world import World
 
 RAMP_STEP_S = 5.0          # a friction ramp changes the lift in steps this long
 
@@ -133,7 +133,7 @@ class SupplyDriver:
     # ------------------------------------------------------------------ report
     def inflow(self) -> tuple[int, list[tuple[float, int]]] | None:
         """(parts at the start, tote arrivals) when placed parts leave the cell, for the
-        report's inflow bound (``feeder_bt.supply_bound``); ``None`` when they go back to
+        report's inflow bound (``feeder_bt.policy.supply_bound``); ``None`` when they go back to
         the hopper (then nothing bounds what enters)."""
         return (self.initial, list(self.arrivals)) if self.plan.ship_placed else None
 

@@ -23,11 +23,11 @@ import numpy as np
 from feeder_bt.calibration.camera import Target, TargetPose
 from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.targets import board_rings
+from feeder_bt.core.jobs import DoneJob, Job
+from feeder_bt.core.model import CameraCalibration, CameraSpec, CellSpec
 from feeder_bt.hal.interfaces import Frame, Pose, RobotPosition
-from feeder_bt.hal.sim.render import Renderer
-from feeder_bt.hal.sim.world import World
-from feeder_bt.jobs import DoneJob, Job
-from feeder_bt.scenario.model import CameraCalibration, CameraSpec, CellSpec
+from feeder_bt.sim.render import Renderer
+from feeder_bt.sim.world import World
 
 PAPER_GREY = 200.0       # front-lit: a printed board's white paper, grey level
 INK_GREY = 30.0          # and its ink
@@ -107,7 +107,7 @@ class TargetCamera:
 def densify(ring: np.ndarray, step_mm: float = 2.0) -> np.ndarray:
     """A polygon's rings (parted by NaN rows) with points every ``step_mm`` along each edge:
     through a lens a straight edge is drawn bent."""
-    from feeder_bt.geometry import rings as split
+    from feeder_bt.core.geometry import rings as split
 
     out = []
     for r in split(ring):
@@ -255,7 +255,7 @@ def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCa
     camera.place(target, pose)
     out = [("belt", camera.grab().result.image)]
     if save:
-        from feeder_bt.tools.common import write_image
+        from feeder_bt.cli.inputs import write_image
         write_image(save, out[0][1])
     if views and truth.intrinsics is None:
         raise CalibrationError("--views: the simulated camera has no lens (sim.lens_focal_px "

@@ -26,20 +26,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.clock import EPS, SimClock
-from feeder_bt.encoder import wrap
-from feeder_bt.geometry import circumradius, place_outline
+from feeder_bt.core.clock import EPS, SimClock
+from feeder_bt.core.encoder import wrap
+from feeder_bt.core.geometry import circumradius, place_outline
+from feeder_bt.core.jobs import Job
+from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import Pose
-from feeder_bt.hal.sim.accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
-from feeder_bt.hal.sim.axis import Axis
-from feeder_bt.hal.sim.grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
-from feeder_bt.hal.sim.imperfect import Imperfections
-from feeder_bt.hal.sim.landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
-from feeder_bt.hal.sim.passlog import PassLog
-from feeder_bt.hal.sim.slip import BeltSlip
-from feeder_bt.jobs import Job
-from feeder_bt.scara import world_arm
-from feeder_bt.scenario.model import CellSpec, Scenario
+from feeder_bt.robot.scara import world_arm
+from feeder_bt.sim.accounting import AUDIT_EVERY, PLACES, PartAccounting, SimPart
+from feeder_bt.sim.axis import Axis
+from feeder_bt.sim.grips import PLACE_TOL_MM, RECYCLE_S, RobotGrips
+from feeder_bt.sim.imperfect import Imperfections
+from feeder_bt.sim.landing import EDGE_MARGIN_MM, LAND_X_MM, TOUCH_GAP_MM, Landing
+from feeder_bt.sim.passlog import PassLog
+from feeder_bt.sim.slip import BeltSlip
 
 __all__ = [
     "AUDIT_EVERY", "EDGE_MARGIN_MM", "LAND_X_MM", "PLACES", "PLACE_TOL_MM", "RECYCLE_S",
@@ -74,7 +74,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.incline = Axis(ic.accel_mm_s2, ic.max_mm_s)
         self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
         self.cpm = cell.encoder.counts_per_mm
-        # the arm as it really moves: a SCARA (feeder_bt.scara), sim_speed_factor times a
+        # the arm as it really moves: a SCARA (feeder_bt.robot.scara), sim_speed_factor times a
         # Cobra 600; the trees see only the cell's Cartesian description (issues 16, 30)
         self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
         # every pass along the belt and every pick, for the report's robot bounds

@@ -7,7 +7,7 @@ import py_trees
 from py_trees.composites import Sequence
 
 from feeder_bt.behaviours.adjust import Adjust, CheckDrift
-from feeder_bt.behaviours.common import Ctx, Wait
+from feeder_bt.behaviours.base import Ctx, Wait
 from feeder_bt.trees import plate
 
 

@@ -10,7 +10,7 @@ from collections.abc import Sequence as Seq
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from feeder_bt.behaviours.common import CountFault, Ctx, ErrorIs, Escalate, Retry
+from feeder_bt.behaviours.base import CountFault, Ctx, ErrorIs, Escalate, Retry
 from feeder_bt.behaviours.present import FirstJamIn
 
 

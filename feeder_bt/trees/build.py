@@ -10,7 +10,7 @@ from py_trees.common import ParallelPolicy, Status
 from py_trees.composites import Parallel, Selector, Sequence
 from py_trees.decorators import SuccessIsRunning
 
-from feeder_bt.behaviours.common import Ctx, ErrorIs, Wait
+from feeder_bt.behaviours.base import Ctx, ErrorIs, Wait
 from feeder_bt.behaviours.locate import GrabGolden
 from feeder_bt.behaviours.plate import InitPlate, PurgePlate, init_plate_keys
 from feeder_bt.behaviours.present import StopConveyors

@@ -12,8 +12,8 @@ import py_trees
 from py_trees.common import ParallelPolicy
 from py_trees.composites import Parallel
 
-from feeder_bt.behaviours.common import Ctx
-from feeder_bt.behaviours.serve import Desk, ServeRobots
+from feeder_bt.behaviours.base import Ctx
+from feeder_bt.behaviours.desk import Desk, ServeRobots
 from feeder_bt.trees import adjust, locate, present
 from feeder_bt.trees.build import Loop, build_cleanup, build_setup
 

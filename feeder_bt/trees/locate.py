@@ -8,7 +8,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from feeder_bt.behaviours.common import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
+from feeder_bt.behaviours.base import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
 from feeder_bt.behaviours.locate import (
     AdvanceIfNothing,
     ClearForGolden,
@@ -20,7 +20,7 @@ from feeder_bt.behaviours.locate import (
     WaitTravel,
 )
 from feeder_bt.behaviours.plate import AskPlate
-from feeder_bt.scenario.plugins import load_class
+from feeder_bt.config.plugins import load_class
 from feeder_bt.trees import plate
 from feeder_bt.trees.branches import link_lost
 

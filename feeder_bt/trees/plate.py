@@ -14,7 +14,7 @@ from __future__ import annotations
 import py_trees
 from py_trees.composites import Selector, Sequence
 
-from feeder_bt.behaviours.common import Ctx, Escalate
+from feeder_bt.behaviours.base import Ctx, Escalate
 from feeder_bt.behaviours.plate import (
     ChoosePlateAction,
     InitPlate,

@@ -14,7 +14,7 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
-from feeder_bt.behaviours.common import CountFault, Ctx, ErrorIs, Escalate
+from feeder_bt.behaviours.base import CountFault, Ctx, ErrorIs, Escalate
 from feeder_bt.behaviours.retrieve import (
     FailedPicksBelow,
     FollowRobotSpeed,
@@ -27,7 +27,7 @@ from feeder_bt.behaviours.retrieve import (
     Reconcile,
     Recover,
 )
-from feeder_bt.scenario.plugins import load_class
+from feeder_bt.config.plugins import load_class
 from feeder_bt.trees.branches import link_lost
 
 KEY = "/retrieve/error"

@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 
 #: py_trees' blackboard is one per process: runs in one process (a Dask worker's threads)
 #: take turns
@@ -43,8 +43,8 @@ def evaluate(job: Job) -> dict[str, Any]:
     tuner records the trial as failed with that line) rather than raised, so one bad point
     never stops a search.
     """
-    from feeder_bt.run import RunOptions, run_job
-    from feeder_bt.scenario.overlay import write_overlay
+    from feeder_bt.app.run import RunOptions, run_job
+    from feeder_bt.config.overlay import write_overlay
 
     extra: dict[str, Any] = {}
     if job.supply:

@@ -8,7 +8,7 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 from feeder_bt.tuning.search import unit_of
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.errors import FeederError
+from feeder_bt.core.errors import FeederError
 from feeder_bt.tuning.objective import Job, evaluate
 from feeder_bt.tuning.space import GRID_MIN_TRIALS, Limits, grid_space, start_params, suggest
 
@@ -157,7 +157,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     """
     from optuna.trial import TrialState
 
-    from feeder_bt.scenario import load_scenario
+    from feeder_bt.config import load_scenario
     if cfg.grid and cfg.space != "fixed":
         raise TuneError(f"--grid searches the fixed space (two speeds), not {cfg.space!r}")
     if cfg.grid and cfg.trials < GRID_MIN_TRIALS:

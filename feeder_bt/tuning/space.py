@@ -25,9 +25,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from feeder_bt.adjusters import make_adjuster
-from feeder_bt.scenario.loader import RANGES, RETRIEVE_POLICIES, part_size_mm
-from feeder_bt.scenario.model import CellSpec, PresentParams, Scenario
+from feeder_bt.config.loader import RANGES, RETRIEVE_POLICIES, part_size_mm
+from feeder_bt.core.model import CellSpec, PresentParams, Scenario
+from feeder_bt.policy.adjusters import make_adjuster
 
 SPACES = ("ours", "watermarks", "fixed")
 ADJUSTERS = ("none", "water_marks", "supply_queue")

@@ -14,7 +14,7 @@ Many logged-in users watch; one at a time holds control and operates the cell. T
   in a snapshot;
 - ``server``: the Starlette app (``responses``: its stateless HTTP pieces), ``serve``: the
   uvicorn thread; ``static/``: the page;
-- ``treedata``: the tree view's data (the trees' history, ``feeder_bt.treelog``) for
+- ``treedata``: the tree view's data (the trees' history, ``feeder_bt.records.treelog``) for
   ``static/tree.js``; ``replay``: that view alone over a past run (``feeder replay --ui``);
 - ``app``: all of it put together for ``feeder run --ui`` (run.py).
 

@@ -11,17 +11,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.cell import Cell
-from feeder_bt.ui.access import Settings
+from feeder_bt.control.access import Settings
+from feeder_bt.control.bridge import Bridge, Snapshot
+from feeder_bt.control.cell import Cell
+from feeder_bt.control.operate import CellOps
+from feeder_bt.control.status import CellPanel
+from feeder_bt.control.users import UsersError, UsersFile, group_or_world_readable
 from feeder_bt.ui.belt import BeltPanel
-from feeder_bt.ui.bridge import Bridge, Snapshot
 from feeder_bt.ui.camera import CameraFeed
-from feeder_bt.ui.operate import CellOps
 from feeder_bt.ui.server import UiApp, UiServer, make_notice
-from feeder_bt.ui.status import CellPanel
-from feeder_bt.ui.users import UsersError, UsersFile, group_or_world_readable
-from feeder_bt.vision.calibration import Calibration
 from feeder_bt.vision.latest import LatestLook
+from feeder_bt.vision.pixels import Calibration
 
 _WARNED: set[Path] = set()
 

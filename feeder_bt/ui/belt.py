@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 import py_trees
 
-from feeder_bt.cell import Cell
-from feeder_bt.parts import Part
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.control.cell import Cell
+from feeder_bt.core.parts import Part
+from feeder_bt.vision.pixels import Calibration
 
 MAX_PARTS = 200                 # a queue longer than this is shown by its first parts
 

@@ -31,9 +31,9 @@ from starlette.responses import Response
 from starlette.routing import Route
 
 from feeder_bt.ui.responses import json_response, refuse
-from feeder_bt.vision.calibration import Calibration
 from feeder_bt.vision.latest import KEY, LatestLook, Look
 from feeder_bt.vision.overlay import draw
+from feeder_bt.vision.pixels import Calibration
 
 JPEG_QUALITY = 80
 

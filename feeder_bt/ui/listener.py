@@ -26,8 +26,8 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from feeder_bt.errors import FeederError
-from feeder_bt.ui.conns import ConnGate, ConnLimits, backlog, quiet_logger
+from feeder_bt.control.conns import ConnGate, ConnLimits, backlog, quiet_logger
+from feeder_bt.core.errors import FeederError
 
 if TYPE_CHECKING:
     from feeder_bt.ui.server import UiApp

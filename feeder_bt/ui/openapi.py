@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from feeder_bt.ui.operate import COMMANDS, SPEED_KEYS
+from feeder_bt.control.operate import COMMANDS, SPEED_KEYS
 
 LOGIN_FIELDS = ("user", "password")     # the form's input names are the same (index.html)
 CONTROL_ACTIONS = ("take", "release", "force-release")

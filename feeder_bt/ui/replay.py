@@ -23,15 +23,15 @@ from starlette.responses import FileResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
-from feeder_bt.errors import FeederError
-from feeder_bt.eventlog import open_readonly
-from feeder_bt.treelog import TraceView, read_trace
+from feeder_bt.control.access import Gate, Settings, allowed_hosts
+from feeder_bt.control.conns import ConnGate, ConnLimits, quiet_logger
+from feeder_bt.core.errors import FeederError
+from feeder_bt.records.eventlog import open_readonly
+from feeder_bt.records.treelog import TraceView, read_trace
 from feeder_bt.ui import parse_bind
-from feeder_bt.ui.access import Gate, Settings, allowed_hosts
-from feeder_bt.ui.conns import ConnGate, ConnLimits, quiet_logger
+from feeder_bt.ui.listener import _bind, is_loopback, make_notice, uvicorn_config
 from feeder_bt.ui.replay_login import ReplayLogin
 from feeder_bt.ui.responses import SecurityHeaders
-from feeder_bt.ui.serve import _bind, is_loopback, make_notice, uvicorn_config
 from feeder_bt.ui.treedata import tree_routes
 
 STATIC = Path(__file__).parent / "static"

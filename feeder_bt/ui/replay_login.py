@@ -18,11 +18,10 @@ from starlette.requests import HTTPConnection, Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from feeder_bt.ui.access import Settings
-from feeder_bt.ui.control import Session, Sessions, retry_after
-from feeder_bt.ui.guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
-from feeder_bt.ui.responses import client_ip, json_body, json_response, refuse, same_origin
-from feeder_bt.ui.users import (
+from feeder_bt.control.access import Settings
+from feeder_bt.control.guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
+from feeder_bt.control.sessions import Session, Sessions, retry_after
+from feeder_bt.control.users import (
     MAX_PASSWORD,
     NAME_RE,
     UsersError,
@@ -30,6 +29,7 @@ from feeder_bt.ui.users import (
     _dummy_hash,
     verify_password,
 )
+from feeder_bt.ui.responses import client_ip, json_body, json_response, refuse, same_origin
 
 COOKIE = "feeder_replay_session"
 MAX_BODY = 16 * 1024

@@ -87,7 +87,7 @@ async def json_body(request: Request, max_bytes: int) -> dict[str, Any] | Respon
     """The JSON object of a state-changing request, or the refusal to send back: another
     site's Origin, not JSON, over ``max_bytes``, or not one JSON object. One reader for the
     dashboard and the replay's login."""
-    from feeder_bt.ui.access import BadBody, parse_body
+    from feeder_bt.control.access import BadBody, parse_body
     if not same_origin(request):
         return refuse("refused: request from another site", 403)
     if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":

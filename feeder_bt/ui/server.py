@@ -36,13 +36,22 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from feeder_bt.ui.access import MAX_HOST_CHARS, AccessRecorder, Gate, Settings, allowed_hosts
-from feeder_bt.ui.bridge import Bridge, Outcome
+from feeder_bt.control.access import MAX_HOST_CHARS, AccessRecorder, Gate, Settings, allowed_hosts
+from feeder_bt.control.bridge import Bridge, Outcome
+from feeder_bt.control.guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
+from feeder_bt.control.operate import COMMANDS
+from feeder_bt.control.sessions import Control, Session, Sessions, retry_after
+from feeder_bt.control.users import (
+    MAX_PASSWORD,
+    NAME_RE,
+    UsersError,
+    UsersFile,
+    _dummy_hash,
+    verify_password,
+)
 from feeder_bt.ui.camera import CameraFeed, CameraView
-from feeder_bt.ui.control import Control, Session, Sessions, retry_after
-from feeder_bt.ui.guard import KNOWN_COOKIE, Attempt, LoginGuard, set_login_cookies
+from feeder_bt.ui.listener import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
 from feeder_bt.ui.openapi import spec as openapi_spec
-from feeder_bt.ui.operate import COMMANDS
 from feeder_bt.ui.responses import (
     SecurityHeaders,
     client_ip,
@@ -51,16 +60,7 @@ from feeder_bt.ui.responses import (
     refuse,
     same_origin,
 )
-from feeder_bt.ui.serve import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
 from feeder_bt.ui.treedata import tree_routes
-from feeder_bt.ui.users import (
-    MAX_PASSWORD,
-    NAME_RE,
-    UsersError,
-    UsersFile,
-    _dummy_hash,
-    verify_password,
-)
 
 COOKIE = "feeder_session"
 COMMAND_TIMEOUT_S = 5.0       # the tick thread answers within a tick or two; else 503

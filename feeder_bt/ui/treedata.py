@@ -16,7 +16,7 @@ from starlette.requests import Request
 from starlette.responses import Response
 from starlette.routing import Route
 
-from feeder_bt.treelog import TraceView
+from feeder_bt.records.treelog import TraceView
 from feeder_bt.ui.responses import json_response, refuse
 
 Guard = Callable[[Request], Response | None]

@@ -14,12 +14,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from feeder_bt.geometry import wrap_deg
-from feeder_bt.vision.calibration import Calibration, PixelGrid
+from feeder_bt.core.geometry import wrap_deg
 from feeder_bt.vision.chains import WINDOW, Contours, _boundary_steps, _full_chain, _smooth_length
 from feeder_bt.vision.corners import _CornerSignature
 from feeder_bt.vision.features import GROUP_OF
 from feeder_bt.vision.jit import kernels
+from feeder_bt.vision.pixels import Calibration, PixelGrid
 
 # a similarity's table for ``kernels.blob_stats`` when only the hull is wanted
 _SIMILARITY = (0, np.zeros((1, 4, 3)), np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0]))

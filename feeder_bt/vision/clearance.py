@@ -15,10 +15,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from feeder_bt.gripper import footprint, grip_poses
-from feeder_bt.scenario.model import PartSpec
+from feeder_bt.core.model import PartSpec
+from feeder_bt.robot.gripper import footprint, grip_poses
 from feeder_bt.vision.blobs import Blob
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.pixels import Calibration
 
 
 def offer_grips(blobs: list[Blob], parts: dict[str, PartSpec],

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.geometry import pose_outline, wrap_deg
-from feeder_bt.scenario.model import PartSpec
+from feeder_bt.core.geometry import pose_outline, wrap_deg
+from feeder_bt.core.model import PartSpec
 from feeder_bt.vision.jit import kernels
 
 

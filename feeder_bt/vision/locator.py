@@ -52,8 +52,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from feeder_bt.geometry import wrap_deg
-from feeder_bt.scenario.model import PartSpec, VisionClass, VisionRecipe
+from feeder_bt.core.geometry import wrap_deg
+from feeder_bt.core.model import PartSpec, VisionClass, VisionRecipe
 from feeder_bt.vision.blobs import (
     Blob,
     Detection,
@@ -63,7 +63,6 @@ from feeder_bt.vision.blobs import (
     measure_feature,
     principal_angle,
 )
-from feeder_bt.vision.calibration import Calibration, PixelGrid
 from feeder_bt.vision.clearance import offer_grips
 from feeder_bt.vision.corners import (
     _CornerSignature,
@@ -76,6 +75,7 @@ from feeder_bt.vision.features import FEATURES, GROUP_OF
 from feeder_bt.vision.jit import kernels, warm
 from feeder_bt.vision.outline import OutlineModel, orient_outline
 from feeder_bt.vision.overlay import draw
+from feeder_bt.vision.pixels import Calibration, PixelGrid
 from feeder_bt.vision.rulers import measure as measure_ruler
 from feeder_bt.vision.segment import Segmenter, to_grey
 from feeder_bt.vision.split import split_blob

@@ -26,8 +26,8 @@ import math
 import cv2
 import numpy as np
 
-from feeder_bt.geometry import outer, place_outline, pose_outline, wrap_deg
-from feeder_bt.scenario.model import PartSpec
+from feeder_bt.core.geometry import outer, place_outline, pose_outline, wrap_deg
+from feeder_bt.core.model import PartSpec
 from feeder_bt.vision.corners import _face_up
 
 RES_MM = 0.5              # raster of the overlap score

@@ -11,7 +11,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.vision.pixels import Calibration
 from feeder_bt.vision.segment import to_grey
 
 ARROW_MM = 25.0                 # the angle arrow's length in the belt frame

@@ -31,7 +31,7 @@ import math
 import cv2
 import numpy as np
 
-from feeder_bt.scenario.model import CameraCalibration
+from feeder_bt.core.model import CameraCalibration
 
 
 class Calibration:

@@ -22,7 +22,7 @@ import math
 import cv2
 import numpy as np
 
-from feeder_bt.scenario.model import Ruler
+from feeder_bt.core.model import Ruler
 
 
 def line_mm(outline: np.ndarray, centre: tuple[float, float], angle_deg: float) -> float:

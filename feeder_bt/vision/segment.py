@@ -22,7 +22,7 @@ import threading
 import cv2
 import numpy as np
 
-from feeder_bt.scenario.model import VisionRecipe
+from feeder_bt.core.model import VisionRecipe
 from feeder_bt.vision.chains import Contours, _with_holes
 from feeder_bt.vision.jit import kernels
 

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.clock import Clock
-from feeder_bt.jobs import FutureJob, Job
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.jobs import FutureJob, Job
 
 
 class DeferredFuture(Future):

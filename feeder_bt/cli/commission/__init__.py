@@ -28,12 +28,12 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from feeder_bt.argtypes import positive
-from feeder_bt.scenario import load_cell
-from feeder_bt.tools.commission.adept import commission_adept, pick_window
-from feeder_bt.tools.commission.camera import CAMERA_STEPS, commission_camera
-from feeder_bt.tools.commission.common import Asker, CommissionError, Report, load_answers
-from feeder_bt.tools.commission.galil import commission_galil
+from feeder_bt.cli.argtypes import positive
+from feeder_bt.cli.commission.adept import commission_adept, pick_window
+from feeder_bt.cli.commission.camera import CAMERA_STEPS, commission_camera
+from feeder_bt.cli.commission.galil import commission_galil
+from feeder_bt.cli.commission.steps import Asker, CommissionError, Report, load_answers
+from feeder_bt.config import load_cell
 
 JOG_MM_S = 20.0          # commissioning jogs are slow
 INPUT_WAIT_S = 5.0       # after the person says they acted, how long to look for it

@@ -25,10 +25,8 @@ from pathlib import Path
 from typing import Any
 
 from feeder_bt.calibration.files import robot_frame_path, write_calibration_file
-from feeder_bt.clock import RealClock
-from feeder_bt.encoder import EncoderSync, FreshAnchor, diff
-from feeder_bt.scenario.model import CellSpec
-from feeder_bt.tools.commission.common import (
+from feeder_bt.cli.commission.frame import FrameFit, fit_frame, frame_record, touch_points
+from feeder_bt.cli.commission.steps import (
     Asker,
     Report,
     active_low,
@@ -38,7 +36,9 @@ from feeder_bt.tools.commission.common import (
     wait,
     wait_for,
 )
-from feeder_bt.tools.commission.frame import FrameFit, fit_frame, frame_record, touch_points
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.encoder import EncoderSync, FreshAnchor, diff
+from feeder_bt.core.model import CellSpec
 
 JOG_S = 1.0
 DRIFT_TOLERANCE_MM = 0.5

@@ -22,11 +22,11 @@ import numpy as np
 
 from feeder_bt.calibration import DEFAULT_TARGETS, calibrate_camera_image
 from feeder_bt.calibration.camera import Target, centred_pose
-from feeder_bt.clock import RealClock
-from feeder_bt.encoder import diff
-from feeder_bt.scenario.model import CameraCalibration, CellSpec
-from feeder_bt.tools.commission.common import Asker, Report, ensure_motor_on, try_step, wait
-from feeder_bt.vision.calibration import Calibration
+from feeder_bt.cli.commission.steps import Asker, Report, ensure_motor_on, try_step, wait
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.model import CameraCalibration, CellSpec
+from feeder_bt.vision.pixels import Calibration
 
 TIMING_SPEEDS_MM_S = (100.0, 200.0)
 FRAME_GAP_S = 0.15           # between triggered frames while the marker crosses the view
@@ -93,13 +93,13 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
     pylon = cell.camera.source.startswith("pylon:")
     try:
         if pylon and "enumerate" in wanted:
-            from feeder_bt.tools.commission.pylon_steps import enumerate_step
+            from feeder_bt.cli.commission.pylon_steps import enumerate_step
             if not try_step(report, "camera.pylon.enumerate", lambda: enumerate_step(cell)):
                 return
         if not try_step(report, "camera.grab", grab):
             return
         if pylon:
-            from feeder_bt.tools.commission.pylon_steps import pylon_steps
+            from feeder_bt.cli.commission.pylon_steps import pylon_steps
             pylon_steps(cell, ask, report, opts, src, wanted)
         if "calibration" in wanted:
             try_step(report, "camera.calibration", calibrate)

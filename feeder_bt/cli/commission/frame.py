@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.scenario.model import CellSpec
+from feeder_bt.core.model import CellSpec
 
 TOUCH_INSET_MM = 50.0         # default touch points: this far inside the pick window
 

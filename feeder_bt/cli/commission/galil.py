@@ -17,10 +17,7 @@ import argparse
 import time
 from typing import Any
 
-from feeder_bt.clock import RealClock
-from feeder_bt.encoder import diff
-from feeder_bt.scenario.model import CellSpec
-from feeder_bt.tools.commission.common import (
+from feeder_bt.cli.commission.steps import (
     Asker,
     Report,
     active_low,
@@ -31,6 +28,9 @@ from feeder_bt.tools.commission.common import (
     wait,
     wait_for,
 )
+from feeder_bt.core.clock import RealClock
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.model import CellSpec
 
 JOG_S = 1.0
 PUSH_MM = 50.0           # how far the person pushes a belt by hand for the encoder sign

@@ -11,9 +11,9 @@ from typing import Any, TextIO
 
 import yaml
 
-from feeder_bt.errors import FeederError
-from feeder_bt.jobs import Job, JobState
-from feeder_bt.scenario.model import CellSpec
+from feeder_bt.core.errors import FeederError
+from feeder_bt.core.jobs import Job, JobState
+from feeder_bt.core.model import CellSpec
 
 
 class CommissionError(FeederError):

@@ -21,8 +21,8 @@ import re
 import threading
 from dataclasses import dataclass
 
-from feeder_bt.emulators.dmc import AXES, DmcError, DmcInterpreter
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.galil.dmc import AXES, DmcError, DmcInterpreter
+from feeder_bt.sim.realtime import Plant
 
 
 @dataclass

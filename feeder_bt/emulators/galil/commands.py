@@ -9,13 +9,19 @@ from __future__ import annotations
 import re
 import threading
 
-from feeder_bt.emulators.dmc import AXES, DmcError, DmcInterpreter, format_number, is_axis_command
-from feeder_bt.emulators.galil_axes import _num
-from feeder_bt.emulators.galil_link import Link as _Link
-from feeder_bt.emulators.galil_link import PtyLink as _PtyLink
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.galil.axes import _num
+from feeder_bt.emulators.galil.dmc import (
+    AXES,
+    DmcError,
+    DmcInterpreter,
+    format_number,
+    is_axis_command,
+)
+from feeder_bt.emulators.galil.link import Link as _Link
+from feeder_bt.emulators.galil.link import PtyLink as _PtyLink
 from feeder_bt.hal.galil.conveyor import active_low
 from feeder_bt.hal.galil.protocol import ERROR_TEXT, MODEL
+from feeder_bt.sim.realtime import Plant
 
 COPYRIGHT = f"Galil Motion Control {MODEL} emulator (feeder_bt), firmware EMU1.0"
 OUTPUT_BITS = 16

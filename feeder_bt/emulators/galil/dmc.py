@@ -30,7 +30,7 @@ import re
 import threading
 from dataclasses import dataclass, field
 
-from feeder_bt.emulators.dmc_expr import (
+from feeder_bt.emulators.galil.dmc_expr import (
     _FMT_RE,
     _MATH,
     DmcError,

@@ -44,22 +44,22 @@ import sys
 import threading
 import time
 
-from feeder_bt.emulators.dmc import AXES, DmcError, DmcInterpreter, Program
 from feeder_bt.emulators.faults import FaultPlan
-from feeder_bt.emulators.galil_axes import AxisCommands, _Axis
-from feeder_bt.emulators.galil_commands import (
+from feeder_bt.emulators.galil.axes import AxisCommands, _Axis
+from feeder_bt.emulators.galil.commands import (
     COPYRIGHT,
     INPUT_BITS,
     OUTPUT_BITS,
     ControllerCommands,
 )
-from feeder_bt.emulators.galil_link import POLL_S
-from feeder_bt.emulators.galil_link import Link as _Link
-from feeder_bt.emulators.galil_link import PtyLink as _PtyLink
-from feeder_bt.emulators.galil_link import Session as _Session
-from feeder_bt.emulators.galil_link import TcpLink as _TcpLink
-from feeder_bt.emulators.plant import Plant
+from feeder_bt.emulators.galil.dmc import AXES, DmcError, DmcInterpreter, Program
+from feeder_bt.emulators.galil.link import POLL_S
+from feeder_bt.emulators.galil.link import Link as _Link
+from feeder_bt.emulators.galil.link import PtyLink as _PtyLink
+from feeder_bt.emulators.galil.link import Session as _Session
+from feeder_bt.emulators.galil.link import TcpLink as _TcpLink
 from feeder_bt.hal.galil.protocol import HANDLES, MODEL
+from feeder_bt.sim.realtime import Plant
 
 __all__ = ["COPYRIGHT", "INPUT_BITS", "OUTPUT_BITS", "REJECT_CODES", "GalilEmulator", "main",
            "run_forever", "serve"]
@@ -364,7 +364,7 @@ def run_forever(host: str, port: int, scenario: str, cell: str | None = None,
                 seed: int = 1, reversed_encoders: str = "") -> None:
     """``feeder emulate galil``: a plant and an emulator until Ctrl-C. ``reversed_encoders``
     (axis letters) wires those encoders reversed, to rehearse the error-limit trip."""
-    from feeder_bt.scenario.loader import load_scenario
+    from feeder_bt.config.loader import load_scenario
 
     sc, cell_spec = load_scenario(scenario, cell)
     plant = Plant(sc, cell_spec, seed=seed).start()

@@ -13,7 +13,7 @@ import tty
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from feeder_bt.emulators.galil import GalilEmulator
+    from feeder_bt.emulators.galil.emulator import GalilEmulator
 
 POLL_S = 0.05                  # how often idle server threads look at the stop flag
 

@@ -7,7 +7,7 @@ is itself a motion during which the arm holds still (or keeps tracking: NOT CONF
 ``BRAKE``, from any task, ends the motion in progress where the arm is (User's Guide v17
 p. 33).
 
-Times come from the plant's arm (``World.robot_model``, a SCARA: ``feeder_bt.scara``, the
+Times come from the plant's arm (``World.robot_model``, a SCARA: ``feeder_bt.robot.scara``, the
 one the simulated robot uses): each motion is joint-interpolated, joints 1, 2 and Z each a
 trapezoid under its own limits, the slowest setting the time, at the program speed times
 the operator's override, times the simulator's per-move time factor. A motion the program

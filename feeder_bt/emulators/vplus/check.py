@@ -50,7 +50,7 @@ Rules, each with its source (docs/real-cell.md, "The Adept controller (V+)"):
 Not checked: which signal numbers are outputs, run-time values, the way round a loop
 (``vplus_flow.py``), anything a V+ release or an option adds.
 
-``python -m feeder_bt.emulators.vplus_check [DIR] [--max-line N]`` prints one line per finding,
+``python -m feeder_bt.emulators.vplus.check [DIR] [--max-line N]`` prints one line per finding,
 ``FILE:LINE: rule: what``, and exits 1 if there is any.
 """
 
@@ -62,12 +62,12 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from feeder_bt.emulators.vplus_flow import NOWAIT, FlowProgram, ForwardChecker
-from feeder_bt.emulators.vplus_vars import unassigned
-from feeder_bt.emulators.vplus_words import INSTRUCTIONS, reserved
-from feeder_bt.errors import ConfigError
+from feeder_bt.core.errors import ConfigError
+from feeder_bt.emulators.vplus.flow import NOWAIT, FlowProgram, ForwardChecker
+from feeder_bt.emulators.vplus.vars import unassigned
+from feeder_bt.emulators.vplus.words import INSTRUCTIONS, reserved
 
-VPLUS_DIR = Path(__file__).resolve().parents[2] / "vplus"
+VPLUS_DIR = Path(__file__).resolve().parents[3] / "vplus"
 MAX_NAME = 15                 # V+ significant characters in a name (User's Guide p. 99)
 MAX_LINE = 80                 # NOT CONFIRMED: a setting (module docstring)
 
@@ -416,7 +416,7 @@ def require_loadable(directory: Path | str = VPLUS_DIR, max_line: int = MAX_LINE
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m feeder_bt.emulators.vplus_check",
+    p = argparse.ArgumentParser(prog="python -m feeder_bt.emulators.vplus.check",
                                 description="check V+ programs the way V+ LOAD would")
     p.add_argument("directory", nargs="?", default=str(VPLUS_DIR))
     p.add_argument("--max-line", type=int, default=MAX_LINE, metavar="N",

@@ -36,7 +36,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from feeder_bt.emulators.vplus_words import MOTION
+from feeder_bt.emulators.vplus.words import MOTION
 
 Pending = tuple[str, int, str] | None      # (file, line, instruction) of the motion in flight
 

@@ -21,15 +21,15 @@ from collections import Counter, deque
 from collections.abc import Callable
 from typing import Any
 
+from feeder_bt.core.errors import HalError
+from feeder_bt.core.model import RobotSpec
 from feeder_bt.emulators.vplus.arm import Arm
 from feeder_bt.emulators.vplus.devices import TcpLun
 from feeder_bt.emulators.vplus.funcs import PURE
 from feeder_bt.emulators.vplus.program import Program
 from feeder_bt.emulators.vplus.task import Cell, Killed, Task, VError
 from feeder_bt.emulators.vplus.trans import Belt, BeltLoc, Trans
-from feeder_bt.errors import HalError
 from feeder_bt.hal.interfaces import PickTarget, Pose
-from feeder_bt.scenario.model import RobotSpec
 
 GRIP_Z_MM = 10.0          # the cup reaches a part only this close to the belt
 MAJOR_CYCLE_S = 0.016     # V+ WAIT with no condition: until the next major cycle

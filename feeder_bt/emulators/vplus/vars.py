@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import re
 
-from feeder_bt.emulators.vplus_flow import FlowProgram
-from feeder_bt.emulators.vplus_words import reserved
+from feeder_bt.emulators.vplus.flow import FlowProgram
+from feeder_bt.emulators.vplus.words import reserved
 
 _NAME = re.compile(r"(?<![\w./$#%])[$#%]?[a-z][\w.]*")
 _ASSIGN = re.compile(r"^\s*(?:SET\s+)?([$#%]?[A-Za-z][\w.]*)\s*(\[[^\]]*\])?\s*=(?!=)")

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from feeder_bt.errors import CommsLost
+from feeder_bt.core.errors import CommsLost
 from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.adept.protocol import Command, ProtocolError
 

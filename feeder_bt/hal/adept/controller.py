@@ -6,12 +6,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from feeder_bt.clock import Clock
-from feeder_bt.errors import CommsLost, HalError
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.errors import CommsLost, HalError
+from feeder_bt.core.model import AdeptSpec, RobotSpec
 from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.adept.client import LineSocket, ServerClient
 from feeder_bt.hal.adept.robot import AdeptIO, AdeptRobot, AdeptRobotPosition
-from feeder_bt.scenario.model import AdeptSpec, RobotSpec
 
 
 class AdeptController:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from feeder_bt.errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
 from feeder_bt.hal.interfaces import Held, Pose
 
 PROTOCOL_VERSION = 1

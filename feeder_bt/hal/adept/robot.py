@@ -12,12 +12,12 @@ import threading
 import time
 from collections.abc import Iterable
 
-from feeder_bt.clock import Clock
-from feeder_bt.errors import CommsLost, HalError, MissedGrab
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.errors import CommsLost, HalError, MissedGrab
+from feeder_bt.core.jobs import DoneJob, FutureJob, Job
 from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.adept.client import LineSocket, ServerClient
 from feeder_bt.hal.interfaces import Held, PickResult, PickTarget, Pose
-from feeder_bt.jobs import DoneJob, FutureJob, Job
 
 POLL_S = 0.02                # position poller period: 50 Hz (adept.poll_hz), one POLL each
 

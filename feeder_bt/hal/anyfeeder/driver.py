@@ -18,8 +18,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import serial
 
-from feeder_bt.clock import Clock
-from feeder_bt.errors import CommsLost, HalError, PlateFault
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.errors import CommsLost, HalError, PlateFault
+from feeder_bt.core.jobs import DoneJob, FutureJob, Job
+from feeder_bt.core.plate_model import PlateSpec
 from feeder_bt.hal.anyfeeder.protocol import (
     BUSY,
     CR,
@@ -30,8 +32,6 @@ from feeder_bt.hal.anyfeeder.protocol import (
     parse_reply,
 )
 from feeder_bt.hal.interfaces import PlateStatus
-from feeder_bt.jobs import DoneJob, FutureJob, Job
-from feeder_bt.scenario.plate_model import PlateSpec
 
 READ_POLL_S = 0.05
 

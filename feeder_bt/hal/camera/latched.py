@@ -12,11 +12,11 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Protocol
 
-from feeder_bt.clock import Clock
-from feeder_bt.errors import GrabFailed, HalError
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.errors import GrabFailed, HalError
+from feeder_bt.core.jobs import DoneJob, FutureJob, Job
 from feeder_bt.hal.camera.sources import FrameSource
 from feeder_bt.hal.interfaces import Frame
-from feeder_bt.jobs import DoneJob, FutureJob, Job
 
 
 class LatchSource(Protocol):

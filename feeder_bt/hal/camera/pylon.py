@@ -19,9 +19,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from feeder_bt.errors import ConfigError, GrabFailed
+from feeder_bt.core.errors import ConfigError, GrabFailed
+from feeder_bt.core.model import PylonSpec
 from feeder_bt.hal.camera.sources import as_frame
-from feeder_bt.scenario.model import PylonSpec
 
 SCHEME = "pylon:"
 INSTALL_HINT = "pip install -e '.[pylon]' (Basler's pypylon)"

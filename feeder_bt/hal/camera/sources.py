@@ -12,8 +12,8 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from feeder_bt.errors import ConfigError, GrabFailed
-from feeder_bt.scenario.model import CameraSpec
+from feeder_bt.core.errors import ConfigError, GrabFailed
+from feeder_bt.core.model import CameraSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 

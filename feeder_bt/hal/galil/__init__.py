@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from feeder_bt.clock import Clock
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.model import CellSpec
 from feeder_bt.hal.galil.conveyor import GalilConveyor, GalilIO
 from feeder_bt.hal.galil.driver import PROGRAMS_DIR, GalilController
 from feeder_bt.hal.galil.protocol import DownloadError, GalilError
-from feeder_bt.scenario.model import CellSpec
 
 
 def make_galil(cell: CellSpec, clock: Clock, programs_dir: Path | str = PROGRAMS_DIR

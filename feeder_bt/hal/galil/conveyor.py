@@ -12,9 +12,11 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from feeder_bt.clock import Clock
-from feeder_bt.encoder import diff
-from feeder_bt.errors import CardFault, ConveyorFault, HalError
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.encoder import diff
+from feeder_bt.core.errors import CardFault, ConveyorFault, HalError
+from feeder_bt.core.jobs import DoneJob, FutureJob, Job, JobState
+from feeder_bt.core.model import IoSignal
 from feeder_bt.hal.galil.driver import RETRY, Delay, GalilController
 from feeder_bt.hal.galil.protocol import (
     DistanceEvent,
@@ -26,8 +28,6 @@ from feeder_bt.hal.galil.protocol import (
     positional,
 )
 from feeder_bt.hal.interfaces import IoChange, speed_refused, watchdog_stopped
-from feeder_bt.jobs import DoneJob, FutureJob, Job, JobState
-from feeder_bt.scenario.model import IoSignal
 
 COUNTER_BITS = 32
 STALL_S = 2.0                # jogging with no encoder motion this long: a stall

@@ -55,9 +55,10 @@ from typing import Any
 
 import serial
 
-from feeder_bt.clock import Clock
-from feeder_bt.encoder import wrap
-from feeder_bt.errors import CommsLost, ConfigError, ConveyorFault, HalError
+from feeder_bt.core.clock import Clock
+from feeder_bt.core.encoder import wrap
+from feeder_bt.core.errors import CommsLost, ConfigError, ConveyorFault, HalError
+from feeder_bt.core.model import GalilSpec
 from feeder_bt.hal.galil.link import (
     DEAD,
     Connection,
@@ -92,7 +93,6 @@ from feeder_bt.hal.galil.startup import (
     AxisStatus,
     CardSetup,
 )
-from feeder_bt.scenario.model import GalilSpec
 
 log = logging.getLogger(__name__)
 

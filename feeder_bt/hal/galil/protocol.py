@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from feeder_bt.errors import CommsLost, HalError
+from feeder_bt.core.errors import CommsLost, HalError
 
 # ---------------------------------------------------------------------------- limits
 

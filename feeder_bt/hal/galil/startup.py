@@ -19,7 +19,7 @@ from feeder_bt.hal.galil.link import Connection, retrieve
 from feeder_bt.hal.galil.protocol import AXES, THREADS, GalilError, parse_int, positional
 
 if TYPE_CHECKING:
-    from feeder_bt.scenario.model import GalilSpec
+    from feeder_bt.core.model import GalilSpec
 
 log = logging.getLogger("feeder_bt.hal.galil.driver")
 

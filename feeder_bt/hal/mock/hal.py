@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from feeder_bt.core.jobs import DoneJob, Job
 from feeder_bt.hal.interfaces import Hal, Held, IoChange, Pose
-from feeder_bt.jobs import DoneJob, Job
 
 
 class MockJob(Job):

@@ -1,0 +1,2 @@
+"""Reading a run: the report and its bounds. May import: control and every layer below.
+"""

@@ -1,0 +1,2 @@
+"""The Galil DMC controller emulator: its link, axes, commands and DMC interpreter.
+"""

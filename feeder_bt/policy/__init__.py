@@ -1,0 +1,3 @@
+"""Feeding policies as pure arithmetic: speed adjusters, the plate's action policy, kits and
+the supply bound. May import: core, robot.
+"""
