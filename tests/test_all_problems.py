@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from feeder_bt.cli.main import main
-from feeder_bt.config.loader import load_cell, load_fault_plan, load_scenario
+from feeder_bt.config.files import load_fault_plan
+from feeder_bt.config.loader import load_cell, load_scenario
 from feeder_bt.core.errors import MAX_PROBLEMS, ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.drivers import OperatorTouch, real_waiter
+from feeder_bt.calibration.procedure import CalibrationError
 from feeder_bt.cli import calibrate
 from feeder_bt.cli.main import main
 from feeder_bt.config import load_cell

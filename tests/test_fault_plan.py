@@ -9,15 +9,14 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.config import loader as L
 from feeder_bt.config.faults import (
     FAULT_KINDS,
     RATE_UNITS,
     FaultPlanSpec,
     FaultRate,
     ScriptedFault,
-    load_fault_plan,
 )
+from feeder_bt.config.files import LOADERS, load_fault_plan
 from feeder_bt.core.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,7 +73,7 @@ def test_shipped_shift_plan_matches_the_issue():
     estops = [s for s in plan.scripted if s.kind == "estop"]
     assert [s.at_s for s in estops] == [7200.0, 21600.0]
     assert all(s.release_after_s == 60.0 for s in estops)
-    assert L.load_fault_plan(SHIFT) == plan        # the loader's own entry point
+    assert LOADERS["faults"](SHIFT) == plan        # feeder check's entry point
 
 
 def test_good_plan_loads_with_defaults(tmp_path):

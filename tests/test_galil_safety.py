@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from galil_fixtures import WAIT_S, plant_and_emulator, rig, wait_job, wait_until
 
-from feeder_bt.config.loader import check_files
+from feeder_bt.config.files import check_files
 from feeder_bt.core.clock import RealClock, SimClock
 from feeder_bt.core.errors import ConveyorFault
 from feeder_bt.core.jobs import JobState

@@ -26,8 +26,8 @@ from feeder_bt.control.ticker import Ticker  # noqa: E402
 from feeder_bt.control.users import UsersFile  # noqa: E402
 from feeder_bt.core.clock import SimClock  # noqa: E402
 from feeder_bt.core.errors import FeederError  # noqa: E402
-from feeder_bt.plant.adapters import PlantOptions  # noqa: E402
 from feeder_bt.plant.opcua import CellUaServer  # noqa: E402
+from feeder_bt.plant.options import PlantOptions  # noqa: E402
 from feeder_bt.sim.devices import make_sim_hal  # noqa: E402
 
 LENSES = "scenarios/lenses.yaml"

@@ -25,8 +25,8 @@ from feeder_bt.core.part_protocol import (
     parse_request,
 )
 from feeder_bt.hal.interfaces import PickTarget
-from feeder_bt.plant.adapters import PlantOptions
 from feeder_bt.plant.client import LoopLink, PartClient, PartServerError
+from feeder_bt.plant.options import PlantOptions
 from feeder_bt.plant.part_server import PartServer, install
 from feeder_bt.plant.sim_robot import SimRobotProgram
 from feeder_bt.sim.devices import make_sim_hal

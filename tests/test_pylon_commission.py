@@ -28,8 +28,8 @@ def pylon_cell(tmp_path: Path, exposure_ms: float) -> Path:
     draws it lying centred in the view (what the calibration step asks the person for)."""
     from feeder_bt.calibration.camera import centred_pose
     from feeder_bt.cli.commission.camera import cell_target
-    from feeder_bt.cli.inputs import write_image
     from feeder_bt.config.loader import load_cell
+    from feeder_bt.core.images import write_image
     from feeder_bt.sim.target import TargetCamera
 
     cell = load_cell(ROOT / "cells" / "sim.yaml", calibration_files=False)

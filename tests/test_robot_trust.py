@@ -16,8 +16,9 @@ from feeder_bt.app.run import RunOptions, run_job
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.errors import FeederError
 from feeder_bt.core.part_protocol import parse_offer
-from feeder_bt.plant.adapters import PlantOptions, _world_check
+from feeder_bt.plant.adapters import _world_check
 from feeder_bt.plant.client import LoopLink, PartClient, PartServerError, TcpLink
+from feeder_bt.plant.options import PlantOptions
 from feeder_bt.plant.part_server import PartServer
 from feeder_bt.plant.robots import RobotsError, RobotTrust
 from feeder_bt.plant.robots import main as robots_main

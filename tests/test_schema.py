@@ -13,7 +13,8 @@ import pytest
 import yaml
 
 from feeder_bt.cli.main import main
-from feeder_bt.config.loader import load_cell, load_fault_plan, load_scenario
+from feeder_bt.config.files import load_fault_plan
+from feeder_bt.config.loader import load_cell, load_scenario
 from feeder_bt.config.schema import KINDS, file_kind, schema
 from feeder_bt.core.errors import ConfigError
 

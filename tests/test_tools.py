@@ -99,7 +99,7 @@ def test_locate_without_golden_says_so(mixed_frames, capsys):
 
 @pytest.mark.parametrize("name", ["missing.png", "frame_000.json"])
 def test_locate_bad_image_is_one_line_exit_2(mixed_frames, name):
-    from feeder_bt.cli.inputs import BadInput
+    from feeder_bt.core.images import BadInput
     with pytest.raises(BadInput) as e:
         feeder("locate", MIXED, str(mixed_frames / name))
     assert e.value.exit_code == 2 and name in str(e.value) and "\n" not in str(e.value)

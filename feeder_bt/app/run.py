@@ -110,7 +110,7 @@ def plant_options(args: argparse.Namespace) -> Any:
     """The ``PlantOptions`` of parsed ``feeder run`` arguments (None: no adapter)."""
     if not getattr(args, "part_server", None) and not getattr(args, "opcua", None):
         return None
-    from feeder_bt.plant.adapters import PlantOptions
+    from feeder_bt.plant.options import PlantOptions
     return PlantOptions(part_server=args.part_server, sim_robot=args.sim_robot,
                         robots=getattr(args, "robots", None),
                         sim_robot_port=getattr(args, "sim_robot_port", None),
@@ -298,7 +298,7 @@ def _prepare(opts: RunOptions) -> _Prepared:
         _check_opcua(opts)
     prep = _Prepared(scenario, cell_spec, duration, start)
     if opts.faults:
-        from feeder_bt.config.faults import load_fault_plan
+        from feeder_bt.config.files import load_fault_plan
         prep.plan = load_fault_plan(opts.faults)
         if opts.hal != "sim":
             raise ConfigError("fault plans drive the simulated cell; the emulators take "

@@ -14,18 +14,21 @@ from feeder_bt.calibration.camera import (
     CameraFit,
     Target,
     TargetPose,
-    calibrate_camera_image,
-    camera_procedure,
     fit_camera,
     window_error_mm,
 )
-from feeder_bt.calibration.camera_model import CameraResult, calibrate_camera_views
-from feeder_bt.calibration.common import CalibrationError, sim_waiter
+from feeder_bt.calibration.camera_model import (
+    CameraResult,
+    calibrate_camera_image,
+    calibrate_camera_views,
+    camera_procedure,
+)
 from feeder_bt.calibration.files import (
     apply_calibration_file,
     read_camera_calibration,
     write_calibration_file,
 )
+from feeder_bt.calibration.procedure import CalibrationError, sim_waiter
 from feeder_bt.calibration.tool import ToolFit, ToolTouch, fit_tool, tool_procedure
 
 __all__ = [

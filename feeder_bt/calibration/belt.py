@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
+from feeder_bt.calibration.procedure import CalibrationError, Waiter, rms_max
 from feeder_bt.core.encoder import diff
 from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Hal

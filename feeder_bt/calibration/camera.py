@@ -29,14 +29,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from feeder_bt.calibration.common import CalibrationError, Waiter, rms_max
+from feeder_bt.calibration.procedure import CalibrationError, rms_max
 from feeder_bt.calibration.targets import DEFAULT_TARGETS, Target, detect_points
 from feeder_bt.core.model import CameraCalibration
-from feeder_bt.hal.interfaces import Camera, Frame
 from feeder_bt.vision.pixels import Calibration
 
-__all__ = ["DEFAULT_TARGETS", "CameraFit", "Target", "TargetPose", "calibrate_camera_image",
-           "camera_procedure", "centred_pose", "correspondences", "detect_target",
+__all__ = ["DEFAULT_TARGETS", "CameraFit", "Target", "TargetPose",
+           "centred_pose", "correspondences", "detect_target",
            "fit_camera", "match_order", "order_grid", "target_points_mm", "window_error_mm"]
 
 MIN_POINTS = 4
@@ -307,29 +306,3 @@ def correspondences(image: np.ndarray, target: Target, pose: TargetPose,
         return ordered.reshape(-1, 2), mm.reshape(-1, 2), None
     ordered, note = order_grid(image, grid, target, mm, nominal.rotation_deg)
     return ordered.reshape(-1, 2), mm.reshape(-1, 2), note
-
-
-def calibrate_camera_image(image: np.ndarray, target: Target, pose: TargetPose,
-                           nominal: CameraCalibration, prior: bool = True) -> CameraFit:
-    """Fit the belt plane from one image of ``target`` lying at ``pose`` (``prior``: see
-    ``correspondences``): a homography from the pixels, undistorted by the lens ``nominal``
-    has (if any: one view cannot tell the lens), to the belt (``intrinsics.fit_belt_plane``).
-    The fit's calibration keeps that lens, and its similarity fields are the homography's
-    nearest similarity."""
-    from feeder_bt.calibration.intrinsics import fit_belt_plane
-
-    px, mm, note = correspondences(image, target, pose, nominal, prior)
-    plane = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist,
-                           prior=nominal.homography)
-    und = Calibration(plane.calibration).undistort(px)
-    return CameraFit(plane.calibration, plane.rms_mm, plane.max_mm, plane.n_points,
-                     _affine_rms(und, mm), plane.rms_mm, hint=note,
-                     similarity_rms_mm=plane.similarity_rms_mm)
-
-
-def camera_procedure(camera: Camera, wait: Waiter, target: Target, pose: TargetPose,
-                     nominal: CameraCalibration, prior: bool = True) -> CameraFit:
-    """The guided procedure: with the target lying at ``pose`` on the belt (belt stopped,
-    backlight on), grab a frame and fit the calibration from its pixels."""
-    frame: Frame = wait(camera.grab())
-    return calibrate_camera_image(frame.image, target, pose, nominal, prior)

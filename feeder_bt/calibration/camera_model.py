@@ -18,8 +18,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from feeder_bt.calibration.camera import calibration_values, correspondences
-from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.camera import (
+    CameraFit,
+    TargetPose,
+    _affine_rms,
+    calibration_values,
+    correspondences,
+)
 from feeder_bt.calibration.intrinsics import (
     MIN_VIEWS,
     BeltPlane,
@@ -28,8 +33,11 @@ from feeder_bt.calibration.intrinsics import (
     find_views,
     fit_belt_plane,
 )
+from feeder_bt.calibration.procedure import CalibrationError, Waiter
 from feeder_bt.calibration.targets import Target
 from feeder_bt.core.model import CameraCalibration
+from feeder_bt.hal.interfaces import Camera, Frame
+from feeder_bt.vision.pixels import Calibration
 
 DEFAULT_MAX_RMS_PX = 1.0       # reprojection rms of the lens model over all views
 DEFAULT_MAX_BELT_MM = 0.3      # rms of the belt plane over the target's points
@@ -122,3 +130,26 @@ def calibrate_camera_views(images: Sequence[tuple[str, np.ndarray]], target: Tar
                               prior=nominal.homography)
     return CameraResult(belt.calibration, belt, lens, rejected, note, first=first_name)
 
+
+def calibrate_camera_image(image: np.ndarray, target: Target, pose: TargetPose,
+                           nominal: CameraCalibration, prior: bool = True) -> CameraFit:
+    """Fit the belt plane from one image of ``target`` lying at ``pose`` (``prior``: see
+    ``correspondences``): a homography from the pixels, undistorted by the lens ``nominal``
+    has (if any: one view cannot tell the lens), to the belt (``intrinsics.fit_belt_plane``).
+    The fit's calibration keeps that lens, and its similarity fields are the homography's
+    nearest similarity."""
+    px, mm, note = correspondences(image, target, pose, nominal, prior)
+    plane = fit_belt_plane(px, mm, None, nominal.intrinsics, nominal.dist,
+                           prior=nominal.homography)
+    und = Calibration(plane.calibration).undistort(px)
+    return CameraFit(plane.calibration, plane.rms_mm, plane.max_mm, plane.n_points,
+                     _affine_rms(und, mm), plane.rms_mm, hint=note,
+                     similarity_rms_mm=plane.similarity_rms_mm)
+
+
+def camera_procedure(camera: Camera, wait: Waiter, target: Target, pose: TargetPose,
+                     nominal: CameraCalibration, prior: bool = True) -> CameraFit:
+    """The guided procedure: with the target lying at ``pose`` on the belt (belt stopped,
+    backlight on), grab a frame and fit the calibration from its pixels."""
+    frame: Frame = wait(camera.grab())
+    return calibrate_camera_image(frame.image, target, pose, nominal, prior)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.calibration.common import CalibrationError, Waiter
+from feeder_bt.calibration.procedure import CalibrationError, Waiter
 from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Hal, Pose
 

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from feeder_bt.calibration.camera import fit_camera
-from feeder_bt.calibration.common import CalibrationError, rms_max
+from feeder_bt.calibration.procedure import CalibrationError, rms_max
 from feeder_bt.calibration.targets import Target, detect_points
 from feeder_bt.core.model import CameraCalibration
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.procedure import CalibrationError
 from feeder_bt.calibration.targets import Target, detect_points
 
 MIN_VIEWS = 3

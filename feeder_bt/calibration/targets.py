@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.procedure import CalibrationError
 
 KINDS = ("chessboard", "circles", "acircles", "charuco", "dots")
 MARKER_FRACTION = 0.7          # charuco: default marker side / square side

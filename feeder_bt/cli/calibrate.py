@@ -49,9 +49,9 @@ from feeder_bt.calibration.camera_model import (
     CameraResult,
     calibrate_camera_views,
 )
-from feeder_bt.calibration.common import CalibrationError
 from feeder_bt.calibration.drivers import OperatorTouch, PlantToucher, real_waiter, refresh
 from feeder_bt.calibration.files import calibration_path, write_calibration_file
+from feeder_bt.calibration.procedure import CalibrationError
 from feeder_bt.calibration.targets import parse_board
 from feeder_bt.config import load_cell
 from feeder_bt.core.clock import SimClock
@@ -340,7 +340,7 @@ def sim_camera(cell: CellSpec, target, pose: TargetPose,
     camera = TargetCamera(cell.camera, truth, seed=seed)
     camera.place(target, pose)
     if save:
-        from feeder_bt.cli.inputs import write_image
+        from feeder_bt.core.images import write_image
         write_image(save, camera.grab().result.image)
         camera.frames = 0                       # the procedure grabs the same image again
     return camera_procedure(camera, lambda job: job.result if job.ok else _raise(job),

@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from feeder_bt.cli.inputs import BadInput, check_size, load_golden, read_image, scenario_locator
+from feeder_bt.cli.inputs import check_size, load_golden, scenario_locator
+from feeder_bt.core.images import BadInput, read_image
 from feeder_bt.vision.diagnose import why_nothing
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")

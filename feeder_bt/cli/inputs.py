@@ -3,46 +3,15 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-import cv2
 import numpy as np
 
 from feeder_bt.config import load_scenario
 from feeder_bt.config.plugins import load_class
-from feeder_bt.core.didyoumean import hint
-from feeder_bt.core.errors import FeederError
+from feeder_bt.core.images import BadInput, read_image
 from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.vision.locator import Locator
 from feeder_bt.vision.pixels import Calibration
-
-
-class BadInput(FeederError):
-    """A missing or unreadable input file or a wrong argument: exit 2, like a YAML mistake."""
-
-    exit_code = 2
-
-
-def read_image(path: str | Path) -> np.ndarray:
-    """A grey uint8 image from a PNG/JPG/BMP file, or a one-line error naming the file."""
-    p = Path(path)
-    if not p.is_file():
-        raise BadInput(f"{p}: image not found{hint(p)}")
-    img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise BadInput(f"{p}: cannot read as an image (PNG, JPG or BMP)")
-    return img
-
-
-def write_image(path: str | Path, image: np.ndarray) -> None:
-    """Write an image, creating its folder; a failure is one line naming the file."""
-    p = Path(path)
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise BadInput(f"{p.parent}: cannot create folder: {e.strerror or e}") from None
-    if not cv2.imwrite(str(p), image):
-        raise BadInput(f"{p}: cannot write image")
 
 
 def scenario_locator(path: str, cell: str | None = None

@@ -16,13 +16,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from feeder_bt.cli.inputs import (
-    check_size,
-    load_golden,
-    read_image,
-    scenario_locator,
-    write_image,
-)
+from feeder_bt.cli.inputs import check_size, load_golden, scenario_locator
+from feeder_bt.core.images import read_image, write_image
 from feeder_bt.vision.diagnose import why_nothing
 from feeder_bt.vision.locator import Detection
 

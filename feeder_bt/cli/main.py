@@ -318,7 +318,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
     one is every problem the loader finds in it, one line each on stderr in file order (the
     first says which kind the file was read as), then a count on stdout."""
-    from feeder_bt.config.loader import check_file
+    from feeder_bt.config.files import check_file
     from feeder_bt.config.schema import describe, file_kind
     bad = found = 0
     for path in args.files:

@@ -18,12 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from feeder_bt.cli.inputs import BadInput, write_image
 from feeder_bt.config import load_scenario
 from feeder_bt.control.cell import Cell, CellState
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.clock import SimClock
 from feeder_bt.core.geometry import outer, place_outline
+from feeder_bt.core.images import BadInput, write_image
 from feeder_bt.core.jobs import Job
 from feeder_bt.hal.interfaces import Frame
 from feeder_bt.sim.devices import make_sim_hal

@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.cli.inputs import BadInput, check_size, load_golden, read_image, scenario_locator
+from feeder_bt.cli.inputs import check_size, load_golden, scenario_locator
 from feeder_bt.core.geometry import outer, polygon_area, pose_outline, rings
+from feeder_bt.core.images import BadInput, read_image
 from feeder_bt.core.model import Scenario
 from feeder_bt.vision.features import FEATURES
 from feeder_bt.vision.locator import Locator

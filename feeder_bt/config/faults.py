@@ -1,6 +1,6 @@
 """Fault plans: which faults the simulated cell injects, how often, and when.
 
-A fault plan is a YAML file (``docs/faults.md``) read by ``load_fault_plan`` with the
+A fault plan is a YAML file (``docs/faults.md``) read by ``files.load_fault_plan`` with the
 scenario loader's machinery, so a mistake in it is one ``FILE:LINE: key: what`` line like a
 mistake in a scenario. ``feeder_bt.sim.faults`` carries the plan out.
 
@@ -156,10 +156,3 @@ def _check_only_for(ctx: Any, kind: str, path: str) -> None:
                             line=ctx.key_lines[sub])
 
 
-def load_fault_plan(path: str | Path) -> FaultPlanSpec:
-    """Load and validate a fault plan (see ``feeder_bt.config.loader.load_fault_plan``)."""
-    from feeder_bt.config.loader import (
-        load_fault_plan as load,  # the loader imports this module's classes
-    )
-
-    return load(path)

@@ -37,7 +37,6 @@ from feeder_bt.config.checks import (  # noqa: F401 - re-exported
     _check_galil,
     _check_scenario,
 )
-from feeder_bt.config.faults import FaultPlanSpec, check_fault_plan
 from feeder_bt.config.special import part_size_mm
 from feeder_bt.config.tables import (  # noqa: F401 - re-exported
     _EXTRA_KEYS,
@@ -94,7 +93,7 @@ __all__ = [
     "ADJUST_ALGORITHMS", "ADJUST_ORDER", "ADJUST_PARAMS", "CELL_HALS", "CONVEYOR_NAMES",
     "ENUMS", "FOREGROUNDS", "IO_DIRS", "LEAF_RE", "ORIENTATION_METHODS", "PRESENT_MODES",
     "PROBABILITY_TOLERANCE", "RANGES", "RETRIEVE_POLICIES", "SHAPE_KINDS", "THRESHOLD_METHODS",
-    "LOADERS", "Range", "check_file", "check_files", "load_cell", "load_fault_plan",
+    "Range", "load_cell",
     "load_scenario", "part_size_mm",
 ]
 
@@ -217,46 +216,3 @@ def _cell_path(path: Path, root: MappingNode, ctx: _Ctx, cell: str | Path | None
             what = "is not a file" if cell_path.exists() else "not found"
             raise ctx.error("cell", f"cell file {rel!r} {what} (looked for {cell_path})")
     return cell_path
-
-
-def load_fault_plan(path: str | Path) -> FaultPlanSpec:
-    """Load and validate a fault plan for the simulated cell (``docs/faults.md``)."""
-    path = Path(path)
-    ctx = _Ctx(str(path))
-    root = _compose(path, ctx)
-    plan = ctx.collect(ctx.dataclass, FaultPlanSpec, root, "", fill={"path": path})
-    if plan is not None:
-        ctx.collect(check_fault_plan, plan, ctx)
-    ctx.raise_problems()
-    return plan
-
-
-def _load_supply_plan(path: str | Path):
-    from feeder_bt.config.supply import load_supply_plan  # it reads this module's walker
-
-    return load_supply_plan(path)
-
-
-LOADERS = {"scenario": load_scenario, "cell": load_cell, "faults": load_fault_plan,
-           "supply": _load_supply_plan}
-
-
-def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:
-    """Validate one file of any kind, told by its keys (``schema.file_kind``): (the kind it
-    was read as, that kind when its keys told it or None when it was a guess, every
-    problem). A scenario is checked with its cell."""
-    from feeder_bt.config.schema import file_kind  # local: the schema reads this module
-
-    told = file_kind(path)
-    kind = told or "scenario"
-    try:
-        LOADERS[kind](path)
-    except ConfigError as e:
-        return kind, told, e.problems
-    return kind, told, []
-
-
-def check_files(paths: list[str]) -> list[str]:
-    """Validate files of any kind: one line per problem, every problem of every file."""
-    return [str(e) for p in paths for e in check_file(p)[2]]
-

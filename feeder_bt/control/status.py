@@ -12,10 +12,10 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-from feeder_bt.app.view import figures, tree_text
 from feeder_bt.behaviours.base import Event, Stats
 from feeder_bt.control.bridge import Message, Snapshot
 from feeder_bt.control.cell import Cell, CellState
+from feeder_bt.control.figures import figures, tree_text
 from feeder_bt.control.operate import Limits, blackboard_speeds
 from feeder_bt.core.vocabulary import MISS_KINDS, split
 from feeder_bt.records.eventlog import ACCESS_KINDS

@@ -9,44 +9,14 @@ published) and ``close()`` at the end.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
 from typing import Any
 
 from feeder_bt.behaviours.desk import Desk
 from feeder_bt.control.cell import Cell
+from feeder_bt.core.addresses import parse_hostport
 from feeder_bt.core.clock import SimClock
 from feeder_bt.core.errors import FeederError
-
-
-@dataclass
-class PlantOptions:
-    part_server: str | None = None      # "[HOST:]PORT"
-    sim_robot: bool = True              # on the simulated cell: drive its robot through
-                                        # the reference client
-    pick_grace_s: float = 5.0
-    robots: str | None = None           # the robots file: who may take parts (robots.py)
-    sim_robot_port: str | None = None   # "[HOST:]PORT": an outside program moves the
-                                        # simulated robot (robot_port.py)
-    opcua: str | None = None            # "[HOST:]PORT"
-    opcua_users: str | None = None
-    opcua_insecure: bool = False        # an unsecured endpoint too (loopback only)
-    opcua_pki: str | None = None
-
-
-def parse_hostport(text: str, default_port: int, what: str) -> tuple[str, int]:
-    """``[HOST:]PORT`` (``PORT`` alone: loopback) to (host, port); one-line error."""
-    text = text.strip()
-    host, sep, port_text = text.rpartition(":")
-    if not sep:
-        host, port_text = "127.0.0.1", text
-    host = host.strip("[]") or "127.0.0.1"
-    try:
-        port = int(port_text) if port_text else default_port
-    except ValueError:
-        raise FeederError(f"{what}: expected [HOST:]PORT, got {text!r}") from None
-    if not 0 <= port <= 65535:
-        raise FeederError(f"{what}: port must be 0..65535, got {port}")
-    return host, port
+from feeder_bt.plant.options import PlantOptions
 
 
 def _world_check(world: Any) -> Any:

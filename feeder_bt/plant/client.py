@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     each line of standard input) and print each reply — a robot's side, by hand."""
     import sys
 
-    from feeder_bt.plant.adapters import parse_hostport
+    from feeder_bt.core.addresses import parse_hostport
     args = sys.argv[1:] if argv is None else argv
     if not args or args[0] in ("-h", "--help"):
         print(main.__doc__)

@@ -41,8 +41,9 @@ from feeder_bt.control.operate import SPEED_KEYS, CellOps
 from feeder_bt.control.sessions import Control, Session
 from feeder_bt.control.status import CellPanel
 from feeder_bt.control.users import UsersFile
+from feeder_bt.core.addresses import parse_hostport
 from feeder_bt.core.errors import FeederError
-from feeder_bt.plant.adapters import PlantOptions, parse_hostport
+from feeder_bt.plant.options import PlantOptions
 from feeder_bt.plant.ua_security import (
     ACTIVATION_S,
     CLOSED,

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from feeder_bt.calibration.camera import Target, TargetPose
-from feeder_bt.calibration.common import CalibrationError
+from feeder_bt.calibration.procedure import CalibrationError
 from feeder_bt.calibration.targets import board_rings
 from feeder_bt.core.jobs import DoneJob, Job
 from feeder_bt.core.model import CameraCalibration, CameraSpec, CellSpec
@@ -255,7 +255,7 @@ def sim_images(cell: CellSpec, target: Target, pose: TargetPose, truth: CameraCa
     camera.place(target, pose)
     out = [("belt", camera.grab().result.image)]
     if save:
-        from feeder_bt.cli.inputs import write_image
+        from feeder_bt.core.images import write_image
         write_image(save, out[0][1])
     if views and truth.intrinsics is None:
         raise CalibrationError("--views: the simulated camera has no lens (sim.lens_focal_px "

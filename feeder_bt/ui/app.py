@@ -19,7 +19,8 @@ from feeder_bt.control.status import CellPanel
 from feeder_bt.control.users import UsersError, UsersFile, group_or_world_readable
 from feeder_bt.ui.belt import BeltPanel
 from feeder_bt.ui.camera import CameraFeed
-from feeder_bt.ui.server import UiApp, UiServer, make_notice
+from feeder_bt.ui.listener import UiServer, make_notice
+from feeder_bt.ui.server import UiApp
 from feeder_bt.vision.latest import LatestLook
 from feeder_bt.vision.pixels import Calibration
 

@@ -1,4 +1,4 @@
-"""The operator UI's web app (Starlette); ``serve.UiServer`` runs it in a background thread.
+"""The operator UI's web app (Starlette); ``listener.UiServer`` runs it in a background thread.
 
 Threading: the app runs on its own asyncio loop in the ``feeder-ui`` thread and never
 touches the cell. It reads the bridge's latest published snapshot and submits commands
@@ -50,7 +50,6 @@ from feeder_bt.control.users import (
     verify_password,
 )
 from feeder_bt.ui.camera import CameraFeed, CameraView
-from feeder_bt.ui.listener import UiServer, is_loopback, make_notice  # noqa: F401  (the public names)
 from feeder_bt.ui.openapi import spec as openapi_spec
 from feeder_bt.ui.responses import (
     SecurityHeaders,

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from feeder_bt.vision.contour_kernels import _reflect, foreground_rois, roi_geometry
-from feeder_bt.vision.jit import _jit
+from feeder_bt.vision.kernel_jit import _jit
 
 _ONES = np.uint64(0xFFFFFFFFFFFFFFFF)
 _HIGH = np.uint64(0x8080808080808080)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from feeder_bt.vision.jit import _jit
+from feeder_bt.vision.kernel_jit import _jit
 
 _ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 _FLT_EPSILON = 1.1920928955078125e-07

@@ -1,4 +1,4 @@
-"""Compiled kernels of the faces (numba; see ``vision.kernels``, which imports them): the
+"""Compiled kernels of the faces (numba; ``vision.kernels`` puts them together for the locator): the
 sub-pixel edge points of the blobs' pixel hulls (``Segmenter._bright_source``), their
 mapping to mm and the cut-corner signatures (``corners._corner_signatures``), all of a
 frame's blobs in one call (``Locator._faces``)."""
@@ -9,8 +9,8 @@ import math
 
 import numpy as np
 
-from feeder_bt.vision.jit import _jit
-from feeder_bt.vision.kernels import _to_mm, convex_hull, min_rect
+from feeder_bt.vision.hull_kernels import _to_mm, convex_hull, min_rect
+from feeder_bt.vision.kernel_jit import _jit
 
 # how ``faces`` reads the image in which parts are bright at a pixel (``Segmenter._diff_at``)
 DIFF, GOLDEN_LIGHT, GOLDEN_DARK, PLAIN_LIGHT, PLAIN_DARK = range(5)

@@ -20,19 +20,6 @@ def kernels() -> ModuleType:
     return _mod
 
 
-def _jit(fn=None, **kw):
-    """numba's ``njit(cache=True, nogil=True)`` for the kernels' modules (which only
-    ``kernels`` imports); where numba finds no writable cache directory, compiled in memory
-    in each process instead."""
-    if fn is None:
-        return lambda f: _jit(f, **kw)
-    from numba import njit
-    try:
-        return njit(cache=True, nogil=True, **kw)(fn)
-    except RuntimeError:            # numba found no writable cache directory
-        return njit(nogil=True, **kw)(fn)
-
-
 NOTICE_AFTER_S = 1.0
 NOTICE = ("feeder: compiling the locator's kernels (numba), once after installing or "
           "upgrading: 20-40 s; later runs load them from the cache")

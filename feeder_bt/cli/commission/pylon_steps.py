@@ -89,7 +89,7 @@ def exposure_step(cell: CellSpec, src: Any, opts: argparse.Namespace) -> dict[st
 def views_step(ask: Asker, src: Any, folder: Path, n: int) -> dict[str, Any]:
     """Calibration views for ``feeder calibrate camera --image``: the person lays or holds
     the target, a frame is grabbed and written for each."""
-    from feeder_bt.cli.inputs import write_image
+    from feeder_bt.core.images import write_image
     folder.mkdir(parents=True, exist_ok=True)
     files = []
     for k in range(1, n + 1):

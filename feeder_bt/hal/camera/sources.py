@@ -13,7 +13,6 @@ import cv2
 import numpy as np
 
 from feeder_bt.core.errors import ConfigError, GrabFailed
-from feeder_bt.core.model import CameraSpec
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 
@@ -105,15 +104,3 @@ class ReplaySource:
     def close(self) -> None:
         if self.cap is not None:
             self.cap.release()
-
-
-def open_source(spec: str, camera: CameraSpec | None = None) -> FrameSource:
-    """The cell description's ``camera.source``: a device index, a URL, a folder or a file,
-    or ``pylon:SERIAL`` (a GenICam camera set from ``camera.pylon``)."""
-    if spec.startswith("pylon:"):
-        from feeder_bt.hal.camera.pylon import PylonSource
-        cam = camera if camera is not None else CameraSpec()
-        return PylonSource(spec, cam.pylon, cam.exposure_ms, (cam.width_px, cam.height_px))
-    if spec.isdigit() or "://" in spec:
-        return VideoCaptureSource(spec)
-    return ReplaySource(spec)
