@@ -11,7 +11,7 @@ user or robot still gets; JSON out.
 - ``opcua``: the OPC UA server with N idle connections; the time for a client to connect,
   log in and read the state.
 
-Measured here, against the issue's 2 s / 5 s; the tests (tests/test_conn_limits.py)
+Measured here, against the issue's 2 s / 5 s; the tests (tests/ui/test_conn_limits.py)
 assert only that the rightful request beats the listeners' 10-s first-request deadline.
 """
 

@@ -1,6 +1,6 @@
 """Regenerate every command output and figure quoted in docs/ (issue 29: docs that cannot
 go stale). ``python docs/build.py`` rewrites them in place; ``--check`` only compares and
-exits 1 naming each quote that no longer matches (tests/test_docs_outputs.py runs that).
+exits 1 naming each quote that no longer matches (tests/project/test_docs_outputs.py runs that).
 
 A quoted output is the fenced block right under a marker comment::
 

@@ -17,8 +17,9 @@ from collections.abc import Iterator
 from typing import Any
 
 import pytest
-from browser_helpers import ARGS, CHROMIUM, UPDATE_SHOTS, Shots
 from hypothesis import HealthCheck, settings
+
+from tests.support.browser_helpers import ARGS, CHROMIUM, UPDATE_SHOTS, Shots
 
 settings.register_profile("feeder", derandomize=True, database=None, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow], print_blob=True)

@@ -11,7 +11,7 @@ its plot, `feeder replay` and the dashboard (issue 29).
 
 The trees count both by kind in one counter (``Stats.faults``); the report splits it with
 :func:`split` into ``faults`` and ``misses``, and so does every text that shows them.
-tests/test_vocabulary.py checks the docs and UI strings keep to these meanings.
+tests/core/test_vocabulary.py checks the docs and UI strings keep to these meanings.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ the belt meets the reach before ``too_far``, per minute of feeding. No feeder se
 place parts faster than either; the lower one is the run's ceiling (``feeder_bt.analysis.report``).
 
 It is counted from what the controller sees (``Enqueue`` counts ``located_in_reach``), so
-it is the same on a real cell; ``tests/test_supply.py`` checks it against the simulated
+it is the same on a real cell; ``tests/config/test_supply.py`` checks it against the simulated
 world's truth. A part that goes round again is supplied again: each pass is a chance.
 
 When placed parts leave the cell and new ones come only in totes (a supply plan with

@@ -5,7 +5,7 @@ closing done on the packed image one bit a pixel, in one call (``packed_morph``)
 OpenCV's ``morphologyEx`` reads and writes a byte a pixel, twice per operation (erode,
 dilate), with a call and an image of its own each; here 64 pixels are one word and an
 operation is a few shifts and ANDs (ORs) of whole words: pixel for pixel OpenCV's result
-(``tests/test_vision.py::test_contours_on_bands_equal_the_whole_frame`` compares the
+(``tests/vision/test_locator.py::test_contours_on_bands_equal_the_whole_frame`` compares the
 contours found with OpenCV's on the whole frame, random masks, kernels 3 to 9 pixels).
 """
 

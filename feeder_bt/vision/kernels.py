@@ -26,7 +26,7 @@ is built (``warm``), never by ``feeder --help`` or ``feeder check``. The compile
 cached beside this file (``__pycache__``; numba writes each file under a temporary name and
 renames it, so processes compiling at once do not clash), or, where that is read-only, in
 the user's cache (``NUMBA_CACHE_DIR`` moves it); with no writable place at all the kernels
-are compiled in memory each process. tests/test_kernels.py checks each against the OpenCV
+are compiled in memory each process. tests/vision/test_kernels.py checks each against the OpenCV
 call or numpy code it replaced, on random inputs.
 """
 

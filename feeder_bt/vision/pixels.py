@@ -171,7 +171,7 @@ class PixelGrid:
     exact mapping (x, y mm and the local mm per px) at every ``step`` pixels, a little
     beyond the image, and points are read from it by bilinear interpolation: over a
     ``step``-pixel cell a lens and a tilt are smooth enough for that to be the mapping to
-    well under a thousandth of a mm (tests/test_parts_model.py). Built once per image size.
+    well under a thousandth of a mm (tests/config/test_parts_model.py). Built once per image size.
     """
 
     def __init__(self, calibration: Calibration, shape: tuple[int, int], step: int = 4) -> None:

@@ -24,7 +24,7 @@ class Asker:
     """Questions to the person at the cell: from the answers file, else standard input.
 
     A question is one prompt ending in ``[KEY] `` (no newline) so a person types the answer
-    after it; a rehearsal's driver (tests/test_commission.py) matches the key."""
+    after it; a rehearsal's driver (tests/cli/test_commission.py) matches the key."""
 
     def __init__(self, answers: dict[str, Any], stdin: TextIO, out: TextIO) -> None:
         self.answers, self.stdin, self.out = answers, stdin, out

@@ -5,7 +5,7 @@ Request: ``VERB arg ...`` and a newline. Reply: ``OK [values]`` or
 unchanged (or one of our server programs' own codes, -9001 and below). The notify socket
 carries unsolicited ``IN <signal> <0|1>`` lines.
 
-``COMMANDS`` is the client's declared command table; ``tests/test_vplus_conformance.py``
+``COMMANDS`` is the client's declared command table; ``tests/emulators/test_vplus_conformance.py``
 checks it against the dispatch in the V+ sources and against PROTOCOL.md, so the three
 cannot drift apart. Nothing here does I/O: the socket side lives in ``client.py``.
 """

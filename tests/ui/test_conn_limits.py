@@ -1,0 +1,178 @@
+"""Issue 28: nobody on the network can starve the cell by holding connections. Each test
+plays the attacker through the public interface on loopback (idle TCP connections from
+many 127.x addresses, ``floodutil.IdleFlood``) and then checks that the rightful user or
+robot still gets through. Waits are event-driven with long bounds. The only durations
+asserted are bounds under the listeners' first-request deadline (``ConnLimits.header_s``,
+10 s), measured around the rightful request alone: a request that got through only once
+that deadline had closed the flood's connections, not because idle ones made room for it,
+would take longer. The issue's own figures (2 s for the dashboard and a robot, 5 s for OPC
+UA) are benchmarks/flood.py's, measured there and not asserted here: a test must pass on a
+busy machine (beside two CPU hogs, /api/me under 5000 idle connections took 2.3 s)."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+
+import pytest
+
+from feeder_bt.control.cell import CellState
+from feeder_bt.control.conns import ConnLimits
+from feeder_bt.control.ticker import Ticker
+from feeder_bt.plant.client import PartClient
+from feeder_bt.plant.part_server import PartServer
+from tests.support.floodutil import IdleFlood
+from tests.support.uiutil import Client, FeederUi, make_users
+
+WAIT_S = 60.0
+GOT_THROUGH_S = ConnLimits().header_s      # faster than the deadline could have made room
+
+
+def _wait(pred, what: str, timeout: float = WAIT_S) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < end, f"timed out waiting for {what}"
+        time.sleep(0.05)
+
+
+def test_idle_connections_do_not_keep_the_controlling_user_from_stop(tmp_path):
+    users = make_users(tmp_path / "users.json", {"alice": "alice-secret-1"})
+    ui = FeederUi(tmp_path, users)
+    flood = None
+    try:
+        alice = Client(ui.url)
+        assert alice.login("alice", "alice-secret-1")[0] == 200
+        assert alice.call("api/control", {"action": "take"})[0] == 200
+        assert alice.command("start")[0] == 200
+        _wait(lambda: alice.status()["state"] == "RUNNING", "the cell to run")
+        port = int(ui.url.rsplit(":", 1)[1].strip("/"))
+        flood = IdleFlood(port, 5000, addresses=50)
+        assert flood.settle() >= 4000
+        t0 = time.monotonic()
+        code, me, _ = alice.call("api/me")
+        t_me = time.monotonic() - t0
+        assert code == 200 and me["user"] == "alice" and me["control"]["state"] == "you"
+        t0 = time.monotonic()
+        code, body = alice.command("stop")
+        t_stop = time.monotonic() - t0
+        assert code == 200, body
+        _wait(lambda: alice.status()["state"] == "STOPPED", "the cell to stop")
+        assert t_me < GOT_THROUGH_S and t_stop < GOT_THROUGH_S, (t_me, t_stop)
+        assert flood.still_open() <= 512          # the cap in all held
+    finally:
+        if flood is not None:
+            flood.close()
+        ui.kill()
+    err = (tmp_path / "stderr.txt").read_text()
+    assert "Traceback" not in err
+    # refusals are told in summary lines, not one line per connection
+    assert len([ln for ln in err.splitlines() if "operator UI:" in ln]) <= 5, err[-2000:]
+
+
+class _ServedCell:
+    """The lenses cell fed through a part server on loopback, ticking in real time."""
+
+    def __init__(self, trust=None) -> None:
+        from tests.plant.test_part_server import Serving
+        self.s = Serving(seed=1)
+        self.s.program.kill()
+        self.s.start()
+        self.s.run(80.0, stop=lambda: len(self.s.cell.ctx.queue) >= 4)
+        self.server = PartServer(self.s.desk, "127.0.0.1", 0, trust)
+        host, port = self.server.start().split(":")
+        self.host, self.port = host, int(port)
+        self.done = threading.Event()
+        ticker = Ticker(self.s.cell, fast=False)
+        self.thread = threading.Thread(target=lambda: ticker.run(
+            until=self.s.clock.now() + 600.0, stop=self.done.is_set,
+            every=self.s.desk.serve_idle))
+        self.thread.start()
+
+    def close(self) -> None:
+        self.done.set()
+        self.thread.join()
+        self.server.close()
+        self.s.close()
+
+
+def test_idle_connections_leave_room_for_a_new_robot(capsys):
+    served = _ServedCell()
+    flood = IdleFlood(served.port, 1200, addresses=40, net=2)
+    try:
+        assert flood.settle() >= 1000
+        t0 = time.monotonic()
+        with PartClient.connect(served.host, served.port) as robot:
+            status = robot.status()
+            t_first = time.monotonic() - t0
+            assert status["state"] == "RUNNING"
+            offer = robot.part(wait=10.0)
+            assert offer is not None
+            robot.release(offer.id)
+        assert t_first < GOT_THROUGH_S, t_first
+        stats = served.server.server.gate.stats()
+        assert stats["open"] <= served.server.server.gate.total
+        assert stats["evicted"] >= 1                 # idle ones made room
+    finally:
+        flood.close()
+        served.close()
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.splitlines()) <= 5, err[-2000:]
+
+
+def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
+    pytest.importorskip("asyncua")
+    from tests.plant.test_opcua import ALICE, LiveCell, cell_node, client, read
+
+    live = LiveCell(tmp_path)
+    port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+    flood = IdleFlood(port, 1100, addresses=40, net=3)
+    try:
+        assert flood.settle() >= 900
+
+        async def go() -> tuple[str, float]:
+            t0 = time.monotonic()
+            async with client(live.url, ALICE) as c:
+                idx, node = await cell_node(c)
+                state = await read(node, idx, "State")
+            return state, time.monotonic() - t0
+
+        state, took = asyncio.run(go())
+        assert state == CellState.STOPPED.value and took < GOT_THROUGH_S, (state, took)
+        assert live.ua.gate.stats()["open"] <= live.ua.gate.total
+    finally:
+        flood.close()
+        live.close()
+
+
+def test_opc_ua_wrong_arguments_are_invalid_and_anonymous_attempts_recorded(tmp_path):
+    pytest.importorskip("asyncua")
+    from asyncua import ua
+    from asyncua.ua.uaerrors import BadInvalidArgument, UaError
+
+    from tests.plant.test_opcua import ALICE, LiveCell, cell_node, client
+
+    live = LiveCell(tmp_path)
+    try:
+        async def go() -> None:
+            with pytest.raises(UaError):
+                async with client(live.url, None):
+                    pass
+            async with client(live.url, ALICE) as c:
+                idx, node = await cell_node(c)
+                await node.call_method(f"{idx}:TakeControl")
+                nan = ua.Variant(float("nan"), ua.VariantType.Double)
+                for bad in (ua.Variant("fast", ua.VariantType.String),
+                            ua.Variant(True, ua.VariantType.Boolean),
+                            ua.Variant([1.0, 2.0], ua.VariantType.Double)):
+                    with pytest.raises(BadInvalidArgument):
+                        await node.call_method(f"{idx}:SetSpeeds", bad, nan, nan)
+                await node.call_method(f"{idx}:ReleaseControl")
+
+        asyncio.run(go())
+        end = time.monotonic() + WAIT_S           # the access event reaches the tick thread
+        while live.ua.ops.report()["access"].get("login_refused", 0) < 1:
+            assert time.monotonic() < end, live.ua.ops.report()["access"]
+            time.sleep(0.05)
+    finally:
+        live.close()
