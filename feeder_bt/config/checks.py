@@ -288,6 +288,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                             f"more than sticking friction")
     check_class_areas(sc, ctx, cell)
     check_class_rulers(sc, ctx, cell)
+    _check_reach_and_kernels(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),
                         key=lambda t: t[1])
@@ -298,3 +299,31 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                         f"must be < {_num(limit)} (camera window {_num(window)} mm along the "
                         f"belt minus the largest part, {biggest!r} {size:.1f} mm), got "
                         f"{_num(fs)}")
+
+
+def _check_reach_and_kernels(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
+    """What would only show in a run, as a silent zero or a frozen controller: a place pose
+    the arm cannot reach, an opening wider than any part (it erases every one), and a
+    closing wider than the image (OpenCV would allocate gigabytes for it)."""
+    r = cell.robot
+    bx, by = r.base_mm
+    for name, part in sc.parts.items():
+        d = math.hypot(part.place.x - bx, part.place.y - by)
+        if not r.inner_reach_mm <= d <= r.reach_mm:
+            ctx.add_problem(f"parts.{name}.place",
+                            f"({_num(part.place.x)}, {_num(part.place.y)}) is {_num(round(d, 1))} "
+                            f"mm from the robot base {_num(bx)}, {_num(by)}: outside its reach "
+                            f"{_num(r.inner_reach_mm)}-{_num(r.reach_mm)} mm ({cell.path})")
+    m = sc.vision.morphology
+    cam = cell.camera
+    widest = max(part_size_mm(p) for p in sc.parts.values()) / cam.calibration.mm_per_px
+    if m.open_px >= widest:
+        ctx.add_problem("vision.morphology.open_px",
+                        f"must be < {math.ceil(widest)} px: an opening {m.open_px} px wide "
+                        f"erases every part (the largest is {widest:.0f} px across at "
+                        f"{_num(cam.calibration.mm_per_px)} mm/px)")
+    side = min(cam.width_px, cam.height_px)
+    if m.close_px >= side:
+        ctx.add_problem("vision.morphology.close_px",
+                        f"must be < {side} px, the image's shorter side ({cam.width_px} x "
+                        f"{cam.height_px} px), got {m.close_px}")

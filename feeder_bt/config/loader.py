@@ -23,6 +23,7 @@ stays the one place to import from.
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 import yaml
@@ -100,20 +101,35 @@ __all__ = [
 
 # ============================================================================ files
 
+MAX_FILE_BYTES = 2**20        # the largest shipped file is ~20 kB; 50 MB took 42 s to check
+
+
+def read_yaml_text(path: Path, file: str) -> str:
+    """A YAML file's text; every failure is a one-line ConfigError. Only a regular file is
+    read (a FIFO would block ``feeder check``), and at most ``MAX_FILE_BYTES`` of it: a
+    scenario, a cell or a plan is a few kB."""
+    try:
+        st = path.stat()
+        if stat.S_ISREG(st.st_mode) and st.st_size > MAX_FILE_BYTES:
+            raise ConfigError(f"is {st.st_size / 2**20:.1f} MiB; a YAML file here is a few kB "
+                              f"(at most {MAX_FILE_BYTES // 2**20} MiB is read)", file=file)
+        if not stat.S_ISREG(st.st_mode) and not stat.S_ISDIR(st.st_mode):
+            raise ConfigError("is not a regular file (a FIFO, socket or device); expected a "
+                              "YAML file", file=file)
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"file not found{hint(path)}", file=file) from None
+    except IsADirectoryError:
+        raise ConfigError("is a directory, not a YAML file", file=file) from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"not UTF-8 text ({e.reason} at byte {e.start})", file=file) from None
+    except OSError as e:
+        raise ConfigError(f"cannot read: {e.strerror or e}", file=file) from None
+
 
 def _compose(path: Path, ctx: _Ctx) -> MappingNode:
     """Read and parse one file into its root mapping node; every failure is a ConfigError."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"file not found{hint(path)}", file=ctx.file) from None
-    except IsADirectoryError:
-        raise ConfigError("is a directory, not a YAML file", file=ctx.file) from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"not UTF-8 text ({e.reason} at byte {e.start})",
-                          file=ctx.file) from None
-    except OSError as e:
-        raise ConfigError(f"cannot read: {e.strerror or e}", file=ctx.file) from None
+    text = read_yaml_text(path, ctx.file)
     try:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.MarkedYAMLError as e:

@@ -54,7 +54,7 @@ def file_kind(path: str | Path) -> str | None:
     (a scenario on a tie, since ``name`` is both a scenario's and a cell's); None when the
     file cannot be read as a mapping or uses no key of any kind (the loader says why)."""
     try:
-        root = yaml.compose(Path(path).read_text(encoding="utf-8"), Loader=yaml.SafeLoader)
+        root = yaml.compose(L.read_yaml_text(Path(path), str(path)), Loader=yaml.SafeLoader)
     except Exception:  # noqa: BLE001 - the real load reports it in one line
         return None
     if not isinstance(root, MappingNode):

@@ -378,6 +378,11 @@ class _Ctx:
             v = self.scalar(node, path)
             if not isinstance(v, str):
                 raise self.error(path, f"expected a string, got {_describe(v)}")
+            try:
+                v.encode("utf-8")
+            except UnicodeEncodeError as e:     # a YAML escape such as "\ud800"
+                raise self.error(path, f"not valid text: a lone surrogate "
+                                       f"{v[e.start]!a} at character {e.start + 1}") from None
             return v
         origin, args = typing.get_origin(tp), typing.get_args(tp)
         if origin is tuple:
