@@ -7,9 +7,9 @@ import sys
 import numpy as np
 
 from feeder_bt.config import load_scenario
-from feeder_bt.config.plugins import load_class
 from feeder_bt.core.images import BadInput, read_image
 from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.trees.leaves import leaf_class
 from feeder_bt.vision.locator import Locator
 from feeder_bt.vision.pixels import Calibration
 
@@ -18,7 +18,7 @@ def scenario_locator(path: str, cell: str | None = None
                      ) -> tuple[Scenario, CellSpec, Locator]:
     """The locator the cell would build for this scenario (its ``vision.leaf`` if it has one)."""
     scenario, cell_spec = load_scenario(path, cell)
-    cls = load_class(scenario.vision.leaf) if scenario.vision.leaf else Locator
+    cls = leaf_class(scenario, "vision.leaf") or Locator
     locator = cls(scenario.vision, scenario.parts, Calibration(cell_spec.camera.calibration))
     return scenario, cell_spec, locator
 

@@ -318,11 +318,15 @@ def cmd_check(args: argparse.Namespace) -> int:
     """Each file is read as the kind its keys say. A good file is one line on stdout; a bad
     one is every problem the loader finds in it, one line each on stderr in file order (the
     first says which kind the file was read as), then a count on stdout."""
+    from feeder_bt.config import load_scenario
     from feeder_bt.config.files import check_file
     from feeder_bt.config.schema import describe, file_kind
+    from feeder_bt.trees.leaves import leaf_problems
     bad = found = 0
     for path in args.files:
         kind, told, problems = check_file(path)   # told None: not a mapping of keys
+        if not problems and kind == "scenario":   # its leaf classes, as a run would load them
+            problems = leaf_problems(load_scenario(path)[0])
         if not problems:
             print(f"ok: {path} ({describe(kind)})")
             continue

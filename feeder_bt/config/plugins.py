@@ -28,9 +28,16 @@ def import_near(mod_name: str, base: Path | None = None) -> ModuleType:
         return importlib.import_module(mod_name)
 
 
-def load_class(spec: str, base: Path | None = None) -> type:
+def load_class(spec: str, base: Path | None = None, must_be: type | None = None) -> type:
+    """The class ``package.module:Class`` names; with ``must_be``, only a subclass of it (a
+    leaf class that is not one would fail at its first tick, or earlier, with a traceback)."""
     mod_name, _, cls_name = spec.partition(":")
     try:
-        return getattr(import_near(mod_name, base), cls_name)
+        cls = getattr(import_near(mod_name, base), cls_name)
     except (ImportError, AttributeError) as e:
         raise ConfigError(f"cannot load leaf class {spec!r}: {e}") from None
+    if must_be is not None and not (isinstance(cls, type) and issubclass(cls, must_be)):
+        what = "a class" if isinstance(cls, type) else type(cls).__name__
+        raise ConfigError(f"{spec!r} is {what}, not a {must_be.__name__} (a leaf class must "
+                          f"subclass {must_be.__module__}.{must_be.__name__})")
+    return cls

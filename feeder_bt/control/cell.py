@@ -19,7 +19,6 @@ import py_trees
 from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx, Stats, init_blackboard
-from feeder_bt.config.plugins import load_class
 from feeder_bt.core.clock import Clock
 from feeder_bt.core.encoder import EncoderSync
 from feeder_bt.core.errors import FeederError
@@ -28,6 +27,7 @@ from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
 from feeder_bt.policy.adjusters import AdjustInputs, Speeds, make_adjuster
 from feeder_bt.trees import build_cleanup, build_feeding, build_setup
+from feeder_bt.trees.leaves import leaf_class
 from feeder_bt.vision.locator import Locator
 from feeder_bt.vision.pixels import Calibration
 from feeder_bt.vision.worker import VisionWorker
@@ -230,11 +230,12 @@ class Cell:
         self.stats.pending.clear()
         self.stats.attempts.clear()
         queue = PartsQueue(list(scenario.parts))
-        locator_cls = load_class(scenario.vision.leaf) if scenario.vision.leaf else Locator
+        locator_cls = leaf_class(scenario, "vision.leaf") or Locator
         locator = locator_cls(scenario.vision, scenario.parts,
                               Calibration(self.cell.camera.calibration))
-        adjuster = (load_class(scenario.adjust.leaf)(scenario.adjust.params)
-                    if scenario.adjust.leaf
+        leaf_adjuster = leaf_class(scenario, "adjust.leaf")
+        adjuster = (leaf_adjuster(scenario.adjust.params)
+                    if leaf_adjuster is not None
                     else make_adjuster(scenario.adjust.algorithm, scenario.adjust.params))
         ctx = Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
                   queue=queue, encoder=self.encoder, stats=self.stats,

@@ -20,16 +20,16 @@ from feeder_bt.behaviours.locate import (
     WaitTravel,
 )
 from feeder_bt.behaviours.plate import AskPlate
-from feeder_bt.config.plugins import load_class
 from feeder_bt.trees import plate
 from feeder_bt.trees.branches import link_lost
+from feeder_bt.trees.leaves import leaf_class
 
 KEY = "/locate/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     # a scenario may replace the recipe step with a leaf class of its own (locate.leaf)
-    recipe = load_class(ctx.scenario.locate.leaf) if ctx.scenario.locate.leaf else Recognise
+    recipe = leaf_class(ctx.scenario, "locate.leaf") or Recognise
     if ctx.scenario.present.mode == "continuous" and not plate.is_plate(ctx):
         frame = Sequence("frame", memory=True, children=[
             WaitTravel("wait belt travel", ctx),

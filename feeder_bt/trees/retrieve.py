@@ -27,8 +27,8 @@ from feeder_bt.behaviours.retrieve import (
     Reconcile,
     Recover,
 )
-from feeder_bt.config.plugins import load_class
 from feeder_bt.trees.branches import link_lost
+from feeder_bt.trees.leaves import leaf_class
 
 KEY = "/retrieve/error"
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
@@ -67,7 +67,7 @@ def _failed_pick(ctx: Ctx, name: str, kind: str, counter: str) -> py_trees.behav
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     # a scenario may replace the pick step with a leaf class of its own (retrieve.leaf)
-    pick = load_class(ctx.scenario.retrieve.leaf) if ctx.scenario.retrieve.leaf else Pick
+    pick = leaf_class(ctx.scenario, "retrieve.leaf") or Pick
     pick_and_place = Sequence("pick and place", memory=True, children=[
         FollowRobotSpeed("robot speed", ctx),
         # nothing pending and the gripper empty: go on; else (a reply was lost, the cell
