@@ -10,7 +10,7 @@ import os
 import sys
 from pathlib import Path
 
-from feeder_bt.cli.argtypes import positive
+from feeder_bt.cli.argtypes import expect_kind, positive
 from feeder_bt.core.errors import ConfigError, FeederError
 from feeder_bt.core.vocabulary import story_text
 
@@ -157,23 +157,6 @@ def _check_run_args(args: argparse.Namespace) -> None:
                             (args.supply, "supply", "--supply")):
         if path is not None:
             expect_kind(path, kind, how)
-
-
-def expect_kind(path: str, kind: str, how: str) -> None:
-    """A file given where another kind was expected is named as what it is."""
-    from feeder_bt.config.schema import describe, file_kind
-    found = file_kind(path)
-    if found is None or found == kind:
-        return                    # the loader reports anything else in its own words
-    where = {"scenario": "give it as the first argument of `feeder run`",
-             "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
-             "faults": f"give it with --faults after a scenario "
-                       f"(feeder run SCENARIO --faults {path})",
-             "supply": f"give it with --supply after a scenario "
-                       f"(feeder run SCENARIO --supply {path})"}
-    how = f" ({how})" if how else ""
-    raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
-                      f"{where[found]}", file=path)
 
 
 def cmd_run(args: argparse.Namespace) -> int:

@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from feeder_bt.cli.argtypes import positive
+from feeder_bt.cli.argtypes import expect_kind, positive
 from feeder_bt.cli.commission.adept import commission_adept, pick_window
 from feeder_bt.cli.commission.camera import CAMERA_STEPS, commission_camera
 from feeder_bt.cli.commission.galil import commission_galil
@@ -92,6 +92,7 @@ STEPS = {"galil": commission_galil, "adept": commission_adept, "camera": commiss
 def cmd_commission(args: argparse.Namespace, stdin: TextIO | None = None,
                    out: TextIO | None = None) -> int:
     # without the calibration files: commissioning makes them (the robot frame, the camera)
+    expect_kind(args.cell, "cell", "", "give the cell description it runs on (its `cell:` key names it)")
     cell = load_cell(args.cell, calibration_files=False)
     ask = Asker(load_answers(args.answers), stdin or sys.stdin, out or sys.stdout)
     report = Report(args.what, cell, out or sys.stdout)
