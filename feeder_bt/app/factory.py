@@ -229,5 +229,5 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
         hal.closers.insert(1, plate_emu.stop)
         hal.extras["plate_emulator"] = plate_emu
     hal.extras.update(plant=plant, galil_emulator=galil, adept_emulator=adept)
-    hal.world = plant.world        # for the report's accounting only; the trees never read it
+    hal.truth = plant.world        # for the report's accounting only; the trees never read it
     return hal, clock

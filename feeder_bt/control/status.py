@@ -165,7 +165,7 @@ class CellPanel:
     def _world_count(self, key: str) -> int | None:
         """A count only the simulated world can know (as ``report.parts`` has it); None
         on a real cell."""
-        world = getattr(self.cell.hal, "world", None)
+        world = self.cell.hal.truth
         counts = getattr(world, "counts", None)
         return int(counts[key]) if counts is not None else None
 

@@ -243,6 +243,36 @@ class PlateFeeder(Protocol):
     def status(self) -> PlateStatus: ...
 
 
+class WorldTruth(Protocol):
+    """What only a simulated cell knows: where every part really is and what really
+    happened to it. The run report's accounting, the dashboard's misoriented count and the
+    part server's check of a robot's PLACED read it; the trees never do, and on a real cell
+    there is none (``Hal.truth`` is None). ``feeder_bt.sim.world.World`` is the one."""
+
+    counts: dict[str, int]                 # released, landed, recirculated, misoriented, ...
+    total: int                             # parts that entered the cell
+    problems: list[str]                    # accounting findings, each part named
+    misplaced_by_type: dict[str, int]
+    placed_by_type: dict[str, int]
+    pick_waited_s: float
+    slid_mm: float
+    broken: bool                           # the accounting found a part lost or duplicated
+    robot_model: object                    # the arm as it really moves (robot.scara)
+    passlog: object                        # the record of every part's pass (sim.passlog)
+    horizontal: object                     # the belts' axes (their ``clamped`` counts)
+    incline: object
+    clock: object
+    listeners: list
+
+    def audit(self) -> None: ...
+
+    def lost(self) -> list: ...
+
+    def duplicated(self) -> list: ...
+
+    def census(self) -> dict: ...
+
+
 @dataclass
 class Hal:
     """The whole cell as the trees see it."""
@@ -255,6 +285,9 @@ class Hal:
     kind: str = "sim"
     extras: dict = field(default_factory=dict)
     plate: PlateFeeder | None = None     # a plate cell's feeder (issue 31); None: belts
+    # the simulated world's truth, for the report's accounting and checks only (never the
+    # trees'); None on a real cell
+    truth: WorldTruth | None = None
 
     def step(self, now: float) -> None:
         """Advance anything that runs on the clock (the simulated world) to ``now``."""
