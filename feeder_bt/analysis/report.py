@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from feeder_bt.analysis.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.analysis.run_report import RunReport, check_written
 from feeder_bt.control.cell import Cell
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.model import CellSpec, Scenario
@@ -124,12 +125,14 @@ def _record_since(world: Any, sim_seconds: float) -> float | None:
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
                  feed_seconds: float, wall_seconds: float, interrupted: bool = False,
                  inflow: Inflow | None = None,
-                 inflow_by_type: dict[str, Inflow] | None = None) -> dict[str, Any]:
+                 inflow_by_type: dict[str, Inflow] | None = None) -> RunReport:
+    """The run's report from the cell's statistics, its robot fit and, on the simulated
+    cell, the world's truth (``Hal.truth``)."""
     s = cell.stats
     retrieved = {name: s.retrieved.get(name, 0) for name in (cell.scenario.parts if cell.scenario
                                                             else {})}
     total = sum(retrieved.values())
-    world = getattr(cell.hal, "world", None)
+    world = cell.hal.truth
     if world is not None:
         world.audit()                     # the final check, part by part
     parts: dict[str, Any] = {
@@ -240,7 +243,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                            # commands a belt ran slower than asked (0: the HAL refuses them)
                            "axis_clamped": {"horizontal": world.horizontal.clamped,
                                             "incline": world.incline.clamped}}
-    return report
+    return RunReport.from_json(report)
 
 
 def _no_match(cell: Cell) -> dict[str, Any] | None:
@@ -249,5 +252,8 @@ def _no_match(cell: Cell) -> dict[str, Any] | None:
     return watch.summary() if watch is not None else None
 
 
-def write_report(report: dict[str, Any], path: str | Path) -> None:
-    Path(path).write_text(json.dumps(report, indent=2) + "\n")
+def write_report(report: RunReport | dict[str, Any], path: str | Path) -> None:
+    """The report's JSON to ``path`` (checked against its schema where the tests ask)."""
+    data = report.to_json() if isinstance(report, RunReport) else report
+    check_written(data)
+    Path(path).write_text(json.dumps(data, indent=2) + "\n")

@@ -131,8 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from feeder_bt.config.schema import KINDS
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
-                       "that checks YAML as you type (docs/getting-started.md)")
-    s.add_argument("kind", choices=list(KINDS))
+                       "that checks YAML as you type (docs/getting-started.md), or of "
+                       "the run report (--report), the JSON contract for CI")
+    s.add_argument("kind", choices=[*KINDS, "report"])
     s.add_argument("-o", "--output", help="write to this file instead of standard output")
 
     r.set_defaults(handler=cmd_run)
@@ -339,8 +340,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
+    from feeder_bt.analysis.run_report import report_schema
     from feeder_bt.config.schema import schema
-    text = json.dumps(schema(args.kind), indent=2) + "\n"
+    doc = report_schema() if args.kind == "report" else schema(args.kind)
+    text = json.dumps(doc, indent=2) + "\n"
     if args.output:
         Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)
         Path(args.output).write_text(text)
