@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import summary
 from feeder_bt.config.loader import load_cell
 from feeder_bt.policy.supply_bound import transport_lag_s
 

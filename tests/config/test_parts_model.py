@@ -56,7 +56,7 @@ def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_ar
     """Issue 27, shown 1: the chain-link plate (180° symmetric) placed turned to 0 by its
     long axis: with ``symmetry: 2`` none misoriented; without, about half, and the
     summary line says so."""
-    from feeder_bt.cli.main import summary
+    from feeder_bt.analysis.summary import summary
     report = _run(ROOT / "scenarios" / "chain_links.yaml")
     placed = report["parts"]["retrieved"]["link"]
     assert placed > 50 and report["parts"]["misoriented"] == 0

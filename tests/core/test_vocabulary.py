@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.cli.replay_cmd import faults as replay_faults
 from feeder_bt.core import vocabulary
 from feeder_bt.records.runs_db import series

@@ -146,7 +146,7 @@ def test_a_placed_the_world_did_not_see_is_a_mismatch():
 
 
 def test_the_report_shows_mismatches_and_the_honest_sim_robot_has_none(capsys):
-    from feeder_bt.cli.main import summary
+    from feeder_bt.analysis.summary import summary
     r = run_job(RunOptions(scenario=LENSES, duration=60.0, fast=True, seed=2, view="none",
                            db=None, plant=PlantOptions(part_server="127.0.0.1:0")))
     ps = r["part_server"]

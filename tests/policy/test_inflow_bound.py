@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import summary
 from feeder_bt.policy.supply_bound import ceiling, inflow_bound_parts
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.policy.kits import KitTracker, kit_bounds
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.config.loader import load_scenario
 from feeder_bt.core.errors import ConfigError
 
