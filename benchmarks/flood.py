@@ -1,4 +1,4 @@
-"""Issue 28's figures: idle-connection floods against each listener, and what the rightful
+"""The figures: idle-connection floods against each listener, and what the rightful
 user or robot still gets; JSON out.
 
     python benchmarks/flood.py [--ui 5000] [--parts 1200] [--opcua 1100] [--out PATH]

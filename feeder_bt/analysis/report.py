@@ -150,20 +150,20 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "misplaced": dict(world.misplaced_by_type) if world else None,
         "dropped": s.counts["dropped"],
     }
-    if world is not None:                 # why the simulated grips missed (issue 27)
+    if world is not None:                 # why the simulated grips missed
         parts["grip_misses"] = {k: world.counts[k] for k in (
             "grip_empty", "grip_refused", "grip_slipped", "grip_on_hole", "grip_on_neighbour")}
     if world is not None:                 # every part that entered the cell, and left it
         parts["supplied"] = world.total
         parts["shipped"] = world.counts["shipped"]
-        # wear (issue 30): passes a plant pays for, and parts worn past max_passes
+        # wear: passes a plant pays for, and parts worn past max_passes
         parts["scrapped"] = world.counts["scrapped"]
         parts["recirculated_per_placed"] = (round(world.counts["recirculated"] / total, 3)
                                             if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
     # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
-    # (feeder_bt.robot.scara), or on a real cell the cell's description (issue 30)
+    # (feeder_bt.robot.scara), or on a real cell the cell's description
     arm = world.robot_model if world is not None else None
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario, arm) if cell.scenario
                               else (0.0, 0.0))
@@ -208,7 +208,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
                                      inflow_by_type, sim_seconds, transport_lag_s(cell.cell),
                                      kit_sel)
-    if cell.cell.presentation == "plate":   # the plate's actions (issue 31)
+    if cell.cell.presentation == "plate":   # the plate's actions
         report["plate"] = {k[len("plate_"):]: v for k, v in sorted(s.counts.items())
                            if k.startswith("plate_")}
     counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",

@@ -55,7 +55,7 @@ def _kits_line(report: dict) -> str:
 
 
 def _robots_line(report: dict) -> str:
-    """The part server's distrust (issue 28): PLACED reports the simulated world did not
+    """The part server's distrust: PLACED reports the simulated world did not
     see (not counted as retrieved) and robots cut off; nothing when there was none."""
     ps = report.get("part_server") or {}
     bad = [(ps.get("mismatch", 0), "PLACED the world did not see (not counted)"),

@@ -38,8 +38,8 @@ class Adjust(Leaf):
 
 
 class CheckDrift(Leaf):
-    """Re-checks during the run that the Galil's and the robot's belt counts still agree
-    (issue 15, finding 11): commissioning checks it once, but a counter that loses pulses
+    """Re-checks during the run that the Galil's and the robot's belt counts still agree:
+    commissioning checks it once, but a counter that loses pulses
     later moves every pick by the difference. Reads only cached counts, so it never
     blocks; samples every ``encoder.drift_check_s``. Past ``drift_warn_mm`` it records an
     ``encoder_drift`` event; past ``drift_limit_mm`` it asks the cell to go to FAULT (the

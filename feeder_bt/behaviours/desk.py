@@ -200,7 +200,7 @@ class Desk(TrustRules):
         self.chooser: ServeRobots | None = None
         # is a robot's connection still open? (the TCP server knows; in process: yes)
         self.alive: Callable[[Hashable], bool] = lambda conn: True
-        # trust (issue 28): at most this many parts with one robot and not yet reported;
+        # trust: at most this many parts with one robot and not yet reported;
         # a robot whose parts expire unreported that many times running is cut off
         self.max_outstanding = 4
         self.cut_off_s = CUT_OFF_S

@@ -222,7 +222,7 @@ class ClearForGolden(JobLeaf):
         self.bb = client(self, write=("/present/hold",))
 
     def start(self) -> Job:
-        if self.ctx.hal.plate is not None:          # a plate is emptied by a purge (issue 31)
+        if self.ctx.hal.plate is not None:          # a plate is emptied by a purge
             return self.ctx.hal.plate.purge(10)
         conv = self.ctx.hal.conveyors["horizontal"]
         length = self.ctx.cell.conveyors["horizontal"].length_mm

@@ -1,4 +1,4 @@
-"""Leaves of a vibratory-plate cell (issue 31), where a belt leaf must differ.
+"""Leaves of a vibratory-plate cell, where a belt leaf must differ.
 
 The thesis's incremental mode, with the plate as the presentation sub-system: *locate*
 looks at the settled plate and, when the look found nothing new, asks for a plate action

@@ -33,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                                               "the person's actions on standard input")
     p.add_argument("controller", choices=["galil", "adept", "cell", "plate"],
                    help="galil, adept, or cell (both and the camera over one simulated cell); "
-                        "plate: an AnyFeeder over a simulated plate (issue 31)")
+                        "plate: an AnyFeeder over a simulated plate")
     p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                    help=f"scenario whose parts the simulated cell carries (default {DEFAULT_SCENARIO})")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")

@@ -65,7 +65,7 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
     _check_galil(cell, ctx)
 
 
-# Galil wiring (issue 15; docs/real-cell.md): I/O bits start at 1, the input monitor reports
+# Galil wiring (docs/real-cell.md): I/O bits start at 1, the input monitor reports
 # inputs 1-8, or 1-16 on a card with 16 (``galil.inputs``: TI 1 is only valid on a 5-8 axis
 # card, Galil command reference, TI), and the DMC-21x3 latches each axis from its own input.
 GALIL_MAX_INPUT = 16
@@ -261,7 +261,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         if key.endswith("_mm_s"):
             speed(f"adjust.params.{key}", v,
                   "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
-    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range (issue 16)
+    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range
     limits = {"horizontal": hmax, "incline": imax}
     try:
         envelope = cls(ctx.adjust_params).envelope(pct) if cls is not None else []

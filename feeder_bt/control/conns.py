@@ -1,4 +1,4 @@
-"""Connection limits for every listener (issue 28): the dashboard, ``feeder replay --ui``,
+"""Connection limits for every listener: the dashboard, ``feeder replay --ui``,
 the part server and the OPC UA server all admit TCP connections through a ``ConnGate``.
 
 A peer on the network must not be able to starve the cell by opening connections and

@@ -29,7 +29,7 @@ SIMPLE = {"start": "start", "stop": "stop", "pause": "pause", "resume": "resume"
 COMMANDS = (*SIMPLE, "load", "speeds", "adjust")
 MAX_AUDIT = 1000
 MAX_NUMBER_CHARS = 32          # a speed given as text: longer is refused before conversion
-# Physical floors (issue 28): below them a speed is not a working speed but a stopped
+# Physical floors: below them a speed is not a working speed but a stopped
 # machine (pause the cell instead), and 1e-300 would only hide a mistake. The V+ speed
 # factor is a percentage of full speed, 100 normal (V+ Operating System Reference Guide,
 # SPEED monitor command); its lower bound here is ours: check at commissioning.

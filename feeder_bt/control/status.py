@@ -144,7 +144,7 @@ class CellPanel:
             # parts placed turned or face-down: only a simulated cell can know (its world's
             # count, as in ``feeder report``); None on a real cell
             "misoriented": self._world_count("misoriented"),
-            # parts worn past their max_passes (issue 30): the simulated world's count too
+            # parts worn past their max_passes: the simulated world's count too
             "scrapped": self._world_count("scrapped"),
             # faults (recovered so far) and misses apart: vocabulary.py
             "faults": sum(split(s.faults)[0].values()),

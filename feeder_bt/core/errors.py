@@ -114,7 +114,7 @@ class CardFault(ConveyorFault):
 
 class PlateFault(HalError):
     """A plate feeder's drive reported an error (AnyFeeder: a servo error, an error
-    state, no sync signal); the message carries the manual's words (issue 31)."""
+    state, no sync signal); the message carries the manual's words."""
     kind = "plate"
 
 

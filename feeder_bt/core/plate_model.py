@@ -1,4 +1,4 @@
-"""What a vibratory-plate cell and a plate scenario add to the YAML (issue 31).
+"""What a vibratory-plate cell and a plate scenario add to the YAML.
 
 A cell chooses its presentation kind with ``presentation: plate`` and describes the plate
 (``plate:``); a scenario chooses how the plate is worked (``present.plate:``: smart feeding

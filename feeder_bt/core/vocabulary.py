@@ -1,5 +1,5 @@
 """One vocabulary for what went wrong in a run, used by the terminal summary, `feeder report`,
-its plot, `feeder replay` and the dashboard (issue 29).
+its plot, `feeder replay` and the dashboard.
 
 - a **fault** stops or degrades the cell: a device failed (the robot's servo timed out, a
   controller link dropped, the camera lost a frame, a conveyor stalled, an e-stop) and the

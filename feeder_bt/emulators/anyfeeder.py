@@ -1,4 +1,4 @@
-"""An AnyFeeder emulator over the simulated plate (issue 31): ``feeder emulate plate``.
+"""An AnyFeeder emulator over the simulated plate: ``feeder emulate plate``.
 
 It listens on 127.0.0.1 and passes the feeder's bytes raw, as a serial-to-Ethernet bridge
 in a plant would, so the driver reaches it with ``socket://127.0.0.1:PORT``. As strict as

@@ -6,7 +6,7 @@ tick thread answers it (``ServeRobots`` while feeding, ``Desk.serve_idle`` other
 the answer is handed back to the loop, which writes it. The cell never waits on a robot,
 and a robot that goes away leaves only records that time out (behaviours/serve.py).
 
-Nobody on the network can starve it (issue 28): connections pass a ``ui.conns.ConnGate``
+Nobody on the network can starve it: connections pass a ``ui.conns.ConnGate``
 (a cap per address and in all; when full, the oldest connection that has not said who it
 is makes room), a connection must send its first line within ``header_s`` and is closed
 after ``idle_s`` of silence with nothing asked; the backlog is the system's ceiling.

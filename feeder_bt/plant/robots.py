@@ -1,4 +1,4 @@
-"""Which robots the part server trusts (issue 28; docs/part-server.md, "Robots must be
+"""Which robots the part server trusts (docs/part-server.md, "Robots must be
 trusted").
 
 The robots file (``feeder run --part-server ... --robots FILE``) names each robot and how it

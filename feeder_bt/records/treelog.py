@@ -1,4 +1,4 @@
-"""The trees' history (issue 17): every status change of every node, and the blackboard,
+"""The trees' history: every status change of every node, and the blackboard,
 recorded compactly so that a shift can be rewound (``feeder replay``, the dashboard's
 timeline), as Groot2 does with BehaviorTree.CPP's transition log.
 

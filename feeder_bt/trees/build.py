@@ -68,7 +68,7 @@ def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
         steps.append(InitPlate("home the plate", ctx))
     if vision.backlight:
         steps.append(SetSignal("backlight on", ctx, "backlight", True))
-    if vision.golden_image:         # a plate is cleared by a purge (issue 31)
+    if vision.golden_image:         # a plate is cleared by a purge
         clear = (PurgePlate("clear the plate", ctx) if plate.is_plate(ctx)
                  else ClearWindow("clear the window", ctx))
         steps += [clear, GrabGolden("golden image", ctx)]

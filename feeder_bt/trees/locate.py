@@ -43,7 +43,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             Grab("grab + latch", ctx),
             recipe("recipe", ctx),
             Enqueue("enqueue", ctx),
-            # a plate: the adjuster plans a plate action instead (issue 31)
+            # a plate: the adjuster plans a plate action instead
             AskPlate("plate action if nothing", ctx) if plate.is_plate(ctx)
             else AdvanceIfNothing("advance if nothing", ctx),
         ])

@@ -1,4 +1,4 @@
-"""The branches of a vibratory-plate cell (issue 31) that differ from a belt cell's.
+"""The branches of a vibratory-plate cell that differ from a belt cell's.
 
 *present* serves plate actions instead of belt advances and recovers the plate's drive
 faults: a servo error or error state is reset and the plate homed again, as the AnyFeeder

@@ -19,7 +19,7 @@ KEY = "/present/error"
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
-    if plate.is_plate(ctx):          # a vibratory plate serves plate actions (issue 31)
+    if plate.is_plate(ctx):          # a vibratory plate serves plate actions
         return plate.build_present(ctx)
     if ctx.scenario.present.mode == "continuous":
         work = RunConveyors("run conveyors", ctx)

@@ -1,5 +1,5 @@
-"""The dashboard's belt view (issue 17): the horizontal belt in plan, from the controller's
-own data — never the simulator's. On a plate cell (issue 31) the same view shows the plate
+"""The dashboard's belt view: the horizontal belt in plan, from the controller's
+own data — never the simulator's. On a plate cell the same view shows the plate
 (``geometry["plate"]``) and the parts queued on it, which do not move.
 
 Where the parts are is what the cell believes: each queued part's pose at its latch, moved

@@ -4,7 +4,7 @@ The socket is bound in the caller's thread, so a bad address or a busy port is a
 error before the cell starts. uvicorn's own forwarded-header handling is off: only
 ``access.Gate`` decides whose ``X-Forwarded-*`` headers count (a named proxy's).
 
-Connections (issue 28): uvicorn caps only concurrency in all (``limit_concurrency``, which
+Connections: uvicorn caps only concurrency in all (``limit_concurrency``, which
 idle connections fill too) and closes a connection only after a response
 (``timeout_keep_alive``); a connection that never sends a request is never closed. So its
 HTTP and websocket protocol classes are replaced (``Config(http=..., ws=...)``) by

@@ -7,7 +7,7 @@ publish. Each websocket client has a sender task that always sends the *latest* 
 (updates published while it was busy are coalesced), and a client that cannot take one
 within ``SEND_TIMEOUT_S`` is dropped; the cell never waits on any of this.
 
-Security (docs/operator-ui.md, issues 6 and 19): a request with a Host that is not ours is
+Security (docs/operator-ui.md): a request with a Host that is not ours is
 refused before anything else (``access.Gate``); passwords are checked against the users
 file's scrypt hashes off the loop, and failed logins are slowed per address and browser
 (``guard``) without locking the rightful user out; a session lives in an HTTP-only,
@@ -67,7 +67,7 @@ SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
 MAX_CHECKS = 4                # password checks at once (16 MiB and ~50 ms of a core each)
 STRANGER_CHECKS = 2           # ... of which strangers may hold at most this many: a known
-                              # browser or address always finds a free one (issue 28)
+                              # browser or address always finds a free one
 STATIC = Path(__file__).parent / "static"
 
 class _Client:

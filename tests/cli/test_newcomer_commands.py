@@ -1,4 +1,4 @@
-"""A newcomer's first commands (issue 29): a missing file names the nearest one, Ctrl-C while
+"""A newcomer's first commands: a missing file names the nearest one, Ctrl-C while
 the first imports run ends in one line, the tree glyphs have a legend, and the README's tour
 writes only into the ignored ``out/``."""
 

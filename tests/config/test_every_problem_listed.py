@@ -1,4 +1,4 @@
-"""Every problem of a file is listed, not only the first (issue 17): each on its own line
+"""Every problem of a file is listed, not only the first: each on its own line
 ``FILE:LINE: dotted.key: what``, in file order, for scenarios (with their cell), cells and
 fault plans; ``feeder check`` prints them all and a count, ``feeder run`` prints them all
 and exits 2; at most ``MAX_PROBLEMS`` are shown, then how many more."""

@@ -1,4 +1,4 @@
-"""Supply plans (issue 16): totes and shipping, mix drift, friction, the operator's speed
+"""Supply plans: totes and shipping, mix drift, friction, the operator's speed
 override; accounting by identity with parts arriving and leaving; and the supply bound
 the controller counts, checked against the simulated world's truth. Seeded, virtual time."""
 

@@ -1,4 +1,4 @@
-"""One meaning per word (issue 29): a *fault* stops or degrades the cell, a *miss* is a grab or
+"""One meaning per word: a *fault* stops or degrades the cell, a *miss* is a grab or
 pick the trees retry, an *alarm* is a fault that stopped the cell until the reset. The words
 are defined once (docs/faults.md, as feeder_bt/core/vocabulary.py says), and no doc, CLI or UI
 string uses one in another's meaning; the report, its plot and replay keep them apart."""

@@ -1,4 +1,4 @@
-"""Recovery that knows what it holds (issue 13), robot link: the real driver against the V+
+"""Recovery that knows what it holds, robot link: the real driver against the V+
 emulator, the link cut at each phase of a pick-and-place; after the reconnection
 ``held()`` tells the truth. Also STOP on a timed-out motion, the e-stop input, CR/LF in
 requests and the belt channel's direction."""

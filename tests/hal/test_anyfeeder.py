@@ -1,4 +1,4 @@
-"""The AnyFeeder driver and its emulator (issue 31): the emulator refuses what the manual
+"""The AnyFeeder driver and its emulator: the emulator refuses what the manual
 says the feeder refuses, the driver works a simulated plate through it, and a servo error
 is reported in one line with the manual's words and recovered by reset and init.
 Loopback only; every wait is for a condition, with a generous time-out."""

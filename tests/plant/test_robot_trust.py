@@ -1,4 +1,4 @@
-"""Issue 28: robots must be trusted. A robot proves who it is (a secret from the robots
+"""Robots must be trusted. A robot proves who it is (a secret from the robots
 file, or its address); at most N parts are outstanding per robot; a robot that takes parts
 and never reports them is cut off with a fault for the operator; on the simulated cell a
 PLACED the world did not see is a mismatch, counted and shown; ``--fast`` with

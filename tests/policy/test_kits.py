@@ -1,4 +1,4 @@
-"""Kits (issue 30, thesis 8.2.1.5): the retrieve tree takes the part types the kit being
+"""Kits (thesis 8.2.1.5): the retrieve tree takes the part types the kit being
 built still lacks; a kit advances when a part is placed, never when one is only chosen;
 the report counts kits and bounds them."""
 

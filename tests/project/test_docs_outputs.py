@@ -1,4 +1,4 @@
-"""Docs that cannot go stale (issue 29): every command output quoted in docs/ under an
+"""Docs that cannot go stale: every command output quoted in docs/ under an
 ``<!-- output: ... -->`` marker, and every figure under ``<!-- figure: ... -->``, is what
 the commands print now (`python docs/build.py` rewrites them; `--check` is this test)."""
 
@@ -22,7 +22,7 @@ def test_the_docs_quote_what_they_must():
     assert "recipe suggest scenarios/hex_nuts.yaml" in cmds          # the stale ones of #29
     assert "locate scenarios/brackets_dark.yaml" in cmds
     assert "--faults faults/shift.yaml" in cmds
-    assert "--target acircles --board 7x13" in cmds           # issue 26: real circle grids
+    assert "--target acircles --board 7x13" in cmds           # real circle grids
     assert [png for _, _, png in build.figures()] == ["report-example.png"]
 
 
@@ -36,7 +36,7 @@ def test_every_quoted_output_and_figure_is_current():
 def test_an_edited_quote_fails_and_the_wall_clock_does_not(tmp_path):
     doc = tmp_path / "adding-a-part.md"
     text = (ROOT / "docs/adding-a-part.md").read_text()
-    for old, new, stale in [("finds 4 part(s)", "finds 6 part(s)", True),    # issue 29's
+    for old, new, stale in [("finds 4 part(s)", "finds 6 part(s)", True),    # the docs'
                             (" rejected, ", " rejected, 12.5 ms;", True),
                             (" ms\n", " ms\n", False)]:
         assert old in text

@@ -1,4 +1,4 @@
-"""The world's arm moves like a SCARA (feeder_bt/robot/scara.py, issue 30): times against
+"""The world's arm moves like a SCARA (feeder_bt/robot/scara.py): times against
 hand-computed joint profiles, and the selection-aware robot bounds over a run's record."""
 
 from __future__ import annotations

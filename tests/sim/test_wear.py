@@ -1,4 +1,4 @@
-"""Wear (issue 30): a part type may travel the belt at most ``max_passes`` times; one that
+"""Wear: a part type may travel the belt at most ``max_passes`` times; one that
 falls off the end on its last pass goes to scrap, counted and never lost, and every report
 says how many passes each placed part cost."""
 

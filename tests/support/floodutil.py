@@ -1,4 +1,4 @@
-"""Playing the attacker on loopback (issue 28): many idle TCP connections from many
+"""Playing the attacker on loopback: many idle TCP connections from many
 loopback addresses (127.0.N.x: every 127/8 address is this machine on Linux), opened
 without blocking and held until closed. Shared by tests/ui/test_conn_limits.py and
 benchmarks/flood.py."""

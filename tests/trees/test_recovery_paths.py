@@ -1,4 +1,4 @@
-"""Each recovery path of issue 4, ticked through the fault and the recovery over the mock
+"""Each recovery path of the trees, ticked through the fault and the recovery over the mock
 HAL, asserting the order of the HAL calls."""
 
 from __future__ import annotations
@@ -141,7 +141,7 @@ def test_estop_stops_every_motion_at_once_and_needs_an_operator_reset():
     m = len(rig.hal.calls)
     rig.cell.reset()
     assert rig.cell.state is CellState.STOPPED
-    # the operator's reset is what turns the belt motors back on (issue 15, finding 6)
+    # the operator's reset is what turns the belt motors back on
     assert sorted(rig.hal.methods()[m:]) == ["horizontal.servo", "incline.servo"]
     assert all(args == (True,) for _, meth, args in rig.hal.calls[m:])
     assert rig.cell.stats.recoveries["estop"] == 1

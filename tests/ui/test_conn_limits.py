@@ -1,4 +1,4 @@
-"""Issue 28: nobody on the network can starve the cell by holding connections. Each test
+"""Nobody on the network can starve the cell by holding connections. Each test
 plays the attacker through the public interface on loopback (idle TCP connections from
 many 127.x addresses, ``floodutil.IdleFlood``) and then checks that the rightful user or
 robot still gets through. Waits are event-driven with long bounds. The only durations

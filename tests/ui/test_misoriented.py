@@ -1,4 +1,4 @@
-"""Issue 27: the dashboard shows the parts placed misoriented, beside located / missed.
+"""The dashboard shows the parts placed misoriented, beside located / missed.
 
 Browser-free: the status payload from ``CellPanel.snapshot`` on a simulated cell, and the
 page's template and script that show it.

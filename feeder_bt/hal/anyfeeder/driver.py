@@ -1,4 +1,4 @@
-"""A driver for an AnyFeeder-class plate feeder over its serial line (issue 31).
+"""A driver for an AnyFeeder-class plate feeder over its serial line.
 
 One device worker (a single-thread executor, as the Galil driver keeps one per
 controller) owns the port: each action is written there and its replies read until every

@@ -1,4 +1,4 @@
-"""The start-up sequence and the health poll of the Galil driver (issues 15 and 25), kept
+"""The start-up sequence and the health poll of the Galil driver, kept
 apart from the link handling of ``driver``: which handle we are, ``CF``, ``IH`` clean-up,
 halting only our threads, the safety settings (``ER`` ``TL`` ``TK`` ``OE`` ``CN``), ``SH``
 only as the cell description allows, and the periodic poll that pets the card's watchdog,
