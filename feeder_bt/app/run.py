@@ -218,13 +218,9 @@ def _watch_accounting(cell: Cell) -> Callable[[], bool]:
     return lambda: world.broken
 
 
-def final_speeds() -> dict[str, float | None]:
+def final_speeds(cell: Cell) -> dict[str, float | None]:
     """The speeds the trees followed last (the scenario's, the adjuster's or an operator's)."""
-    import py_trees
-    storage = py_trees.blackboard.Blackboard.storage
-    return {k: (None if storage.get(f"/speeds/{k}") is None
-                else float(storage[f"/speeds/{k}"]))
-            for k in ("horizontal_mm_s", "incline_pct", "robot_speed_pct")}
+    return cell.speeds()
 
 
 def _start_log(log: EventLog, opts: RunOptions, scenario: Scenario, cell: Cell) -> None:
@@ -467,7 +463,7 @@ class _Run:
                               inflow=self.supply.inflow() if self.supply is not None else None,
                               inflow_by_type=(self.supply.inflow_by_type()
                                               if self.supply is not None else None))
-        report.speeds = final_speeds()
+        report.speeds = final_speeds(self.cell)
         if self.injector is not None:
             report.injected = dict(self.injector.injected)
             report.unseen = dict(self.injector.unseen)     # injected, met by nobody

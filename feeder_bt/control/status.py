@@ -151,7 +151,7 @@ class CellPanel:
             "recovered": sum(s.recoveries.values()),
             "misses": sum(split(s.faults)[1].values()),
             "queue": int(f["queue"]),
-            "speeds": blackboard_speeds() if cell.ctx is not None else
+            "speeds": blackboard_speeds(cell) if cell.ctx is not None else
             dict.fromkeys(("horizontal_mm_s", "incline_pct", "robot_speed_pct")),
             "hal": self._hal_speeds(),
             "auto_adjust": bool(cell.auto_adjust),

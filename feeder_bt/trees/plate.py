@@ -15,6 +15,7 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 
 from feeder_bt.behaviours.base import Ctx, Escalate
+from feeder_bt.behaviours.keys import PRESENT
 from feeder_bt.behaviours.plate import (
     ChoosePlateAction,
     InitPlate,
@@ -24,7 +25,7 @@ from feeder_bt.behaviours.plate import (
 )
 from feeder_bt.trees.branches import link_lost, once_a_minute
 
-KEY = "/present/error"
+KEY = PRESENT.ERROR
 
 
 def is_plate(ctx: Ctx) -> bool:

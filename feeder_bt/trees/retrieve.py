@@ -15,6 +15,7 @@ from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
 from feeder_bt.behaviours.base import CountFault, Ctx, ErrorIs, Escalate
+from feeder_bt.behaviours.keys import RETRIEVE
 from feeder_bt.behaviours.retrieve import (
     FailedPicksBelow,
     FollowRobotSpeed,
@@ -30,7 +31,7 @@ from feeder_bt.behaviours.retrieve import (
 from feeder_bt.trees.branches import link_lost
 from feeder_bt.trees.leaves import leaf_class
 
-KEY = "/retrieve/error"
+KEY = RETRIEVE.ERROR
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
 
 

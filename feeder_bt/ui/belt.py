@@ -15,8 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import py_trees
 
+from feeder_bt.behaviours.keys import RETRIEVE
 from feeder_bt.control.cell import Cell
 from feeder_bt.core.parts import Part
 from feeder_bt.vision.pixels import Calibration
@@ -79,8 +79,8 @@ class BeltPanel:
             return p.x_at(count, enc.robot_bits, enc.counts_per_mm)
 
         out["parts"] = [self._part(p, at(p)) for p in ctx.queue.peek_all()[:MAX_PARTS]]
-        store = py_trees.blackboard.Blackboard.storage
-        part, phase = store.get("/retrieve/part"), store.get("/retrieve/phase")
+        board = self.cell.board
+        part, phase = board.get(RETRIEVE.PART), board.get(RETRIEVE.PHASE)
         if isinstance(part, Part) and phase in ("pick", "held", "place"):
             # "pick": still on the belt, the robot tracking it; "held"/"place": gripped
             out["picking"] = {**self._part(part, at(part)), "phase": phase}
