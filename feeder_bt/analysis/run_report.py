@@ -133,6 +133,7 @@ class RunReport:
     supply: dict[str, Any] = _absent()
     operator: dict[str, Any] = _absent()     # the dashboard's operators (--ui)
     part_server: dict[str, Any] = _absent()  # robots served (--part-server)
+    opcua: dict[str, Any] = _absent()        # the OPC UA server's clients (--opcua)
 
     def to_json(self) -> dict[str, Any]:
         """The report as written: every key it has, in order, none it does not."""

@@ -18,14 +18,15 @@ def test_nothing_names_the_tracker_by_number():
                            check=True).stdout.split()
     found = []
     for name in files:
-        if not name.endswith(TEXT) or name.startswith("benchmarks/results/"):
+        if (not name.endswith(TEXT) or name.startswith("benchmarks/results/")
+                or name == "tests/project/test_words_not_numbers.py"):
             continue
         path = ROOT / name
         if not path.is_file():
             continue
         for i, line in enumerate(path.read_text(encoding="utf-8", errors="replace")
                                  .splitlines(), 1):
-            if TRACKER.search(line) and "TRACKER = re.compile" not in line:
+            if TRACKER.search(line):
                 found.append(f"{name}:{i}: {line.strip()[:100]}")
     assert found == []
 
