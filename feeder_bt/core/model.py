@@ -452,7 +452,9 @@ class AdeptSpec:
     notify_port: int = 1404
     timeout_s: float = 5.0               # connect/reply time-out for short commands
     motion_timeout_s: float = 20.0       # longest a pick/place/move may take
-    recover_power_on: bool = False       # may RECOVER turn arm power on (else: the operator)
+    # may RECOVER turn arm power on after a servo fault (else: the operator); never after
+    # an e-stop or a guard took it (PowerOff: always a person)
+    recover_power_on: bool = False
     belt_direction: str = "forward"      # the robot's belt channel counts: forward | reverse
     poll_hz: float = 50.0                # position poller rate (POLL: pose and belt count)
 
