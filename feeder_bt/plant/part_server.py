@@ -6,9 +6,11 @@ tick thread answers it (``ServeRobots`` while feeding, ``Desk.serve_idle`` other
 the answer is handed back to the loop, which writes it. The cell never waits on a robot,
 and a robot that goes away leaves only records that time out (behaviours/serve.py).
 
-Nobody on the network can starve it (issue 28): connections pass a ``ui.conns.ConnGate``
-(a cap per address and in all; when full, the oldest connection that has not said who it
-is makes room), a connection must send its first line within ``header_s`` and is closed
+Nobody on the network can starve it: connections pass a ``control.conns.ConnGate`` (a cap
+per address and in all; over either, the oldest connection that has not said who it is
+makes room; a robot that proved who it is moves into the gate's reserve, outside the
+caps, and when every capped connection is busy a newcomer is let in on trial and closed
+unless its first line proves it a robot), a connection must send its first line within ``header_s`` and is closed
 after ``idle_s`` of silence with nothing asked; the backlog is the system's ceiling.
 Robots must be trusted (``robots.RobotTrust``): a robot named in the robots file proves
 who it is (``HELLO NAME SECRET``, or its address); without a robots file only loopback
@@ -38,7 +40,7 @@ from feeder_bt.trees.desk import build_serving, build_serving_cleanup, build_ser
 DEFAULT_PORT = 7600
 SWEEP_S = 1.0              # how often idle connections are looked for
 IN_FLIGHT = 8              # requests a connection may have waiting; then it is not read
-LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0)
+LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0, reserve=32)
 FREE = ("HELP", "QUIT")    # what a robot may ask before it has said who it is
 
 
@@ -101,6 +103,7 @@ class _Conn(asyncio.Protocol):
             r = srv.trust.by_address(ip)
             if r is not None:
                 self._become(r.name)
+                srv.gate.vouch(transport, lambda: True)
         elif _loopback(ip):
             self.robot = ""                # anonymous: this machine, this connection
         srv.conns.add(self)
@@ -155,8 +158,17 @@ class _Conn(asyncio.Protocol):
         self.lines += 1
         words = line.split()
         cmd = words[0].upper() if words else ""
+        if self.transport is not None and self.srv.gate.on_trial(self.transport) \
+                and cmd != "HELLO":
+            self.srv.gate.note("closed: a connection on trial that did not say HELLO")
+            self.close("ERR the part server is busy: say HELLO first, or try again")
+            return
         if cmd == "HELLO":
             self._reply_now(self._hello(words))
+            if self.transport is not None and self.srv.gate.on_trial(self.transport):
+                self.srv.gate.note("closed: a connection on trial that did not prove "
+                                   "who it is")
+                self.close()
             return
         if self.robot is None and cmd not in FREE:
             self.srv.gate.note("refused: a request before HELLO")
@@ -196,6 +208,8 @@ class _Conn(asyncio.Protocol):
         if srv.cut_off(r.name):
             return f"ERR robot {r.name} is cut off: parts handed to it were never reported"
         self._become(r.name)
+        if self.transport is not None:
+            srv.gate.vouch(self.transport, lambda: True)   # a robot's: the reserve's
         return f"OK HELLO {r.name}"
 
     def _reply_now(self, text: str) -> None:
