@@ -90,11 +90,13 @@ class PlantAdapters:
         else:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
-            if self.trust.robots:            # it says who it is, like any robot
-                link.send(f"HELLO sim-robot {self.trust.add_runtime('sim-robot')}")
-                reply = link.receive(timeout=10.0)
-                if reply is None or not reply.startswith("OK HELLO"):
-                    raise FeederError(f"the simulated robot was refused: {reply}")
+            client = PartClient(link)
+            if self.trust.robots:            # it proves who it is, like any robot
+                try:
+                    client.hello("sim-robot", self.trust.add_runtime("sim-robot"))
+                except FeederError as e:
+                    raise FeederError(f"the simulated robot was refused: {e}") from None
+            return SimRobotProgram(client, cell.hal.robot, cell.scenario, cell.clock)
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
 
     trust = None

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import secrets
 import sys
 import time
 from collections.abc import Awaitable, Callable
@@ -192,6 +193,20 @@ class UiApp:
         if gone is not None:
             self.record("control_released", gone.user,
                         why=f"no page open for {self.control.grace_s:g} s")
+
+    def keeper(self, scope: dict[str, Any]) -> Callable[[], bool] | None:
+        """For the connection gate: if this request or websocket is the session that
+        holds control's, the test that it still does (its connection is then kept in
+        the gate's reserve, never displaced by others' connections); else None. Runs on
+        the loop before the app, so it must be cheap: a cookie and a comparison."""
+        holder = self.control.holder
+        if holder is None:
+            return None
+        token = HTTPConnection(scope).cookies.get(COOKIE) or ""
+        if not secrets.compare_digest(token.encode(), holder.token.encode()):
+            return None
+        return lambda: (self.control.holder is not None
+                        and self.control.holder.token == token)
 
     def session_of(self, conn: HTTPConnection) -> Session | None:
         """The caller's live session (this request counts as use), or None."""
