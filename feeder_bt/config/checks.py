@@ -45,6 +45,12 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         elif p.trigger == "Software":
             ctx.add_problem("camera.pylon.trigger_signal",
                             "pulses a line: set camera.pylon.trigger to Line1 (or Line2, Line3)")
+    if p.trigger == "Software":
+        for key, what in (("line_debouncer_us", "filters the trigger line"),
+                          ("trigger_delay_us", "delays a line trigger, never a software one")):
+            if getattr(p, key) is not None:
+                ctx.add_problem(f"camera.pylon.{key}", f"{what}: set camera.pylon.trigger "
+                                                       "to Line1 (or Line2, Line3)")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
         ctx.add_problem("encoder.robot_start", f"must be < 2**robot_bits "

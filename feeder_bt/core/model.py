@@ -312,7 +312,8 @@ class TargetSpec:
 @dataclass
 class PylonSpec:
     """A GenICam camera through Basler's pylon (``camera.source: pylon:SERIAL``), set with
-    the GenICam standard feature names (docs/real-cell.md, "An industrial camera"). The
+    the GenICam standard feature names, SFNC 2 or the older SFNC 1 ones, whichever the
+    camera offers (docs/real-cell.md, "An industrial camera"). The
     exposure is ``camera.exposure_ms`` (ExposureTime), the size ``width_px`` x ``height_px``."""
 
     trigger: str = "Software"            # TriggerSource of FrameStart: Software | Line1
@@ -326,6 +327,14 @@ class PylonSpec:
     # frames need the NIC's MTU to match) and GevSCPD, the inter-packet delay in ticks
     packet_size: int | None = None
     inter_packet_delay: int | None = None
+    # a line trigger only (Line1..3): the edge that starts a frame (TriggerActivation; it
+    # must be the edge the Galil latches, opto-coupler inversion included), the line's
+    # debouncer (LineDebouncerTime, SFNC 1 LineDebouncerTimeAbs) and the FrameStart
+    # trigger delay (TriggerDelay, SFNC 1 TriggerDelayAbs), both in microseconds and left
+    # as the camera has them when None; both delay the exposure after the latched pulse
+    trigger_activation: str = "RisingEdge"
+    line_debouncer_us: float | None = None
+    trigger_delay_us: float | None = None
     # an emulated camera only (PYLON_CAMEMU): a folder of images it serves in name order
     # (ImageFilename, ImageFileMode On), relative to the cell file; recorded frames or a
     # rendered target through the vendor SDK without a camera

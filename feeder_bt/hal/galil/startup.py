@@ -159,7 +159,7 @@ class CardSetup:
         if self._has_notifier:
             step = max(1, round(self.spec.notify_mm * self.cpm))
             self._ask_on(conn, f"DSTEP={step}")
-            self._ask_on(conn, f"~a={AXES.index(self.spec.latch_axis.upper())}")
+            self._ask_on(conn, f"DAXIS={AXES.index(self.spec.latch_axis.upper())}")
         if self._has_watchdog:
             self._ask_on(conn, f"WDMS={round(self.spec.watchdog_s * 1000)}")
             self._ask_on(conn, f"WDAXES={sum(1 << AXES.index(a) for a in self.servo_axes)}")
