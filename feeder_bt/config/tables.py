@@ -38,7 +38,12 @@ from feeder_bt.core.model import (
     Threshold,
     VisionRecipe,
 )
-from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.core.plate_model import (
+    PlatePolicy,
+    PlateRepetitions,
+    PlateSpec,
+    PlateSpeeds,
+)
 
 # ============================================================================ allowed values
 
@@ -286,6 +291,15 @@ RANGES[(PlatePolicy, "purge_reps")] = Range(1, 127)     # Table 3-2: purge 1...1
 for _f in ("feed_mm_per_rep", "rep_s", "dispense_per_rep", "purge_mm_per_rep", "timeout_s"):
     RANGES[(PlateSpec, _f)] = POSITIVE
 RANGES[(PlateSpec, "flip_prob")] = Range(0, 1)
+for _f in ("quiet_s", "echo_probe_s"):
+    RANGES[(PlateSpec, _f)] = POSITIVE
+for _f in ("feed_forward", "feed_backward", "flip_forward", "flip_backward", "flip",
+           "dispense", "purge"):
+    RANGES[(PlateSpeeds, _f)] = Range(1, 10)            # Table 3-2: [speed]
+for _f in ("feed_forward", "feed_backward", "flip_forward", "flip_backward", "flip",
+           "dispense", "heavy_dispense"):
+    RANGES[(PlateRepetitions, _f)] = Range(1, 10)       # Table 3-2: [turns]
+RANGES[(PlateRepetitions, "purge")] = Range(1, 127)
 
 #: Ordering constraints between adjuster parameters: (algorithm, smaller, larger, strict).
 ADJUST_ORDER: tuple[tuple[str, str, str, bool], ...] = (
