@@ -174,10 +174,11 @@ class AnyFeeder:
               after: Callable[[], None] | None = None) -> Job:
         line = command_line(number, value)
 
-        def run(cancel: threading.Event) -> None:
-            self._exchange(name, line, duration, cancel)
+        def run(cancel: threading.Event) -> list[str]:
+            codes = self._exchange(name, line, duration, cancel)
             if after is not None:
                 after()
+            return codes                      # the job's result: the motor codes seen
         return self._job(name, run)
 
     def _job(self, name: str, fn: Callable[[threading.Event], Any]) -> Job:
