@@ -146,7 +146,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
         wire_line_trigger(cell, camera.source, io)
         plate = None
-        if cell.presentation == "plate":    # an AnyFeeder on its serial line (issue 31)
+        if cell.presentation == "plate":    # an AnyFeeder on its serial line
             from feeder_bt.hal.anyfeeder.driver import AnyFeeder
             plate = AnyFeeder(cell.plate, clock)
             closers.append(plate.close)
@@ -162,7 +162,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
 
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
-    if kind == "sim" and cell.presentation == "plate":      # issue 31
+    if kind == "sim" and cell.presentation == "plate":
         from feeder_bt.sim.plate import make_plate_sim_hal
         clock = SimClock()
         return make_plate_sim_hal(scenario, cell, clock, seed), clock

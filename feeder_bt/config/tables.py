@@ -282,7 +282,7 @@ ADJUST_PARAMS: dict[str, dict[str, Range]] = {
 }
 ADJUST_ALGORITHMS: tuple[str, ...] = tuple(ADJUST_PARAMS)
 ENUMS[(AdjustParams, "algorithm")] = ADJUST_ALGORITHMS
-# a vibratory-plate cell (issue 31, scenario/plate_model.py)
+# a vibratory-plate cell (core/plate_model.py)
 ENUMS[(CellSpec, "presentation")] = ("belt", "plate")
 ENUMS[(PlatePolicy, "policy")] = ("smart", "fixed")
 for _f in ("feed_reps", "flip_reps", "dispense_reps"):
