@@ -183,8 +183,9 @@ def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[
 
 
 def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
-                   faults=None) -> tuple[Hal, Clock]:
-    """Emulators on loopback over the simulated cell in real time, and the real drivers."""
+                   faults=None, plate_options: dict | None = None) -> tuple[Hal, Clock]:
+    """Emulators on loopback over the simulated cell in real time, and the real drivers;
+    ``plate_options`` go to the AnyFeeder emulator (echo, motor gap, a late code)."""
     from feeder_bt.emulators.adept import AdeptEmulator
     from feeder_bt.emulators.camera import PlantCameraSource
     from feeder_bt.emulators.galil.emulator import GalilEmulator
@@ -197,7 +198,7 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     plate_emu = None
     if cell.presentation == "plate":        # the AnyFeeder emulator over the plate
         from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
-        plate_emu = AnyFeederEmulator(plant, faults=faults).start()
+        plate_emu = AnyFeederEmulator(plant, faults=faults, **(plate_options or {})).start()
         cell = dataclasses.replace(cell, plate=dataclasses.replace(
             cell.plate, url=f"socket://127.0.0.1:{plate_emu.port}"))
     wired = dataclasses.replace(
