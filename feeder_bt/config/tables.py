@@ -61,6 +61,9 @@ IO_DIRS: tuple[str, ...] = ("in", "out")
 #: mono formats a frame is converted from (GenICam SFNC names)
 PYLON_TRIGGERS: tuple[str, ...] = ("Software", "Line1", "Line2", "Line3")
 PYLON_PIXEL_FORMATS: tuple[str, ...] = ("Mono8", "Mono10", "Mono12", "Mono16")
+#: the FrameStart edges that give one frame per pulse (AnyEdge would give two, the Level
+#: modes a frame for as long as the line is held)
+PYLON_TRIGGER_ACTIVATIONS: tuple[str, ...] = ("RisingEdge", "FallingEdge")
 
 #: Shape kinds and the ``Shape`` fields each one is written with (all required).
 SHAPE_KINDS: dict[str, tuple[str, ...]] = {
@@ -125,6 +128,7 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (GalilSpec, "free_handles"): ("ours", "others", "none"),
     (PylonSpec, "trigger"): PYLON_TRIGGERS,
     (PylonSpec, "pixel_format"): PYLON_PIXEL_FORMATS,
+    (PylonSpec, "trigger_activation"): PYLON_TRIGGER_ACTIVATIONS,
 }
 
 #: Numeric fields: (dataclass, field) -> allowed interval. Cross-file limits (conveyor
@@ -184,6 +188,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (PylonSpec, "frame_timeout_s"): Range(0.01, 60),
     (PylonSpec, "packet_size"): Range(220, 16404),        # GevSCPSPacketSize, bytes
     (PylonSpec, "inter_packet_delay"): NON_NEGATIVE,      # GevSCPD, ticks
+    (PylonSpec, "line_debouncer_us"): Range(0, 1_000_000),  # Basler: 0 to about 1 s
+    (PylonSpec, "trigger_delay_us"): Range(0, 10_000_000),  # Basler ace: 0 to 10 s
     (CameraCalibration, "mm_per_px"): POSITIVE,
     (TargetSpec, "max_rms_px"): POSITIVE,
     (TargetSpec, "max_belt_mm"): POSITIVE,
