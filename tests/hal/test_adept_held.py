@@ -185,6 +185,7 @@ def test_a_stop_that_resets_itself_never_gets_arm_power_back_from_software(rig):
     try:
         for _ in range(2):                                    # pressed and reset, twice
             plant.set_signal("estop", True)
+            assert emu.estop_active()                         # the e-stop chain drops power
             job = wait_job(ctrl.robot.move_safe())
             assert isinstance(job.error, PowerOff) and job.error.code == -9007
             plant.set_signal("estop", False)                  # it resets itself
