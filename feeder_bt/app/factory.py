@@ -14,7 +14,7 @@ from pathlib import Path
 from feeder_bt.core.clock import Clock, RealClock, SimClock
 from feeder_bt.core.errors import ConfigError, HalError
 from feeder_bt.core.jobs import DoneJob, Job
-from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.model import CellSpec, Scenario, belt_window
 from feeder_bt.hal.interfaces import Hal, IoChange
 
 HAL_KINDS = ("sim", "emulated", "real")
@@ -135,7 +135,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         adept = AdeptController(cell.adept, clock, inputs=[
             s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"],
             robot=cell.robot, estop=adept_estop(cell),
-            counts_per_mm=cell.encoder.counts_per_mm)
+            counts_per_mm=cell.encoder.counts_per_mm, window=belt_window(cell))
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")

@@ -28,6 +28,7 @@ from feeder_bt.behaviours.base import Ctx
 from feeder_bt.behaviours.keys import SPEEDS
 from feeder_bt.behaviours.retrieve import NextPart, count_retrieved
 from feeder_bt.core.clock import Clock
+from feeder_bt.core.model import belt_window
 from feeder_bt.core.part_protocol import (
     USAGE,
     Offer,
@@ -527,7 +528,8 @@ class ServeRobots(NextPart):
         y = part.y_mm + oy
         if abs(y - by) >= sp.reach_mm:
             return math.inf
-        x_enter = bx - math.sqrt(sp.reach_mm ** 2 - (y - by) ** 2)
+        x_enter = max(bx - math.sqrt(sp.reach_mm ** 2 - (y - by) ** 2),
+                      belt_window(self.ctx.cell)[0])
         x = self.x_now(part) + ox
         if x >= x_enter:
             return 0.0
