@@ -13,6 +13,7 @@ from feeder_bt.analysis.run_report import RunReport, check_written
 from feeder_bt.control.cell import Cell
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.outputs import write_or_fallback
 from feeder_bt.core.vocabulary import split
 from feeder_bt.policy.kits import KitTracker, kits_report
 from feeder_bt.policy.supply_bound import (
@@ -252,8 +253,15 @@ def _no_match(cell: Cell) -> dict[str, Any] | None:
     return watch.summary() if watch is not None else None
 
 
-def write_report(report: RunReport | dict[str, Any], path: str | Path) -> None:
-    """The report's JSON to ``path`` (checked against its schema where the tests ask)."""
+def write_report(report: RunReport | dict[str, Any], path: str | Path,
+                 fallback_dir: str | Path | None = None) -> Path:
+    """The report's JSON to ``path`` (checked against its schema where the tests ask);
+    with ``fallback_dir``, a report that cannot be written there goes to a file in it,
+    named on standard error (``core.outputs.write_or_fallback``). Returns where it went."""
     data = report.to_json() if isinstance(report, RunReport) else report
     check_written(data)
-    Path(path).write_text(json.dumps(data, indent=2) + "\n")
+    text = json.dumps(data, indent=2) + "\n"
+    if fallback_dir is None:
+        Path(path).write_text(text)
+        return Path(path)
+    return write_or_fallback(path, text, "run report", fallback_dir)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from feeder_bt.analysis.summary import summary
 from feeder_bt.cli.argtypes import expect_kind, positive
-from feeder_bt.core.errors import ConfigError, FeederError
+from feeder_bt.core.errors import ConfigError, FeederError, UsageError
 
 # feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
@@ -23,11 +23,6 @@ TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emul
 #: the world or the trees, never the operator's doing): docs/faults.md
 EXIT_ACCOUNTING = 4
 
-
-class UsageError(FeederError):
-    """A command-line mistake found after parsing (options that do not go together)."""
-
-    exit_code = 2
 
 
 class _Parser(argparse.ArgumentParser):
