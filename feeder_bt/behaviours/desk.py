@@ -508,8 +508,7 @@ class ServeRobots(NextPart):
         quiet = now - desk.last_request
         if desk.idle_told and (quiet < ROBOT_IDLE_S or desk.queues):
             desk.idle_told = False
-            stats.recoveries["robot_idle"] += 1
-            stats.emit(now, "recovered", kind="robot_idle", attempts=0)
+            stats.recovered(now, "robot_idle")
         elif not desk.idle_told and quiet >= ROBOT_IDLE_S and len(self.ctx.queue) \
                 and not desk.queues and not desk.handed:
             desk.idle_told = True
