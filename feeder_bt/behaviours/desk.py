@@ -26,6 +26,7 @@ from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx
 from feeder_bt.behaviours.keys import SPEEDS
+from feeder_bt.behaviours.policies import gone_by
 from feeder_bt.behaviours.retrieve import NextPart, count_retrieved
 from feeder_bt.core.clock import Clock
 from feeder_bt.core.model import belt_window
@@ -544,7 +545,7 @@ class ServeRobots(NextPart):
         self.v_mm_s = self.policy.belt_mm_s = float(self.bb.get(SPEEDS.HORIZONTAL))
         self.policy.robot_pct = float(self.bb.get(SPEEDS.ROBOT))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
-        gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
+        gone = queue.take(gone_by(self.ctx, self.x_now, lead))
         if gone:
             self.ctx.stats.count("too_far", len(gone))
         wanted = None if ptype is None else {ptype}

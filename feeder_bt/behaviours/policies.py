@@ -23,6 +23,20 @@ from feeder_bt.robot.fit import pricing_model
 XNow = Callable[[Part], float]
 
 
+def gone_by(ctx: Ctx, x_now: XNow, lead_mm: float) -> Callable[[Part], bool]:
+    """Which queued parts no pick can have any more: past ``too_far`` by the time a pick
+    would grip them (``lead_mm`` of belt on), or, tracking, already past the controller's
+    pick limit (``core.model.belt_window``), where it refuses to start the pick."""
+    r = ctx.scenario.retrieve
+    pick_limit = belt_window(ctx.cell)[2] if r.tracking else math.inf
+    parts = ctx.scenario.parts
+
+    def gone(p: Part) -> bool:
+        x = x_now(p)
+        return x + lead_mm > r.too_far_mm or x + parts[p.type].tool_offset[0] > pick_limit
+    return gone
+
+
 class Policy:
     """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
 

@@ -383,7 +383,8 @@ class RobotSpec:
     touch_points_mm: list[tuple[float, float]] = field(default_factory=list)
     # the belt window (belt-frame x, mm): where the arm may track the belt, and past which no
     # pick starts; sent to the robot controller at connect (V+ WINDOW), taught with the tool
-    # at commissioning. Unset: ``belt_window`` derives them from the reach over the belt.
+    # at commissioning. Unset: ``belt_window`` derives them from the reach over the belt
+    # (the pick limit: the downstream limit).
     belt_window_mm: tuple[float, float] | None = None
     pick_limit_mm: float | None = None
     # controller time per pick and per place before the arm moves: command round trips,
@@ -538,10 +539,6 @@ class CellSpec:
     plate: PlateSpec = field(default_factory=PlateSpec)
 
 
-PICK_MARGIN_MM = 60.0     # vplus/a_server.v2 pick.margin: the default pick limit's distance
-                          # short of the window's downstream limit
-
-
 def reach_over_belt(cell: CellSpec) -> tuple[float, float]:
     """The stretch of the horizontal belt (belt-frame x, mm) some point of which, across its
     width, is inside the arm's reach: the widest belt window the arm can work."""
@@ -557,9 +554,10 @@ def reach_over_belt(cell: CellSpec) -> tuple[float, float]:
 
 def belt_window(cell: CellSpec) -> tuple[float, float, float]:
     """(upstream, downstream, pick limit), belt-frame x in mm: the cell description's
-    ``robot.belt_window_mm`` and ``robot.pick_limit_mm``, else the reach over the belt and a
-    pick limit ``PICK_MARGIN_MM`` short of its end (what V+ holds by default)."""
+    ``robot.belt_window_mm`` and ``robot.pick_limit_mm``, else the reach over the belt, and
+    the downstream limit as the pick limit (a part that would leave the window before its
+    grip fails there, on the controller as in the simulator)."""
     r = cell.robot
     up, down = r.belt_window_mm if r.belt_window_mm is not None else reach_over_belt(cell)
-    pick = r.pick_limit_mm if r.pick_limit_mm is not None else down - PICK_MARGIN_MM
+    pick = r.pick_limit_mm if r.pick_limit_mm is not None else down
     return float(up), float(down), float(pick)

@@ -195,7 +195,7 @@ def test_commission_adept_fits_the_true_robot_base(tmp_path):
     steps = _steps(report)
     assert code == 0, out
     assert steps["adept.window"]["ok"] and steps["adept.window"]["sent"]
-    assert steps["adept.window"]["taught_mm"] == pytest.approx([785.0, 1219.0, 1159.0], abs=0.5)
+    assert steps["adept.window"]["taught_mm"] == pytest.approx([785.0, 1219.0, 1219.0], abs=0.5)
     fit = steps["adept.frame"]
     assert fit["base_mm"] == pytest.approx([1375.0, 302.0], abs=0.5)
     assert fit["base_deg"] == pytest.approx(2.0, abs=0.1)

@@ -66,7 +66,7 @@ def test_a_taught_window_inside_the_reach_is_sent_with_its_cell_file_lines():
     found, sent, prompts = _teach([(800.0, 305.0), (1200.0, 305.0), (1140.0, 200.0)])
     assert "upstream limit" in prompts and "x 770.0" in prompts      # the cell file's
     assert found["ok"] and found["taught_mm"] == [800.0, 1200.0, 1140.0]
-    assert found["change_mm"] == [30.0, -19.0, -19.0]
+    assert found["change_mm"] == [30.0, -19.0, -79.0]
     assert sent == [("WINDOW", 800.0, 1200.0, 1140.0)]
     assert found["cell_file_lines"] == ["robot.belt_window_mm: [800, 1200]",
                                         "robot.pick_limit_mm: 1140"]

@@ -35,7 +35,7 @@ from tests.hal.test_adept_driver import (
 
 # the base 70 mm further upstream than the simulated cell's, so that 700 mm is in reach
 ROBOT = {"base_mm": (1300.0, 305.0), "safe_mm": (1300.0, -150.0),
-         "belt_window_mm": (700.0, 1150.0)}
+         "belt_window_mm": (700.0, 1150.0), "pick_limit_mm": 1090.0}
 DOWN = 1150.0
 
 
