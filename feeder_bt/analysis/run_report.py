@@ -129,6 +129,7 @@ class RunReport:
     injected: dict[str, int] = _absent()     # a fault plan's faults, injected
     unseen: dict[str, int] = _absent()       # injected, met by nobody
     watchdog_stops: int = _absent()
+    reconnects: dict[str, int] = _absent()   # the drivers' links, per controller
     fault_plan: str = _absent()
     supply: dict[str, Any] = _absent()
     operator: dict[str, Any] = _absent()     # the dashboard's operators (--ui)

@@ -472,6 +472,12 @@ class _Run:
             report.unseen = dict(self.injector.unseen)     # injected, met by nobody
             report.watchdog_stops = self.injector.watchdog_stops   # #WDOG outages
             report.fault_plan = str(opts.faults)
+        links = getattr(self.hal, "links", None)      # the drivers' links (not the sim's)
+        if links is not None:
+            seen = links()
+            report.reconnects = seen["reconnects"]
+            if "watchdog_stops" in seen:
+                report.watchdog_stops = seen["watchdog_stops"]
         if self.supply is not None:
             report.supply = self.supply.report()
         if self.ui:

@@ -133,3 +133,11 @@ def test_a_run_with_only_misses_had_no_fault_and_says_so(tmp_path, capsys):
     err = capsys.readouterr().err
     n = sum(r["misses"].values())
     assert "had no fault" in err and (n == 0 or f"({n} miss" in err), err
+
+
+def test_the_story_names_the_links_that_reconnected():
+    report = {"faults": {"comms_lost": 2}, "recoveries": {"comms_lost": 2},
+              "watchdog_stops": 1, "reconnects": {"galil": 2, "adept": 0}}
+    line = vocabulary.story(report)[0]
+    assert "watchdog stopped the belts 1 times" in line
+    assert line.endswith("links reconnected: galil 2") and "adept" not in line

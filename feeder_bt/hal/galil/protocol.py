@@ -472,3 +472,13 @@ def read_programs(directory: Path, names: Sequence[str]) -> list[ProgramLine]:
 def download_payload(lines: Sequence[ProgramLine]) -> bytes:
     """The bytes after ``DL<CR>``: every line with CR, then the ``\\`` terminator."""
     return "".join(pl.text + "\r" for pl in lines).encode("ascii") + b"\\"
+
+
+# _SC, the axis's stop code (Galil command reference, SC)
+STOP_CODES = {0: "running", 1: "stopped at the commanded position", 2: "forward limit switch",
+              3: "reverse limit switch", 4: "ST command", 6: "abort input (e-stop chain)",
+              7: "abort command", 8: "off-on-error (position error over ER)"}
+
+
+def stop_text(code: int) -> str:
+    return STOP_CODES.get(code, f"stop code {code}")
