@@ -69,14 +69,23 @@ class LinkProxy:
             threading.Thread(target=self._pump, args=(client, device), daemon=True).start()
 
     def _pump(self, client: socket.socket, device: socket.socket | None) -> None:
+        """Forward both ways. A close at one end reaches the other only while the cable is
+        in: through a pulled cable no FIN passes, the far end stays open (half-open)."""
         ends = [client] if device is None else [client, device]
         try:
-            while not self._stop.is_set():
+            while not self._stop.is_set() and ends:
                 ready, _, _ = select.select(ends, [], [], 0.05)
                 for s in ready:
-                    data = s.recv(65536)
+                    try:
+                        data = s.recv(65536)
+                    except OSError:
+                        data = b""
                     if not data:
-                        raise OSError("closed")
+                        if self.mode == "pass":
+                            raise OSError("closed")
+                        ends.remove(s)             # only this end goes
+                        _close(s)
+                        continue
                     if self.mode != "pass" or device is None:
                         continue                   # the cable is out: the bytes are lost
                     (device if s is client else client).sendall(data)

@@ -13,6 +13,9 @@ from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.adept.client import LineSocket, ServerClient
 from feeder_bt.hal.adept.robot import AdeptIO, AdeptRobot, AdeptRobotPosition
 
+HEARTBEAT_S = 1.0      # the motion socket's keep-alive; the V+ server drops a client
+                       # silent for link.idle (5 s, vplus/a_server.v2)
+
 
 class AdeptController:
     """Connect to the V+ servers, check each is the server it should be, and start the
@@ -66,6 +69,8 @@ class AdeptController:
             raise
         self.position.start()
         self.io.start()
+        # the motion socket is idle between picks: a heartbeat finds a dead link in seconds
+        self.clients["motion"].keep_alive("HOLDING", HEARTBEAT_S)
 
     def _hello(self, name: str, client: ServerClient, timeout: float | None = None) -> None:
         version, server = protocol.decode_hello(client.call("HELLO", timeout=timeout))
