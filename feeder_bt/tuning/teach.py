@@ -11,8 +11,8 @@ From sample images and what is in them (``tuning.labels``) it learns, in this or
    the features that keep classes apart: area always, a shape feature that shuts out
    touching pairs, and for every pair of classes whose boxes would overlap the feature
    whose sample ranges are furthest apart; a pair that no feature separates is an error
-   naming both classes. Where two classes are apart on a feature, each widened range
-   stops halfway between them;
+   naming both classes. Where two classes are apart on a feature, each range reaches
+   halfway to the other (the nearer class wins), elsewhere its margin;
 3. each pose's outline with its holes, in mm through the cell's camera scale: the samples'
    outlines turned onto one another and the pixels most of them cover (a median
    silhouette); its rotational and mirror symmetry; a pick point on material, as far from
@@ -289,10 +289,13 @@ def learn_classes(samples: dict[Cls, list[Measured]]
     """Each class's ranges, and the pairs a feature was added to separate (see the module
     docstring). Raises ``BadInput`` naming two classes no feature separates."""
     classes = sorted(samples)
-    chosen: dict[Cls, list[str]] = {}
-    for c in classes:
-        shape = min(SHAPE, key=lambda n: spread([m.features for m in samples[c]], n))
-        chosen[c] = ["area_mm2", shape]
+    # one shape feature for every class, the steadiest within the classes: it shuts out
+    # touching parts, whatever the class, so its range is learnt from all the samples (a
+    # class of a few samples would get too narrow a range of its own)
+    shape = min(SHAPE, key=lambda n: float(np.mean(
+        [spread([m.features for m in samples[c]], n) for c in classes])))
+    pooled = [m for c in classes for m in samples[c]]
+    chosen: dict[Cls, list[str]] = {c: ["area_mm2", shape] for c in classes}
     separated = []
     names = ["area_mm2", *PREFERRED]
     for i, a in enumerate(classes):
@@ -314,22 +317,28 @@ def learn_classes(samples: dict[Cls, list[Measured]]
                     chosen[c].append(best)
             separated.append((a, b, best))
     ranges: dict[Cls, dict[str, tuple[float, float]]] = {}
+    split = {(c, f) for a, b, f in separated for c in (a, b)}
     for c in classes:
         r = {}
         for n in chosen[c]:
+            if n == shape and (c, shape) not in split:
+                r[n] = widen(list(_interval(pooled, n)))
+                continue
             lo, hi = _interval(samples[c], n)
             if n == "holes":
                 r[n] = (lo, hi)           # a count is exact
                 continue
             wlo, whi = widen([lo, hi])
-            for d in classes:             # stop halfway to a class apart on this feature
-                if d == c:
-                    continue
-                dlo, dhi = _interval(samples[d], n)
-                if dhi < lo:
-                    wlo = max(wlo, round_sig((dhi + lo) / 2, math.floor))
-                if dlo > hi:
-                    whi = min(whi, round_sig((hi + dlo) / 2, math.ceil))
+            # towards a class apart on this feature the range reaches halfway to it (the
+            # nearer class wins, as a person sorting by eye would); elsewhere the margin
+            below = [dhi for d in classes if d != c
+                     for dlo, dhi in [_interval(samples[d], n)] if dhi < lo]
+            above = [dlo for d in classes if d != c
+                     for dlo, dhi in [_interval(samples[d], n)] if dlo > hi]
+            if below:
+                wlo = round_sig((max(below) + lo) / 2, math.ceil)
+            if above:
+                whi = round_sig((hi + min(above)) / 2, math.floor)
             r[n] = (wlo, whi)
         ranges[c] = r
     return ranges, separated
