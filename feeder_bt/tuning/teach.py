@@ -234,7 +234,15 @@ def choose_segmentation(samples: list[Sample], calibration: Calibration, min_are
     cands = candidates(samples, min_area_mm2, min_hole_mm2, size_px)
     for c in cands:
         score(c, samples, calibration)
-    best = max(cands, key=lambda c: (round(c.score, 6), round(c.fit, 3), -cands.index(c)))
+    if any(s.part is None for s in samples):
+        def key(c: Segmentation) -> tuple:
+            return round(c.score, 6), round(c.fit, 3), -cands.index(c)
+    else:
+        # --part folders only: no boxes to fill, so many blobs alike beat a few (a
+        # segmentation finding three shadows of one size is not the best)
+        def key(c: Segmentation) -> tuple:
+            return round(c.good * c.score, 6), -cands.index(c)
+    best = max(cands, key=key)
     if best.good == 0:
         raise BadInput("no segmentation finds any labelled part alone: check that the "
                        "labels' boxes are on the parts (x, y, width, height in pixels)")
@@ -272,9 +280,17 @@ def measure(seg: Segmentation, samples: list[Sample], calibration: Calibration
 # ---------------------------------------------------------------------------- classes
 
 
-def _interval(ms: list[Measured], name: str) -> tuple[float, float]:
-    v = [m.features[name] for m in ms]
-    return min(v), max(v)
+TRIM = 0.1                 # classes of 10+ samples: this share at each end is not their edge
+
+
+def _interval(ms: list[Measured], name: str, trim: bool = False) -> tuple[float, float]:
+    """The samples' range of a feature; ``trim``: without the few most extreme at each
+    end (a washer whose hole a neighbour's shadow filled, a mislabelled box), so that one
+    odd sample does not merge two classes."""
+    v = np.array([m.features[name] for m in ms], dtype=float)
+    if trim and len(v) >= 10:
+        return float(np.quantile(v, TRIM)), float(np.quantile(v, 1 - TRIM))
+    return float(v.min()), float(v.max())
 
 
 def _apart(a: tuple[float, float], b: tuple[float, float]) -> float:
@@ -301,12 +317,13 @@ def learn_classes(samples: dict[Cls, list[Measured]]
     for i, a in enumerate(classes):
         for b in classes[i + 1:]:
             used = set(chosen[a]) | set(chosen[b])
-            if any(_apart(_interval(samples[a], n), _interval(samples[b], n)) > 0.05
-                   for n in used):
+            def apart(n: str, a: Cls = a, b: Cls = b) -> float:
+                return _apart(_interval(samples[a], n, True), _interval(samples[b], n, True))
+
+            if any(apart(n) > 0.05 for n in used):
                 continue
-            best = max(names, key=lambda n: _apart(_interval(samples[a], n),
-                                                   _interval(samples[b], n)))
-            d = _apart(_interval(samples[a], best), _interval(samples[b], best))
+            best = max(names, key=apart)
+            d = apart(best)
             if d <= 0:
                 raise BadInput(
                     f"classes {'/'.join(a)} and {'/'.join(b)} overlap in every feature "
@@ -325,20 +342,21 @@ def learn_classes(samples: dict[Cls, list[Measured]]
                 r[n] = widen(list(_interval(pooled, n)))
                 continue
             lo, hi = _interval(samples[c], n)
-            if n == "holes":
-                r[n] = (lo, hi)           # a count is exact
-                continue
-            wlo, whi = widen([lo, hi])
+            tlo, thi = _interval(samples[c], n, True)
             # towards a class apart on this feature the range reaches halfway to it (the
             # nearer class wins, as a person sorting by eye would); elsewhere the margin
             below = [dhi for d in classes if d != c
-                     for dlo, dhi in [_interval(samples[d], n)] if dhi < lo]
+                     for dlo, dhi in [_interval(samples[d], n, True)] if dhi < tlo]
             above = [dlo for d in classes if d != c
-                     for dlo, dhi in [_interval(samples[d], n)] if dlo > hi]
+                     for dlo, dhi in [_interval(samples[d], n, True)] if dlo > thi]
+            if n == "holes":              # a count is exact
+                r[n] = (tlo if below else lo, thi if above else hi)
+                continue
+            wlo, whi = widen([lo, hi])
             if below:
-                wlo = round_sig((max(below) + lo) / 2, math.ceil)
+                wlo = round_sig((max(below) + tlo) / 2, math.ceil)
             if above:
-                whi = round_sig((hi + min(above)) / 2, math.floor)
+                whi = round_sig((thi + min(above)) / 2, math.floor)
             r[n] = (wlo, whi)
         ranges[c] = r
     return ranges, separated
