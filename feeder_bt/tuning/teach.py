@@ -441,7 +441,10 @@ def learn_outline(ms: list[Measured]) -> Outline:
     ref = r.draw(ms[ref_i], 0.0)
     for _ in range(2):              # align to one sample, then to the first vote
         masks = [_align(r, m, ref) for m in ms]
-        ref = (np.mean(masks, axis=0) >= 0.5).astype(np.uint8)
+        # the cells most samples cover, the vote smoothed over a cell or so: the outline
+        # follows the part, not the pixel staircase of each sample
+        vote = cv2.GaussianBlur(np.mean(masks, axis=0).astype(np.float32), (5, 5), 1.0)
+        ref = (vote >= 0.5).astype(np.uint8)
     mom = cv2.moments(ref, binaryImage=True)
     if mom["m00"] == 0:
         raise BadInput("the samples' outlines have nothing in common")
@@ -452,7 +455,7 @@ def learn_outline(ms: list[Measured]) -> Outline:
     contours, hier = cv2.findContours(ref, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     top = [i for i in range(len(contours)) if hier[0][i][3] < 0]
     main = max(top, key=lambda i: cv2.contourArea(contours[i]))
-    eps = 0.6
+    eps = 0.8
     outer = r.to_mm(cv2.approxPolyDP(contours[main], eps, True) + 0.5)
     min_hole = HOLE * float(np.median(areas))      # as the recipe's min_hole_mm2
     holes = []
@@ -640,8 +643,8 @@ def write_scenario(taught: Taught, out: str | Path, cell: str | Path, cell_spec:
             rg = taught.ranges[c]
             items = [f"part: {c[0]}", f"pose: {c[1]}", "pickable: true"]
             items += [f"{n}: [{fmt(lo)}, {fmt(hi)}]" for n, (lo, hi) in rg.items()]
-            lines.append(f"    # {len(taught.samples[c])} sample(s): ranges widened by "
-                         "a margin")
+            lines.append(f"    # {len(taught.samples[c])} sample(s): their spread and a "
+                         "margin, or halfway to the next class")
             lines.append("    - {" + ", ".join(items) + "}")
     # a frame every so far along the belt: each part whole in at least one frame
     cam = cell_spec.camera
