@@ -81,6 +81,19 @@ def test_coins_taught_from_every_row_pass_feeder_check(tmp_path, capsys):
     assert areas["medium_coin"][1] <= areas["large_coin"][0]
 
 
+def test_euro_coins_that_no_feature_tells_apart_are_an_error_naming_both(tmp_path, capsys):
+    """Eight denominations, some 1 mm apart, shiny ones as bright as the paper: their
+    measured areas overlap, and teach says so rather than write ranges that mix them."""
+    euro = ROOT / "tests/data/euro_coins"
+    code, _, err = teach(capsys, *sorted(str(p) for p in euro.glob("euro_*.jpg")),
+                         "--labels", str(euro / "labels.json"), "--cell",
+                         str(euro / "cell.yaml"), "--out", str(tmp_path / "euro.yaml"),
+                         "--validate", "0.5")
+    assert code == 2 and err.count("\n") == 1
+    assert "classes cent_1/flat and cent_10/flat overlap in every feature" in err
+    assert not (tmp_path / "euro.yaml").exists()
+
+
 # ---------------------------------------------------------------------------- rendered frames
 
 
