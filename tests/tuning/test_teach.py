@@ -185,6 +185,53 @@ def test_part_folders_teach_without_labels(tmp_path, capsys):
     assert main(["locate", str(out), str(sorted(d.glob("frame_*.png"))[0])]) == 0
 
 
+def _textured_frames(d: Path, n: int = 8) -> Path:
+    """Frames of dark discs of two sizes on a busy printed background that stays put (a
+    patterned belt), the discs elsewhere in each frame; and their COCO labels."""
+    import cv2
+    rng = np.random.default_rng(7)
+    h, w = 240, 320
+    noise = cv2.GaussianBlur(rng.uniform(0, 255, (h, w)).astype(np.float32), (0, 0), 3)
+    belt = cv2.normalize(noise, None, 45, 235, cv2.NORM_MINMAX).astype(np.uint8)
+    d.mkdir()
+    images, anns = [], []
+    for i in range(n):
+        img = belt.copy()
+        placed: list[tuple[int, int, int]] = []
+        while len(placed) < 6:
+            r = int(rng.choice([11, 17]))
+            x, y = int(rng.integers(r + 4, w - r - 4)), int(rng.integers(r + 4, h - r - 4))
+            if all((x - a) ** 2 + (y - b) ** 2 > (r + c + 6) ** 2 for a, b, c in placed):
+                placed.append((x, y, r))
+        for x, y, r in placed:
+            cv2.circle(img, (x, y), r, 0, -1, lineType=cv2.LINE_AA)
+            anns.append({"id": len(anns) + 1, "image_id": i, "category_id": 1 if r < 14 else 2,
+                         "bbox": [x - r - 2, y - r - 2, 2 * r + 4, 2 * r + 4]})
+        cv2.imwrite(str(d / f"f{i}.png"), img)
+        images.append({"id": i, "file_name": f"f{i}.png"})
+    (d / "labels.json").write_text(json.dumps({
+        "images": images, "annotations": anns,
+        "categories": [{"id": 1, "name": "small"}, {"id": 2, "name": "large"}]}))
+    return d
+
+
+def test_a_patterned_belt_is_taken_out_by_the_median_of_the_frames(tmp_path, capsys):
+    d = _textured_frames(tmp_path / "frames")
+    out = tmp_path / "discs.yaml"
+    code, text, err = teach(capsys, *sorted(str(p) for p in d.glob("f*.png")), "--labels",
+                            str(d / "labels.json"), "--cell", str(COINS / "cell.yaml"),
+                            "--out", str(out), "--validate", "0.5")
+    assert code == 0, err
+    assert "against the median of the frames" in text.splitlines()[0]
+    golden = tmp_path / "discs_golden.png"
+    assert f"wrote {golden}" in text and "golden_image: true" in out.read_text()
+    assert f1s(text)[0] >= 0.95
+    capsys.readouterr()
+    assert main(["locate", str(out), str(d / "f1.png"), "--golden", str(golden), "--json"]) == 0
+    found = json.loads(capsys.readouterr().out)[0]
+    assert len(found["parts"]) == 6 and not found["rejected"]
+
+
 # ---------------------------------------------------------------------------- the learning
 
 
