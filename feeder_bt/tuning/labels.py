@@ -122,10 +122,21 @@ def load_coco(labels: str | Path, images: list[str | Path]) -> list[Sample]:
     out = []
     for img in images:
         p = Path(img)
-        if p.name not in boxes:
-            raise BadInput(f"{path}: no image named {p.name} in images[] (given {p})")
-        out.append(Sample(p, read_image(p), boxes[p.name]))
+        listed = _listed(p.name, boxes, path)
+        out.append(Sample(p, read_image(p), boxes[listed]))
     return out
+
+
+def _listed(name: str, listed: dict[str, list[Box]], path: Path) -> str:
+    """The ``images[]`` name of the image file ``name``: the same, or (Label Studio
+    prefixes uploads with a hash and a dash) the one name ending in ``-NAME``."""
+    if name in listed:
+        return name
+    prefixed = [n for n in listed if n.endswith("-" + name)]
+    if len(prefixed) == 1:
+        return prefixed[0]
+    raise BadInput(f"{path}: no image named {name} in images[]"
+                   + (f" (several end in -{name})" if prefixed else ""))
 
 
 def load_part_dir(spec: str) -> list[Sample]:

@@ -324,6 +324,13 @@ def test_bad_labels_are_one_line_naming_the_file(tmp_path, capsys, doc, images, 
     assert labels in err or "missing.png" in err
 
 
+def test_label_studio_names_with_a_hash_prefix_match_the_image(tmp_path):
+    from feeder_bt.tuning.labels import load_coco
+    doc = {**GOOD, "images": [{"id": 1, "file_name": "images/5f2a9c1e-row_1.png"}]}
+    (s,) = load_coco(_labels(tmp_path, doc), [ROWS[0]])
+    assert s.name == "row_1.png" and [b.part for b in s.boxes] == ["coin"]
+
+
 def test_a_missing_image_is_one_line_naming_it(tmp_path, capsys):
     doc = {**GOOD, "images": [{"id": 1, "file_name": "gone.png"}]}
     labels = _labels(tmp_path, doc)
