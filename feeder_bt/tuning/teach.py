@@ -281,6 +281,8 @@ def measure(seg: Segmentation, samples: list[Sample], calibration: Calibration
 
 
 TRIM = 0.1                 # classes of 10+ samples: this share at each end is not their edge
+POOL_MIN = 5               # classes of this many samples tell how much a class varies ...
+SPREADS = 2.0              # ... and a range is at least this many of their spreads each side
 
 
 def _interval(ms: list[Measured], name: str, trim: bool = False) -> tuple[float, float]:
@@ -335,6 +337,9 @@ def learn_classes(samples: dict[Cls, list[Measured]]
             separated.append((a, b, best))
     ranges: dict[Cls, dict[str, tuple[float, float]]] = {}
     split = {(c, f) for a, b, f in separated for c in (a, b)}
+    many = [c for c in classes if len(samples[c]) >= POOL_MIN]
+    pooled_spread = {n: float(np.median([spread([m.features for m in samples[c]], n)
+                                         for c in many])) if many else 0.0 for n in names}
     for c in classes:
         r = {}
         for n in chosen[c]:
@@ -353,6 +358,12 @@ def learn_classes(samples: dict[Cls, list[Measured]]
                 r[n] = (tlo if below else lo, thi if above else hi)
                 continue
             wlo, whi = widen([lo, hi])
+            # a class of a few samples has seen little of how its parts vary: its range
+            # is at least as wide as the classes of many vary (their spread, pooled)
+            mid = (lo + hi) / 2
+            half = SPREADS * pooled_spread.get(n, 0.0) * abs(mid)
+            wlo = min(wlo, round_sig(mid - half, math.floor))
+            whi = max(whi, round_sig(mid + half, math.ceil))
             if below:
                 wlo = round_sig((max(below) + tlo) / 2, math.ceil)
             if above:
