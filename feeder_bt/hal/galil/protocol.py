@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from feeder_bt.core.errors import CommsLost, HalError
+from feeder_bt.core.errors import CommsLost, HalError, one_line
 
 # ---------------------------------------------------------------------------- limits
 
@@ -249,9 +249,10 @@ def parse_unsolicited(line: str) -> Event:
 
     Program errors are recognised in every form the controller may echo them: a leading
     ``?``, a numbered program line with a ``?`` in it (``004 JP #X?``), or a program line
-    ending in ``?``. Output of our programs never contains ``?``.
+    ending in ``?``. Output of our programs never contains ``?``. Control characters are
+    escaped (``\x1b``): a card's text reaches logs and terminals, never their controls.
     """
-    text = line.strip()
+    text = one_line(line.strip())
     if text.startswith("?"):
         return ProgramError(text[1:].strip())
     if "?" in text and _ECHO_ERROR_RE.match(text):
