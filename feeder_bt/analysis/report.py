@@ -163,6 +163,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                                             if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
+    if world is not None:
+        mismatch = outcome_mismatch(dict(world.placed_by_type), retrieved)
+        if mismatch:
+            parts["outcomes"] = mismatch
     # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
     # (feeder_bt.robot.scara), or on a real cell the cell's description
     arm = world.robot_model if world is not None else None
@@ -251,6 +255,20 @@ def _no_match(cell: Cell) -> dict[str, Any] | None:
     """The vision watch's summary (``feeder_bt.vision.watch``): frames that fit no class."""
     watch = cell.ctx.extras.get("recipe_watch") if cell.ctx is not None else None
     return watch.summary() if watch is not None else None
+
+
+def outcome_mismatch(placed: dict[str, int], counted: dict[str, int]
+                     ) -> dict[str, dict[str, int]]:
+    """Every placement the world saw is one the cell counted, and the reverse: what does
+    not pair off, by type (``world_only``: placed, not counted, as when a PLACED's reply
+    was lost; ``cell_only``: counted, never placed). Empty when they agree."""
+    kinds = sorted(set(placed) | set(counted))
+    world_only = {k: placed.get(k, 0) - counted.get(k, 0) for k in kinds
+                  if placed.get(k, 0) > counted.get(k, 0)}
+    cell_only = {k: counted.get(k, 0) - placed.get(k, 0) for k in kinds
+                 if counted.get(k, 0) > placed.get(k, 0)}
+    return {"world_only": world_only, "cell_only": cell_only} if world_only or cell_only \
+        else {}
 
 
 def write_report(report: RunReport | dict[str, Any], path: str | Path,

@@ -173,6 +173,10 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"{nm['example']} (blobs: {why}; see the vision_no_match events)",
               file=sys.stderr)
     problems = p.get("accounting") or []
+    if p.get("outcomes"):               # the world and the cell disagree on placements
+        print(f"ACCOUNTING: placements the world and the cell do not agree on: "
+              f"{p['outcomes']}", file=sys.stderr)
+        return EXIT_ACCOUNTING
     if problems:
         for prob in problems[:10]:
             where = prob.get("last_place") or " and ".join(prob.get("places", []))
