@@ -168,6 +168,10 @@ class Handed:
     picked: bool = False
 
 
+# where a part handed out ends: handed_out = the sum of these + outstanding
+LEDGER = ("placed", "missed", "released", "expired", "held_expired", "mismatch")
+
+
 @dataclass
 class DeskCounts:
     """What the desk did, for the report (``part_server``) and STATUS."""
@@ -178,7 +182,11 @@ class DeskCounts:
         keys = ("requests", "handed_out", "picked", "placed", "missed", "released",
                 "expired", "held_expired", "late_reports", "refused", "mismatch",
                 "over_limit", "cut_off")
-        return {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
+        out = {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
+        # every part handed out ends in one of these, or is still out: 0 when the ledger
+        # balances (docs/part-server.md)
+        out["unaccounted"] = out["handed_out"] - outstanding - sum(out[k] for k in LEDGER)
+        return out
 
 
 class Desk(TrustRules):
@@ -442,7 +450,7 @@ class Desk(TrustRules):
             values["encoder_bits"] = int(enc.robot_bits)
             values["tracking"] = int(ctx.scenario.retrieve.tracking)
             values["types"] = ",".join(ctx.scenario.parts)
-        for k in ("placed", "missed", "released", "expired", "held_expired"):   # the ledger
+        for k in LEDGER:
             values[k] = int(self.counts[k])
         values["wanted"] = int(sum(self.wanted.values()))
         return status_line(values)
