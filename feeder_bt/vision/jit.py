@@ -1,6 +1,7 @@
 """The compiled kernels (``vision.kernels``), imported on first use: numba's import costs
-about 0.3 s, which no command that never locates a part should pay (``feeder --help``,
-``feeder check``). ``Locator`` calls ``warm`` when it is built."""
+about 0.3 s, which no command that never measures a blob should pay (``feeder --help``,
+``feeder check`` of a cell). ``Locator`` calls ``warm`` when it is built (``feeder check``
+of a scenario builds one to measure the drawn outlines of its classes)."""
 
 from __future__ import annotations
 
