@@ -100,7 +100,8 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
                min_area_mm2: float, full: bool = True,
                holes: list[list[np.ndarray]] | None = None,
                mapping: Calibration | PixelGrid | None = None,
-               length: bool = False, hulls: bool = False) -> list[Blob]:
+               length: bool = False, hulls: bool = False,
+               min_hole_mm2: float = 0.0) -> list[Blob]:
     """The contours worth reporting (not specks), measured as far as every blob is: area,
     centroid (mm), the border and size rules (``reason`` "touches border", "too small").
 
@@ -112,6 +113,10 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     minimum-area rectangle now, in the same compiled pass (``kernels.blob_stats``) — what
     the recipe's classes or faces will ask of most blobs; ``measure_feature`` measures them
     one blob at a time otherwise.
+
+    The centroid is the blob's area centroid with its holes (of at least ``min_hole_mm2``)
+    taken out, the part frame's origin, when its holes were looked for; else the filled
+    outline's (the same for a part without holes).
     """
     if not contours:
         return []
@@ -145,8 +150,13 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         area = area_px * sc * sc if local else area_px * s2
         reason = "touches border" if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h \
             else ("too small" if area < min_area_mm2 else "")
-        det = Detection(None, None, False, row[k.X], row[k.Y], 0.0, row[k.CU], row[k.CV],
-                        {"area_mm2": area}, reason)
+        x, y, cu, cv = row[k.X], row[k.Y], row[k.CU], row[k.CV]
+        if holes is not None and holes[i]:
+            cu, cv, moved = _region_centroid(row[k.M00], cu, cv, holes[i],
+                                             min_hole_mm2 / s2)
+            if moved:
+                x, y = (mapping or calibration).px_to_mm(np.array([[cu, cv]]))[0].tolist()
+        det = Detection(None, None, False, x, y, 0.0, cu, cv, {"area_mm2": area}, reason)
         b = Blob(contours[i] if given else None, tuple(box), area_px, det, full,
                  None if holes is None else holes[i])
         if local:
@@ -156,6 +166,27 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         b.stats, b.frame, b.index = row, frame, i
         blobs.append(b)
     return blobs
+
+
+def _region_centroid(m00: float, cu: float, cv: float, holes: list[np.ndarray],
+                     min_px: float) -> tuple[float, float, bool]:
+    """The centroid (px) of the outline's polygon less its holes' of at least ``min_px``
+    (smaller ones are specks), and whether any was taken out: a part's holes move its
+    area centroid off the filled outline's (a lever with bores at one end: millimetres)."""
+    a, su, sv = m00, m00 * cu, m00 * cv
+    moved = False
+    for h in holes:
+        mom = cv2.moments(h)
+        ah = mom["m00"]
+        if ah <= 0 or ah < min_px:
+            continue
+        a -= ah
+        su -= mom["m10"]
+        sv -= mom["m01"]
+        moved = True
+    if not moved or a <= 0:
+        return cu, cv, False
+    return su / a, sv / a, True
 
 
 def _hull_stats(b: Blob) -> list[float]:

@@ -8,8 +8,9 @@ class ranges over ``holes`` or ``hole_area_mm2``); blobs touching the image bord
 smaller than ``min_area_mm2`` are rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
 calibration, corrected for pixelisation so that they are close to the physical value (a
 50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
-names the part and pose. Position is the blob's area centroid, which is the part frame's
-origin (``geometry``). The image work (difference image, threshold, morphology, contours)
+names the part and pose. Position is the blob's area centroid with its holes taken out
+(found whenever a class's outline has holes), which is the part frame's origin
+(``geometry``). The image work (difference image, threshold, morphology, contours)
 is ``segment.Segmenter``'s, of which ``Locator`` is one; the blobs and their features are
 measured in ``blobs``; the cut-corner face and angle in ``corners``.
 Merged (touching) parts fall outside every class and are rejected, so they are never
@@ -52,7 +53,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from feeder_bt.core.geometry import wrap_deg
+from feeder_bt.core.geometry import pose_outline, rings, wrap_deg
 from feeder_bt.core.model import PartSpec, VisionClass, VisionRecipe
 from feeder_bt.vision.blobs import (
     Blob,
@@ -130,9 +131,14 @@ class Locator(Segmenter):
                                for cls in recipe.classes for n in cls.ranges) or (
             recipe.orientation == "cut_corner"
             and any(cls.mirrored is not None for cls in recipe.classes))
-        # hole contours are searched for only when a class ranges over them
+        # hole contours are searched for only when a class ranges over them, or a class's
+        # outline has holes: its point is the area centroid with them taken out (the part
+        # frame's origin), which the filled outline's is not
         self._want_holes = any(GROUP_OF[n] == GROUP_OF["holes"]
-                               for cls in recipe.classes for n in cls.ranges)
+                               for cls in recipe.classes for n in cls.ranges) or any(
+            cls.part in parts and cls.pose in parts[cls.part].poses
+            and len(rings(pose_outline(parts[cls.part], cls.pose))) > 1
+            for cls in recipe.classes)
         # What most blobs will be asked for, measured for all of a frame's blobs in one
         # compiled pass (``find_blobs``): the features the first class ranges over (every
         # blob of its size is checked against it), and the hull where faces are read. Others
@@ -231,7 +237,8 @@ class Locator(Segmenter):
                              self.recipe.min_area_mm2, full=True,
                              holes=[hs for _, hs in pieces],
                              mapping=self._mapping(img.shape[:2]),
-                             length=self._want_length, hulls=self._want_hulls) \
+                             length=self._want_length, hulls=self._want_hulls,
+                             min_hole_mm2=self.recipe.min_hole_mm2) \
                 if pieces else []
             waiting = [p for p in new if not p.det.reason and not self._classify(p)]
             if waiting:
@@ -256,7 +263,8 @@ class Locator(Segmenter):
         blobs = find_blobs(contours, shape, self.calibration, self.recipe.min_area_mm2,
                            full=full, holes=holes, mapping=mapping,
                            length=all_features or self._want_length,
-                           hulls=all_features or self._want_hulls)
+                           hulls=all_features or self._want_hulls,
+                           min_hole_mm2=self.recipe.min_hole_mm2)
         if all_features:
             for b in blobs:
                 for name in (*FEATURES, *self.recipe.rulers):
