@@ -21,7 +21,10 @@ def kernels() -> ModuleType:
     return _mod
 
 
-NOTICE_AFTER_S = 1.0
+# a load from the cache takes well under a second, a few seconds on a busy machine (where
+# `feeder check` of a scenario, which loads them too, must print nothing more); a compile
+# 13-40 s
+NOTICE_AFTER_S = 5.0
 NOTICE = ("feeder: compiling the locator's kernels (numba), once after installing or "
           "upgrading: 20-40 s; later runs load them from the cache")
 
