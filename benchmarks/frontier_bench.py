@@ -1,4 +1,4 @@
-"""The wear-budget frontier (issue 30, goal 1): what fixed settings reach at each
+"""The wear-budget frontier (goal 1): what fixed settings reach at each
 recirculation cost, and what switching between them could reach under a budget.
 
     python benchmarks/frontier_bench.py [--scenario scenarios/lenses.yaml]

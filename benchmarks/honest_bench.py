@@ -1,4 +1,4 @@
-"""Issue 16's honest comparison: the thesis table, then ours against baselines tuned with the
+"""The honest comparison: the thesis table, then ours against baselines tuned with the
 same budget, each against the report's ceiling; JSON and a markdown table out.
 
     python benchmarks/honest_bench.py [--supply supply/batch_refill.yaml] [--trials 20]
@@ -83,7 +83,7 @@ def stats(rows: list[dict]) -> dict:
     if len(fixed) == len(rows):
         out["best_possible_ppm"] = round(statistics.mean(fixed), 2)
     sel = [r.get("robot_bound_selection_ppm") for r in rows]
-    if rows and all(sel):       # nearest-first over the parts that passed (issue 30)
+    if rows and all(sel):       # nearest-first over the parts that passed
         out["selection_bound_ppm"] = round(statistics.mean(sel), 2)
         out["of_selection_bound"] = round(out["mean"] / out["selection_bound_ppm"], 3)
     kpm = [r.get("kpm") for r in rows]

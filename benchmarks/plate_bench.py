@@ -1,4 +1,4 @@
-"""Smart feeding against a fixed cycle on the same plate, same seeds (issue 31).
+"""Smart feeding against a fixed cycle on the same plate, same seeds.
 
     python benchmarks/plate_bench.py [--duration 3600] [--seeds 1 2 3 4 5]
 

@@ -2,7 +2,7 @@
 
     python benchmarks/run_bench.py [--duration 3600] [--seeds 1] [--repeats 1] [--out PATH]
 
-Simulator speed (issue 5: lenses with vision in the loop >= 100x real time)::
+Simulator speed (lenses with vision in the loop >= 100x real time)::
 
     python benchmarks/run_bench.py --scenarios lenses --repeats 5 \\
         --out benchmarks/results/simspeed.json
@@ -11,7 +11,7 @@ Each (scenario, seed) runs ``--repeats`` times in a row; a fast run is determini
 the repeats must report the same counts (checked), and only the time differs: the
 simulated seconds per wall second are given per repeat and as min / median / max, with
 the process CPU time (all threads) and the load average around the runs, since the
-project's 2-core machine is shared and one run's speed says little on its own. Issue 2's
+project's 2-core machine is shared and one run's speed says little on its own. The
 target: lenses, one simulated hour, seed 1: >= 60 parts/min, nothing lost, under 120 s of
 wall time. Speed is measured here, never in tests.
 """

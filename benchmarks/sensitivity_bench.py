@@ -1,4 +1,4 @@
-"""Issue 16's sensitivity table: which of the simulated cell's figures move the thesis
+"""The sensitivity table: which of the simulated cell's figures move the thesis
 comparison most. One figure changed at a time, from its documented value
 (docs/simulator.md) to a plausible other one; each row the mean and spread over seeds.
 

@@ -8,7 +8,7 @@ Each seed runs twice on the simulated cell, exactly as a user would with
 once without. The JSON has, per run, the end state and exit code ``feeder run`` would
 give, parts/min, the accounting (lost, duplicated, misplaced), and injected faults
 against the cell's faults and recoveries; per seed, the ratio of parts/min with faults to
-without; and a ``verdict`` against issue 13's bar (STOPPED after the whole shift, exit 0,
+without; and a ``verdict`` against the bar (STOPPED after the whole shift, exit 0,
 nothing lost or duplicated, every injected fault recovered or reported, ≥ 90 % of the
 fault-free parts/min). docs/faults.md quotes it.
 """

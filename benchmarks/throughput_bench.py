@@ -35,7 +35,7 @@ ADJUST_SECTIONS: dict[str, str | None] = {
     "water_marks": ("adjust:\n  algorithm: water_marks\n  period_s: 0.5\n  params: {high: 100, "
                     "low: 50, gain: 0.10, step: 5, min_mm_s: 80, max_mm_s: 200, "
                     "median_mm_s: 150}\n"),
-    # within the cell's limits like every other setting (issue 16): a belt held at 250 mm/s
+    # within the cell's limits like every other setting: a belt held at 250 mm/s
     # and the incline up to 160 % of it, 400 mm/s, the incline's max_mm_s
     "supply_queue": ("adjust:\n  algorithm: supply_queue\n  period_s: 0.5\n  params: "
                      "{target_queue: 24, horizontal_mm_s: 250, max_incline_pct: 160, "
@@ -89,7 +89,7 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 
 def targets(summary: list[dict]) -> dict[str, dict]:
-    """Issue 5's checks per scenario: the best adjuster + policy against the water-mark
+    """The checks per scenario: the best adjuster + policy against the water-mark
     adjuster with the thesis's FIFO order, and against the robot bound."""
     out: dict[str, dict] = {}
     for scen in sorted({row["scenario"] for row in summary}):

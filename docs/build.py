@@ -1,4 +1,4 @@
-"""Regenerate every command output and figure quoted in docs/ (issue 29: docs that cannot
+"""Regenerate every command output and figure quoted in docs/ (docs that cannot
 go stale). ``python docs/build.py`` rewrites them in place; ``--check`` only compares and
 exits 1 naming each quote that no longer matches (tests/project/test_docs_outputs.py runs that).
 

@@ -15,8 +15,7 @@ import math
 import cv2
 import numpy as np
 
-from feeder_bt.core.geometry import pose_outline
-from feeder_bt.vision.locator import Detection, LocateResult, Locator
+from feeder_bt.api import Detection, LocateResult, Locator, pose_outline
 
 
 class TriangleLocator(Locator):

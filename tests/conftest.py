@@ -28,6 +28,11 @@ settings.register_profile("explore", parent=settings.get_profile("feeder"),
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "feeder"))
 
 
+# every run report a test writes, in its process or a child's, is checked against the
+# published schema (``feeder schema report``; feeder_bt.analysis.run_report.check_written)
+os.environ["FEEDER_CHECK_REPORTS"] = "1"
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Compile the locator's kernels (feeder_bt/vision/kernels.py) once, in xdist's
     controller before the workers start: on a fresh clone each worker would compile them

@@ -12,6 +12,14 @@ MODULE FeederParts
 
     CONST string FEEDER_IP := "192.168.125.10";
     CONST num FEEDER_PORT := 7600;
+    ! Who this robot is. RAPID has no SHA-256 or HMAC function that we could find, so it
+    ! cannot answer the part server's challenge (HELLO NAME, then PROOF HMAC-SHA256). List
+    ! the controller's address in the robots file (no HELLO: leave ROBOT_NAME empty), or, on
+    ! a trusted, isolated robot network only, opt this robot in to the old plain form
+    ! (python -m feeder_bt.plant.robots add irb1 --robots FILE --plain-secret): that line
+    ! can be captured and replayed (docs/part-server.md, "Robots must be trusted").
+    CONST string ROBOT_NAME := "";
+    CONST string ROBOT_SECRET := "";
     PERS tooldata tSuction := [TRUE, [[0, 0, 100], [1, 0, 0, 0]], [0.5, [0, 0, 50], [1, 0, 0, 0], 0, 0, 0]];
     PERS wobjdata wBelt := [FALSE, TRUE, "", [[0, 0, 0], [1, 0, 0, 0]], [[0, 0, 0], [1, 0, 0, 0]]];
     CONST robtarget pPlace := [[300, -250, 50], [0, 0, 1, 0], [0, 0, 0, 0], [9E9, 9E9, 9E9, 9E9, 9E9, 9E9]];
@@ -27,6 +35,7 @@ MODULE FeederParts
         VAR robtarget pGrip;
         SocketCreate feeder;
         SocketConnect feeder, FEEDER_IP, FEEDER_PORT;
+        Hello;
         WHILE TRUE DO
             reply := Call("PART WAIT 5");
             IF Field(reply, 1) = "PART" THEN
@@ -60,7 +69,20 @@ MODULE FeederParts
             WaitTime 2;
             SocketCreate feeder;
             SocketConnect feeder, FEEDER_IP, FEEDER_PORT;
+            Hello;
             RETRY;
+        ENDIF
+    ENDPROC
+
+    ! say who this robot is (the plain form: see ROBOT_NAME above), once per connection
+    PROC Hello()
+        VAR string reply;
+        IF ROBOT_NAME <> "" THEN
+            reply := Call("HELLO " + ROBOT_NAME + " " + ROBOT_SECRET);
+            IF Field(reply, 1) <> "HELLO" THEN
+                ErrWrite "feeder: refused", reply;
+                Stop;
+            ENDIF
         ENDIF
     ENDPROC
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from feeder_bt.analysis.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.analysis.run_report import RunReport, check_written
 from feeder_bt.control.cell import Cell
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.model import CellSpec, Scenario
@@ -124,12 +125,14 @@ def _record_since(world: Any, sim_seconds: float) -> float | None:
 def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds: float,
                  feed_seconds: float, wall_seconds: float, interrupted: bool = False,
                  inflow: Inflow | None = None,
-                 inflow_by_type: dict[str, Inflow] | None = None) -> dict[str, Any]:
+                 inflow_by_type: dict[str, Inflow] | None = None) -> RunReport:
+    """The run's report from the cell's statistics, its robot fit and, on the simulated
+    cell, the world's truth (``Hal.truth``)."""
     s = cell.stats
     retrieved = {name: s.retrieved.get(name, 0) for name in (cell.scenario.parts if cell.scenario
                                                             else {})}
     total = sum(retrieved.values())
-    world = getattr(cell.hal, "world", None)
+    world = cell.hal.truth
     if world is not None:
         world.audit()                     # the final check, part by part
     parts: dict[str, Any] = {
@@ -147,20 +150,20 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         "misplaced": dict(world.misplaced_by_type) if world else None,
         "dropped": s.counts["dropped"],
     }
-    if world is not None:                 # why the simulated grips missed (issue 27)
+    if world is not None:                 # why the simulated grips missed
         parts["grip_misses"] = {k: world.counts[k] for k in (
             "grip_empty", "grip_refused", "grip_slipped", "grip_on_hole", "grip_on_neighbour")}
     if world is not None:                 # every part that entered the cell, and left it
         parts["supplied"] = world.total
         parts["shipped"] = world.counts["shipped"]
-        # wear (issue 30): passes a plant pays for, and parts worn past max_passes
+        # wear: passes a plant pays for, and parts worn past max_passes
         parts["scrapped"] = world.counts["scrapped"]
         parts["recirculated_per_placed"] = (round(world.counts["recirculated"] / total, 3)
                                             if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
     # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
-    # (feeder_bt.robot.scara), or on a real cell the cell's description (issue 30)
+    # (feeder_bt.robot.scara), or on a real cell the cell's description
     arm = world.robot_model if world is not None else None
     bound_cycle, bound_ppm = (robot_bound(cell.cell, cell.scenario, arm) if cell.scenario
                               else (0.0, 0.0))
@@ -205,7 +208,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         report["kits"] = kits_report(s.kit, s.in_reach_by_type, feed_seconds, bound_ppm,
                                      inflow_by_type, sim_seconds, transport_lag_s(cell.cell),
                                      kit_sel)
-    if cell.cell.presentation == "plate":   # the plate's actions (issue 31)
+    if cell.cell.presentation == "plate":   # the plate's actions
         report["plate"] = {k[len("plate_"):]: v for k, v in sorted(s.counts.items())
                            if k.startswith("plate_")}
     counts = getattr(getattr(getattr(cell.hal, "camera", None), "source", None), "counts",
@@ -240,7 +243,7 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                            # commands a belt ran slower than asked (0: the HAL refuses them)
                            "axis_clamped": {"horizontal": world.horizontal.clamped,
                                             "incline": world.incline.clamped}}
-    return report
+    return RunReport.from_json(report)
 
 
 def _no_match(cell: Cell) -> dict[str, Any] | None:
@@ -249,5 +252,8 @@ def _no_match(cell: Cell) -> dict[str, Any] | None:
     return watch.summary() if watch is not None else None
 
 
-def write_report(report: dict[str, Any], path: str | Path) -> None:
-    Path(path).write_text(json.dumps(report, indent=2) + "\n")
+def write_report(report: RunReport | dict[str, Any], path: str | Path) -> None:
+    """The report's JSON to ``path`` (checked against its schema where the tests ask)."""
+    data = report.to_json() if isinstance(report, RunReport) else report
+    check_written(data)
+    Path(path).write_text(json.dumps(data, indent=2) + "\n")

@@ -1,4 +1,4 @@
-"""Selection-aware robot bounds (issue 30): what the robot could do with the parts the run
+"""Selection-aware robot bounds: what the robot could do with the parts the run
 really had, not with a part always waiting at the best corner of its window.
 
 ``robot_bound_ppm`` (``report.robot_bound``) is 60 over the shortest pick-and-place cycle

@@ -146,7 +146,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
         wire_line_trigger(cell, camera.source, io)
         plate = None
-        if cell.presentation == "plate":    # an AnyFeeder on its serial line (issue 31)
+        if cell.presentation == "plate":    # an AnyFeeder on its serial line
             from feeder_bt.hal.anyfeeder.driver import AnyFeeder
             plate = AnyFeeder(cell.plate, clock)
             closers.append(plate.close)
@@ -162,7 +162,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
 
 def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
     """The HAL and the clock for a run."""
-    if kind == "sim" and cell.presentation == "plate":      # issue 31
+    if kind == "sim" and cell.presentation == "plate":
         from feeder_bt.sim.plate import make_plate_sim_hal
         clock = SimClock()
         return make_plate_sim_hal(scenario, cell, clock, seed), clock
@@ -183,8 +183,9 @@ def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[
 
 
 def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
-                   faults=None) -> tuple[Hal, Clock]:
-    """Emulators on loopback over the simulated cell in real time, and the real drivers."""
+                   faults=None, plate_options: dict | None = None) -> tuple[Hal, Clock]:
+    """Emulators on loopback over the simulated cell in real time, and the real drivers;
+    ``plate_options`` go to the AnyFeeder emulator (echo, motor gap, a late code)."""
     from feeder_bt.emulators.adept import AdeptEmulator
     from feeder_bt.emulators.camera import PlantCameraSource
     from feeder_bt.emulators.galil.emulator import GalilEmulator
@@ -195,9 +196,9 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
     adept = AdeptEmulator(plant, faults=faults).start()
     ports = adept.ports
     plate_emu = None
-    if cell.presentation == "plate":        # the AnyFeeder emulator over the plate (issue 31)
+    if cell.presentation == "plate":        # the AnyFeeder emulator over the plate
         from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
-        plate_emu = AnyFeederEmulator(plant, faults=faults).start()
+        plate_emu = AnyFeederEmulator(plant, faults=faults, **(plate_options or {})).start()
         cell = dataclasses.replace(cell, plate=dataclasses.replace(
             cell.plate, url=f"socket://127.0.0.1:{plate_emu.port}"))
     wired = dataclasses.replace(
@@ -229,5 +230,5 @@ def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
         hal.closers.insert(1, plate_emu.stop)
         hal.extras["plate_emulator"] = plate_emu
     hal.extras.update(plant=plant, galil_emulator=galil, adept_emulator=adept)
-    hal.world = plant.world        # for the report's accounting only; the trees never read it
+    hal.truth = plant.world        # for the report's accounting only; the trees never read it
     return hal, clock

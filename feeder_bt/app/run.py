@@ -206,7 +206,7 @@ def _operator(cell: Cell) -> None:
 def _watch_accounting(cell: Cell) -> Callable[[], bool]:
     """On the simulated cell: every part the world finds lost or duplicated is an event in
     the cell's log, and ends the run (``broken()``); elsewhere nothing to watch."""
-    world = getattr(cell.hal, "world", None)
+    world = cell.hal.truth
     if world is None:
         return lambda: False
 
@@ -215,16 +215,12 @@ def _watch_accounting(cell: Cell) -> Callable[[], bool]:
                         **{k: v for k, v in problem.items() if k != "kind"})
 
     world.listeners.append(tell)
-    return lambda: cell.hal.world.broken      # type: ignore[attr-defined]
+    return lambda: world.broken
 
 
-def final_speeds() -> dict[str, float | None]:
+def final_speeds(cell: Cell) -> dict[str, float | None]:
     """The speeds the trees followed last (the scenario's, the adjuster's or an operator's)."""
-    import py_trees
-    storage = py_trees.blackboard.Blackboard.storage
-    return {k: (None if storage.get(f"/speeds/{k}") is None
-                else float(storage[f"/speeds/{k}"]))
-            for k in ("horizontal_mm_s", "incline_pct", "robot_speed_pct")}
+    return cell.speeds()
 
 
 def _start_log(log: EventLog, opts: RunOptions, scenario: Scenario, cell: Cell) -> None:
@@ -456,7 +452,8 @@ class _Run:
             self.log.flush()
 
     def finish_report(self) -> dict[str, Any]:
-        """The run report, written where asked and closed into the event log."""
+        """The run report (``RunReport``), written where asked and closed into the event log;
+        its JSON is returned, as written."""
         opts = self.opts
         report = build_report(self.cell, self.ticker, seed=opts.seed, hal=opts.hal,
                               sim_seconds=self.clock.now() - self.t_start,
@@ -466,25 +463,26 @@ class _Run:
                               inflow=self.supply.inflow() if self.supply is not None else None,
                               inflow_by_type=(self.supply.inflow_by_type()
                                               if self.supply is not None else None))
-        report["speeds"] = final_speeds()
+        report.speeds = final_speeds(self.cell)
         if self.injector is not None:
-            report["injected"] = dict(self.injector.injected)
-            report["unseen"] = dict(self.injector.unseen)     # injected, met by nobody
-            report["watchdog_stops"] = self.injector.watchdog_stops   # #WDOG outages
-            report["fault_plan"] = str(opts.faults)
+            report.injected = dict(self.injector.injected)
+            report.unseen = dict(self.injector.unseen)     # injected, met by nobody
+            report.watchdog_stops = self.injector.watchdog_stops   # #WDOG outages
+            report.fault_plan = str(opts.faults)
         if self.supply is not None:
-            report["supply"] = self.supply.report()
+            report.supply = self.supply.report()
         if self.ui:
-            report["operator"] = self.ui.report()
+            report.operator = self.ui.report()
         if self.plant is not None:
             report.update(self.plant.report())
+        data = report.to_json()
         if opts.report:
             Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
-            write_report(report, opts.report)
+            write_report(data, opts.report)
         if self.log:
-            self.log.finish(report)
+            self.log.finish(data)
             self.log.close()
-        return report
+        return data
 
     # ---------------------------------------------------------------- helpers
     def feed_seconds(self) -> float:

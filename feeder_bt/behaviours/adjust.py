@@ -5,18 +5,20 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.base import Ctx, Leaf, client
+from feeder_bt.behaviours.base import Ctx, Leaf
+from feeder_bt.behaviours.keys import FAULTS, SPEEDS
 from feeder_bt.core.encoder import DriftWatch
 from feeder_bt.policy.adjusters import AdjustInputs
 
-SPEED_KEYS = ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct")
+SPEED_KEYS = SPEEDS.ALL
 GOLDEN = 0.6180339887498949    # the golden ratio's fraction: evenly spread, never repeating
 
 
 class Adjust(Leaf):
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, read=SPEED_KEYS, write=SPEED_KEYS)
+    """Run the scenario's adjuster on the statistics; write the speeds it returns."""
+
+    READS = SPEEDS.ALL
+    WRITES = SPEEDS.ALL
 
     def update(self) -> Status:
         s = self.ctx.stats
@@ -38,12 +40,15 @@ class Adjust(Leaf):
 
 
 class CheckDrift(Leaf):
-    """Re-checks during the run that the Galil's and the robot's belt counts still agree
-    (issue 15, finding 11): commissioning checks it once, but a counter that loses pulses
+    """Re-checks during the run that the Galil's and the robot's belt counts still agree:
+    commissioning checks it once, but a counter that loses pulses
     later moves every pick by the difference. Reads only cached counts, so it never
     blocks; samples every ``encoder.drift_check_s``. Past ``drift_warn_mm`` it records an
     ``encoder_drift`` event; past ``drift_limit_mm`` it asks the cell to go to FAULT (the
     operator's reset re-anchors the sync with the belt at rest)."""
+
+    READS = (FAULTS.ESCALATE,)
+    WRITES = (FAULTS.ESCALATE,)
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
@@ -51,7 +56,6 @@ class CheckDrift(Leaf):
         self.spec = enc
         self.watch = DriftWatch(ctx.encoder, enc.counts_per_mm,
                                 robot_sample_s=enc.robot_sample_s)
-        self.bb = client(self, write=("/faults/escalate",), read=("/faults/escalate",))
         self._next = 0.0
         self._k = 0
         self._warned = False
@@ -78,10 +82,10 @@ class CheckDrift(Leaf):
             return Status.SUCCESS
         self.feedback_message = f"encoder drift {drift:+.2f} mm"
         if abs(drift) > self.spec.drift_limit_mm:
-            if self.bb.get("/faults/escalate") is None:
+            if self.bb.get(FAULTS.ESCALATE) is None:
                 stats.emit(now, "encoder_drift", mm=round(drift, 2), level="fault")
                 stats.faults["encoder_drift"] += 1
-                self.bb.set("/faults/escalate",
+                self.bb.set(FAULTS.ESCALATE,
                             f"belt encoders disagree by {drift:+.1f} mm (limit "
                             f"{self.spec.drift_limit_mm:g} mm): the Galil's and the robot's "
                             "counts of the belt drifted apart; check the encoder cable and "

@@ -12,12 +12,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import py_trees
-from py_trees.common import Access, Status
+from py_trees.common import Status
 
+from feeder_bt.behaviours.board import ROOT, Board
+from feeder_bt.behaviours.keys import FAULTS, INITIAL, SPEEDS
 from feeder_bt.core.clock import EPS, Clock
 from feeder_bt.core.encoder import EncoderSync
 from feeder_bt.core.errors import HalError
-from feeder_bt.core.jobs import Job, JobState
+from feeder_bt.core.jobs import Activity, Job, JobState
 from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
@@ -131,6 +133,10 @@ class Ctx:
     vision: Any = None                   # VisionWorker, created per scenario
     adjuster: Any = None
     extras: dict[str, Any] = field(default_factory=dict)
+    #: the cell's blackboard; a tree built outside a cell uses the root one
+    board: Board = field(default_factory=lambda: ROOT)
+    #: the cell's news for its ticker (jobs ended, cycles restarted)
+    activity: Activity = field(default_factory=Activity)
 
     def now(self) -> float:
         return self.clock.now()
@@ -138,54 +144,33 @@ class Ctx:
 
 # --------------------------------------------------------------------------- blackboard
 
-SPEEDS = "/speeds"
-FAULTS = "/faults"
 
-
-def client(owner: py_trees.behaviour.Behaviour, read: tuple[str, ...] = (),
-           write: tuple[str, ...] = ()) -> py_trees.blackboard.Client:
-    """A blackboard client registering only the keys a leaf uses."""
-    bb = owner.attach_blackboard_client(name=owner.name)
-    for key in read:
-        bb.register_key(key=key, access=Access.READ)
-    for key in write:
-        bb.register_key(key=key, access=Access.WRITE)
-    return bb
-
-
-def init_blackboard(scenario: Scenario) -> None:
+def init_blackboard(scenario: Scenario, board: Board = ROOT) -> None:
     """Fresh blackboard for a scenario: speeds from the YAML, no faults."""
-    py_trees.blackboard.Blackboard.clear()
-    bb = py_trees.blackboard.Client(name="cell")
-    for key in ("/speeds/horizontal_mm_s", "/speeds/incline_pct", "/speeds/robot_speed_pct",
-                "/present/request", "/present/completed", "/retrieve/part", "/retrieve/phase",
-                "/retrieve/error", "/faults/escalate", "/locate/frame", "/locate/result",
-                "/locate/found", "/locate/error", "/present/error", "/present/hold"):
-        bb.register_key(key=key, access=Access.WRITE)
-    bb.set("/speeds/horizontal_mm_s", scenario.present.horizontal_mm_s)
-    bb.set("/speeds/incline_pct", scenario.present.incline_pct)
-    bb.set("/speeds/robot_speed_pct", scenario.retrieve.robot_speed_pct)
-    bb.set("/present/request", None)
-    bb.set("/present/completed", 0)
-    bb.set("/retrieve/part", None)
-    bb.set("/retrieve/phase", None)    # what the robot was last told to do with the part
-    bb.set("/retrieve/error", None)
-    bb.set("/locate/error", None)      # read by the fallbacks even when no job ever failed
-    bb.set("/present/error", None)
-    bb.set("/present/hold", False)     # locate's golden-image recovery holds the incline
-    bb.set("/faults/escalate", None)
-    bb.set("/locate/frame", None)
-    bb.set("/locate/result", None)
-    bb.set("/locate/found", 0)
+    board.reset({SPEEDS.HORIZONTAL: scenario.present.horizontal_mm_s,
+                 SPEEDS.INCLINE: scenario.present.incline_pct,
+                 SPEEDS.ROBOT: scenario.retrieve.robot_speed_pct, **INITIAL})
 
 
 # --------------------------------------------------------------------------- leaves
 
 
 class Leaf(py_trees.behaviour.Behaviour):
+    """A leaf of the cell's trees.
+
+    ``READS`` and ``WRITES`` are its ports (BehaviorTree.CPP's ``providedPorts()``): the
+    blackboard keys it uses, from ``keys``. Its client (``self.bb``) is registered from
+    them and nothing else, so py_trees refuses a key the leaf did not declare. A leaf whose
+    key is an argument (``ErrorIs``) sets ``READS`` on the instance before this runs."""
+
+    READS: tuple[str, ...] = ()
+    WRITES: tuple[str, ...] = ()
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name)
         self.ctx = ctx
+        board = getattr(ctx, "board", ROOT)     # a stand-in context (a test's) may have none
+        self.bb = board.client(self, read=self.READS, write=self.WRITES)
 
 
 class JobLeaf(Leaf):
@@ -197,12 +182,16 @@ class JobLeaf(Leaf):
     # arriving says nothing about a camera that failed
     recovers: tuple[str, ...] | None = None
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """A leaf that reports faults to a key declares that key among its ports."""
+        super().__init_subclass__(**kwargs)
+        if cls.fault_key and cls.fault_key not in cls.WRITES:
+            raise TypeError(f"{cls.__name__}: fault_key {cls.fault_key} is not in its WRITES")
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
         self.job: Job | None = None
         self.error: HalError | None = None
-        if self.fault_key:
-            self.bb_fault = client(self, write=(self.fault_key,))
 
     def start(self) -> Job:
         raise NotImplementedError
@@ -213,7 +202,7 @@ class JobLeaf(Leaf):
     def on_failure(self, error: HalError) -> Status:
         self.feedback_message = str(error)
         if self.fault_key:
-            self.bb_fault.set(self.fault_key, error)
+            self.bb.set(self.fault_key, error)
         return Status.FAILURE
 
     def initialise(self) -> None:
@@ -257,9 +246,9 @@ class ErrorIs(Leaf):
     """Condition: the last error in ``key`` is of one of ``kinds``."""
 
     def __init__(self, name: str, ctx: Ctx, key: str, kinds: tuple[str, ...]) -> None:
+        self.READS = (key,)
         super().__init__(name, ctx)
         self.key, self.kinds = key, kinds
-        self.bb = client(self, read=(key,))
 
     def update(self) -> Status:
         err = self.bb.get(self.key)
@@ -271,9 +260,9 @@ class CountFault(Leaf):
     branch retries through the same kind of fault is one more attempt, not a new fault."""
 
     def __init__(self, name: str, ctx: Ctx, key: str, counter: str | None = None) -> None:
+        self.READS = (key,)
         super().__init__(name, ctx)
         self.key, self.counter = key, counter
-        self.bb = client(self, read=(key,))
 
     def update(self) -> Status:
         err = self.bb.get(self.key)
@@ -300,9 +289,9 @@ class Retry(Leaf):
 
     def __init__(self, name: str, ctx: Ctx, key: str, first_s: float = 0.5,
                  max_s: float = 8.0, max_attempts: int = 8) -> None:
+        self.READS = (key,)
         super().__init__(name, ctx)
         self.key, self.first_s, self.max_s, self.max_attempts = key, first_s, max_s, max_attempts
-        self.bb = client(self, read=(key,))
         self.until = 0.0
         self.give_up = False
 
@@ -348,18 +337,20 @@ class Escalate(Leaf):
     is counted and the branch starts over, up to ``Retry``'s limit of attempts in a row.
     ``what`` may be a function, for a reason that says what happened (a count, a type)."""
 
+    WRITES = (FAULTS.ESCALATE,)
+
     def __init__(self, name: str, ctx: Ctx, key: str | None, what: str | Callable[[], str],
                  max_attempts: int = 8) -> None:
+        self.READS = (key, FAULTS.ESCALATE) if key else (FAULTS.ESCALATE,)
         super().__init__(name, ctx)
         self.key, self.what, self.max_attempts = key, what, max_attempts
-        self.bb = client(self, read=(key,) if key else (), write=("/faults/escalate",))
 
     def update(self) -> Status:
         err = self.bb.get(self.key) if self.key else None
         stats = self.ctx.stats
         if (self.key and err is not None and err.kind in TRANSIENT
                 and stats.attempts[self.key] < self.max_attempts
-                and self.bb.get("/faults/escalate") is None):
+                and self.bb.get(FAULTS.ESCALATE) is None):
             if stats.counted.get(self.key) is not err:
                 stats.counted[self.key] = err
                 if stats.is_retrying(self.key, err.kind):       # the same outage, still
@@ -374,8 +365,8 @@ class Escalate(Leaf):
             return Status.SUCCESS
         what = self.what() if callable(self.what) else self.what
         reason = f"{what}: {err}" if err is not None else what
-        if self.bb.get("/faults/escalate") is None:
-            self.bb.set("/faults/escalate", reason)
+        if self.bb.get(FAULTS.ESCALATE) is None:
+            self.bb.set(FAULTS.ESCALATE, reason)
             episode = err is not None and stats.is_retrying(self.key, err.kind)
             if err is None or (stats.counted.get(self.key) is not err and not episode):
                 self.ctx.stats.faults[getattr(err, "kind", "fatal")] += 1

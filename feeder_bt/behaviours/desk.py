@@ -25,6 +25,7 @@ from typing import Any
 from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx
+from feeder_bt.behaviours.keys import SPEEDS
 from feeder_bt.behaviours.retrieve import NextPart, count_retrieved
 from feeder_bt.core.clock import Clock
 from feeder_bt.core.part_protocol import (
@@ -200,7 +201,7 @@ class Desk(TrustRules):
         self.chooser: ServeRobots | None = None
         # is a robot's connection still open? (the TCP server knows; in process: yes)
         self.alive: Callable[[Hashable], bool] = lambda conn: True
-        # trust (issue 28): at most this many parts with one robot and not yet reported;
+        # trust: at most this many parts with one robot and not yet reported;
         # a robot whose parts expire unreported that many times running is cut off
         self.max_outstanding = 4
         self.cut_off_s = CUT_OFF_S
@@ -539,8 +540,8 @@ class ServeRobots(NextPart):
         queue = self.ctx.queue
         if len(queue) == 0:
             return None
-        self.v_mm_s = self.policy.belt_mm_s = float(self.bb.get("/speeds/horizontal_mm_s"))
-        self.policy.robot_pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        self.v_mm_s = self.policy.belt_mm_s = float(self.bb.get(SPEEDS.HORIZONTAL))
+        self.policy.robot_pct = float(self.bb.get(SPEEDS.ROBOT))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:

@@ -7,7 +7,8 @@ import math
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
+from feeder_bt.behaviours.keys import LOCATE, PRESENT
 from feeder_bt.core.encoder import diff
 from feeder_bt.core.jobs import Job
 from feeder_bt.core.parts import Part
@@ -20,7 +21,8 @@ from feeder_bt.vision.watch import recipe_watch
 class WaitTravel(JobLeaf):
     """Continuous mode: the conveyor's distance notification paces the frames."""
 
-    fault_key = "/locate/error"     # so the fallbacks never act on a stale grab error
+    fault_key = LOCATE.ERROR        # so the fallbacks never act on a stale grab error
+    WRITES = (LOCATE.ERROR,)
     recovers = ("comms_lost",)
 
     def start(self) -> Job:
@@ -31,34 +33,29 @@ class WaitTravel(JobLeaf):
 class Grab(JobLeaf):
     """Trigger the camera; the same trigger latches the conveyor encoder."""
 
-    fault_key = "/locate/error"
-
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, write=("/locate/frame",))
+    fault_key = LOCATE.ERROR
+    WRITES = (LOCATE.FRAME, LOCATE.ERROR)
 
     def start(self) -> Job:
         return self.ctx.hal.camera.grab()
 
     def on_success(self, result: Frame) -> Status:
-        self.bb.set("/locate/frame", result)
+        self.bb.set(LOCATE.FRAME, result)
         return Status.SUCCESS
 
 
 class Recognise(JobLeaf):
     """Run the scenario's recipe on the frame, on the vision worker."""
 
-    fault_key = "/locate/error"
-
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, read=("/locate/frame",), write=("/locate/result",))
+    fault_key = LOCATE.ERROR
+    READS = (LOCATE.FRAME,)
+    WRITES = (LOCATE.RESULT, LOCATE.ERROR)
 
     def start(self) -> Job:
-        return self.ctx.vision.recognise(self.bb.get("/locate/frame").image)
+        return self.ctx.vision.recognise(self.bb.get(LOCATE.FRAME).image)
 
     def on_success(self, result) -> Status:
-        self.bb.set("/locate/result", result)
+        self.bb.set(LOCATE.RESULT, result)
         self.ctx.stats.vision_ms.append(result.ms)
         self.ctx.stats.count("frames")
         return Status.SUCCESS
@@ -98,11 +95,11 @@ class Enqueue(Leaf):
     """Turn detections into parts in the belt frame, drop duplicates, queue the pickable."""
 
     _ids = itertools.count(1)
+    READS = (LOCATE.FRAME, LOCATE.RESULT)
+    WRITES = (LOCATE.FOUND,)
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/locate/frame", "/locate/result"),
-                         write=("/locate/found",))
         cam = ctx.cell.camera
         window_end = cam.calibration.origin_mm[0] + cam.height_px * cam.calibration.mm_per_px
         seen = ctx.extras.get("seen")
@@ -119,8 +116,8 @@ class Enqueue(Leaf):
         return sorted(parts, key=lambda d: -d.x_mm)
 
     def update(self) -> Status:
-        frame: Frame = self.bb.get("/locate/frame")
-        result = self.bb.get("/locate/result")
+        frame: Frame = self.bb.get(LOCATE.FRAME)
+        result = self.bb.get(LOCATE.RESULT)
         latch = self.ctx.encoder.to_robot(frame.latch)
         self.seen.prune(latch)
         stats, new = self.ctx.stats, 0
@@ -159,7 +156,7 @@ class Enqueue(Leaf):
             stats.count("gripper_blocked", blocked)
         recipe_watch(self.ctx.extras).feed(frame.t, result, stats)   # no silent zero
         hand_over(self.ctx.extras, frame, result)      # a reference, for the camera view
-        self.bb.set("/locate/found", new)
+        self.bb.set(LOCATE.FOUND, new)
         self.feedback_message = f"frame {frame.index}: {new} new"
         return Status.SUCCESS
 
@@ -184,12 +181,13 @@ class AdvanceIfNothing(Leaf):
     """Incremental mode: if the last frame found nothing, ask the presenter to advance
     (small; big after ``big_after`` empty frames in a row) and wait until it has."""
 
+    READS = (LOCATE.FOUND, PRESENT.COMPLETED)
+    WRITES = (PRESENT.REQUEST,)
+
     def __init__(self, name: str, ctx: Ctx, big_after: int = 3) -> None:
         super().__init__(name, ctx)
         self.big_after = big_after
         self.empty_run = big_after        # first advance loads the belt
-        self.bb = client(self, read=("/locate/found", "/present/completed"),
-                         write=("/present/request",))
         self.waiting_for: int | None = None
 
     def initialise(self) -> None:
@@ -197,17 +195,17 @@ class AdvanceIfNothing(Leaf):
 
     def update(self) -> Status:
         if self.waiting_for is None:
-            if self.bb.get("/locate/found") > 0:
+            if self.bb.get(LOCATE.FOUND) > 0:
                 self.empty_run = 0
                 return Status.SUCCESS
             self.empty_run += 1
             kind = "big" if self.empty_run >= self.big_after else "small"
             if kind == "big":
                 self.empty_run = 0
-            self.bb.set("/present/request", kind)
-            self.waiting_for = self.bb.get("/present/completed") + 1
+            self.bb.set(PRESENT.REQUEST, kind)
+            self.waiting_for = self.bb.get(PRESENT.COMPLETED) + 1
             self.feedback_message = f"{kind} advance"
-        if self.bb.get("/present/completed") >= self.waiting_for:
+        if self.bb.get(PRESENT.COMPLETED) >= self.waiting_for:
             return Status.SUCCESS
         return Status.RUNNING
 
@@ -217,29 +215,28 @@ class ClearForGolden(JobLeaf):
     hold the incline (``/present/hold``) and let the horizontal belt carry off every part
     on it; incremental: move the horizontal belt its length."""
 
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, write=("/present/hold",))
+    WRITES = (PRESENT.HOLD,)
 
     def start(self) -> Job:
-        if self.ctx.hal.plate is not None:          # a plate is emptied by a purge (issue 31)
+        if self.ctx.hal.plate is not None:          # a plate is emptied by a purge
             return self.ctx.hal.plate.purge(10)
         conv = self.ctx.hal.conveyors["horizontal"]
         length = self.ctx.cell.conveyors["horizontal"].length_mm
         if self.ctx.scenario.present.mode == "continuous":
-            self.bb.set("/present/hold", True)
+            self.bb.set(PRESENT.HOLD, True)
             return conv.travelled(length)
         return conv.move(length, self.ctx.cell.conveyors["horizontal"].max_mm_s)
 
     def terminate(self, new_status: Status) -> None:
         super().terminate(new_status)
-        self.bb.set("/present/hold", False)
+        self.bb.set(PRESENT.HOLD, False)
 
 
 class GrabGolden(JobLeaf):
     """Set-up: grab the golden image (an empty, lit belt) for image subtraction."""
 
-    fault_key = "/locate/error"
+    fault_key = LOCATE.ERROR
+    WRITES = (LOCATE.ERROR,)
 
     def start(self) -> Job:
         return self.ctx.hal.camera.grab()

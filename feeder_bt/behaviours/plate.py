@@ -1,4 +1,4 @@
-"""Leaves of a vibratory-plate cell (issue 31), where a belt leaf must differ.
+"""Leaves of a vibratory-plate cell, where a belt leaf must differ.
 
 The thesis's incremental mode, with the plate as the presentation sub-system: *locate*
 looks at the settled plate and, when the look found nothing new, asks for a plate action
@@ -12,26 +12,24 @@ request goes over the blackboard as the belt's advance does (``/present/request`
 
 from __future__ import annotations
 
-import py_trees
-from py_trees.common import Access, Status
+from py_trees.common import Status
 
-from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
+from feeder_bt.behaviours.board import Board
+from feeder_bt.behaviours.keys import LOCATE, PLATE, PLATE_INITIAL, PRESENT
 from feeder_bt.core.errors import HalError, PlateFault
 from feeder_bt.core.jobs import Job, JobState
 from feeder_bt.hal.interfaces import PlateFeeder
 from feeder_bt.policy.plate import next_actions, part_area_mm2, view_of
 
-LOOK, PLAN = "/plate/look", "/plate/plan"
+LOOK, PLAN = PLATE.LOOK, PLATE.PLAN
 
 
-def init_plate_keys() -> None:
+def init_plate_keys(board: Board) -> None:
     """The plate's own blackboard keys, fresh for a run (``init_blackboard`` makes the
     belt's)."""
-    bb = py_trees.blackboard.Client(name="plate")
-    for key in (LOOK, PLAN):
-        bb.register_key(key=key, access=Access.WRITE)
-    bb.set(LOOK, 0)
-    bb.set(PLAN, None)
+    for key, value in PLATE_INITIAL.items():
+        board.set(key, value)
 
 
 def _plate(ctx: Ctx) -> PlateFeeder:
@@ -43,7 +41,8 @@ def _plate(ctx: Ctx) -> PlateFeeder:
 class InitPlate(JobLeaf):
     """Set-up and recovery: home the plate's drives (nothing is accepted before)."""
 
-    fault_key = "/present/error"
+    fault_key = PRESENT.ERROR
+    WRITES = (PRESENT.ERROR,)
 
     def start(self) -> Job:
         return _plate(self.ctx).init()
@@ -54,7 +53,8 @@ class PurgePlate(JobLeaf):
     plate's ``ClearWindow``): the longest purge the feeder takes (127, Table 3-2) is
     more than the plate's length needs; ``PURGE_REPS`` carries every part off."""
 
-    fault_key = "/present/error"
+    fault_key = PRESENT.ERROR
+    WRITES = (PRESENT.ERROR,)
     PURGE_REPS = 10
 
     def start(self) -> Job:
@@ -65,7 +65,8 @@ class ResetPlate(JobLeaf):
     """Recovery: clear the drive's error ("Error must be reset before operation can
     continue", AnyFeeder Guide Table 3-5)."""
 
-    fault_key = "/present/error"
+    fault_key = PRESENT.ERROR
+    WRITES = (PRESENT.ERROR,)
 
     def start(self) -> Job:
         return _plate(self.ctx).reset()
@@ -81,10 +82,11 @@ class ServePlate(Leaf):
     plate's error in ``/present/error``; the request stays, to be run again after the
     recovery."""
 
+    READS = (PRESENT.REQUEST, PRESENT.COMPLETED)
+    WRITES = (PRESENT.REQUEST, PRESENT.COMPLETED, PRESENT.ERROR)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/present/request",),
-                         write=("/present/request", "/present/completed", "/present/error"))
         self.job: Job | None = None
         self.todo: list[tuple[str, int]] = []
 
@@ -107,7 +109,7 @@ class ServePlate(Leaf):
 
     def update(self) -> Status:
         if self.job is None and not self.todo:
-            request = self.bb.get("/present/request")
+            request = self.bb.get(PRESENT.REQUEST)
             if not request:
                 return Status.RUNNING
             self.todo = list(request)
@@ -121,15 +123,15 @@ class ServePlate(Leaf):
                 return Status.RUNNING
             if state is not JobState.SUCCEEDED:
                 err = self.job.error or PlateFault(f"{self.job.name} {state.value}")
-                self.bb.set("/present/error", err)
+                self.bb.set(PRESENT.ERROR, err)
                 self.feedback_message = str(err)
                 self.job, self.todo = None, []
                 return Status.FAILURE
             self.job = None
             if not self.todo:
-                self.ctx.stats.succeeded("/present/error", self.ctx.now(), None)
-                self.bb.set("/present/request", None)
-                self.bb.set("/present/completed", self.bb.get("/present/completed") + 1)
+                self.ctx.stats.succeeded(PRESENT.ERROR, self.ctx.now(), None)
+                self.bb.set(PRESENT.REQUEST, None)
+                self.bb.set(PRESENT.COMPLETED, self.bb.get(PRESENT.COMPLETED) + 1)
                 return Status.SUCCESS
 
     def terminate(self, new_status: Status) -> None:
@@ -142,10 +144,11 @@ class AskPlate(Leaf):
     look to the adjuster (``/plate/look``), wait for its plan, ask the presenter to run it
     and wait until it has. Parts seen before an action moved them are forgotten then."""
 
+    READS = (LOCATE.FOUND, PRESENT.COMPLETED, LOOK, PLAN)
+    WRITES = (PRESENT.REQUEST, LOOK)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/locate/found", "/present/completed", LOOK, PLAN),
-                         write=("/present/request", LOOK))
         self.look = 0
         self.waiting_for: int | None = None
 
@@ -155,7 +158,7 @@ class AskPlate(Leaf):
 
     def update(self) -> Status:
         if self.look == 0:
-            if self.bb.get("/locate/found") > 0:
+            if self.bb.get(LOCATE.FOUND) > 0:
                 return Status.SUCCESS
             self.look = self.bb.get(LOOK) + 1
             self.bb.set(LOOK, self.look)
@@ -164,11 +167,11 @@ class AskPlate(Leaf):
             plan = self.bb.get(PLAN)
             if plan is None or plan[0] != self.look:
                 return Status.RUNNING
-            self.bb.set("/present/request", plan[1])
-            self.waiting_for = self.bb.get("/present/completed") + 1
+            self.bb.set(PRESENT.REQUEST, plan[1])
+            self.waiting_for = self.bb.get(PRESENT.COMPLETED) + 1
             self.ctx.clock.wake_at(self.ctx.now() + 1e-3)    # news for present: next tick
             self.feedback_message = ", ".join(f"{a} x{n}" for a, n in plan[1])
-        if self.bb.get("/present/completed") >= self.waiting_for:
+        if self.bb.get(PRESENT.COMPLETED) >= self.waiting_for:
             seen = self.ctx.extras.get("seen")
             if seen is not None:
                 seen.parts = []         # the parts moved: every part is new to the next look
@@ -179,9 +182,10 @@ class AskPlate(Leaf):
 class WaitLook(Leaf):
     """Adjust: RUNNING until the locator hands over a look to judge."""
 
+    READS = (LOOK,)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=(LOOK,))
         self.judged = 0
 
     def update(self) -> Status:
@@ -193,14 +197,16 @@ class ChoosePlateAction(Leaf):
     too few parts: dispense; clustered at one end: feed the other way; many unpickable:
     flip; crowded: purge (``plate_policy.next_actions``)."""
 
+    READS = (LOOK, LOCATE.RESULT)
+    WRITES = (PLAN,)
+
     def __init__(self, name: str, ctx: Ctx, waiter: WaitLook) -> None:
         super().__init__(name, ctx)
         self.waiter = waiter
-        self.bb = client(self, read=(LOOK, "/locate/result"), write=(PLAN,))
 
     def update(self) -> Status:
         look = self.bb.get(LOOK)
-        view = view_of(self.bb.get("/locate/result"), self.ctx.cell.plate,
+        view = view_of(self.bb.get(LOCATE.RESULT), self.ctx.cell.plate,
                        part_area_mm2(self.ctx.scenario.vision))
         actions, why = next_actions(view, self.ctx.scenario.present.plate)
         self.bb.set(PLAN, (look, actions))

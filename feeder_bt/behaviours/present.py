@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
+from feeder_bt.behaviours.keys import PRESENT, SPEEDS
 from feeder_bt.core.jobs import Job, JobState
 
 
@@ -13,11 +14,11 @@ class RunConveyors(Leaf):
 
     The incline runs at ``incline_pct`` % of the horizontal speed (thesis 8.1.3)."""
 
+    READS = (SPEEDS.HORIZONTAL, SPEEDS.INCLINE, PRESENT.HOLD)
+    WRITES = (PRESENT.ERROR,)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/incline_pct",
-                                     "/present/hold"),
-                         write=("/present/error",))
         self.jobs: list[Job] = []
         self.commanded: tuple[float, float] | None = None
 
@@ -26,9 +27,9 @@ class RunConveyors(Leaf):
         self.jobs = []
 
     def update(self) -> Status:
-        h = float(self.bb.get("/speeds/horizontal_mm_s"))
-        i = h * float(self.bb.get("/speeds/incline_pct")) / 100.0
-        if self.bb.get("/present/hold"):
+        h = float(self.bb.get(SPEEDS.HORIZONTAL))
+        i = h * float(self.bb.get(SPEEDS.INCLINE)) / 100.0
+        if self.bb.get(PRESENT.HOLD):
             i = 0.0
         if self.commanded != (h, i):
             conv = self.ctx.hal.conveyors
@@ -46,7 +47,7 @@ class RunConveyors(Leaf):
         return Status.RUNNING
 
     def _failed(self, error) -> Status:
-        self.bb.set("/present/error", error)
+        self.bb.set(PRESENT.ERROR, error)
         self.feedback_message = str(error)
         self.commanded = None               # after the recovery, command the speeds afresh
         return Status.FAILURE
@@ -65,12 +66,12 @@ class RunConveyors(Leaf):
 class ServeAdvance(JobLeaf):
     """Incremental mode: wait for a request from the locator, then advance the belts."""
 
-    fault_key = "/present/error"
+    fault_key = PRESENT.ERROR
+    READS = (PRESENT.REQUEST, PRESENT.COMPLETED)
+    WRITES = (PRESENT.REQUEST, PRESENT.COMPLETED, PRESENT.ERROR)
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/present/request",),
-                         write=("/present/request", "/present/completed"))
         self.kind: str | None = None
 
     def initialise(self) -> None:
@@ -79,7 +80,7 @@ class ServeAdvance(JobLeaf):
 
     def update(self) -> Status:
         if self.job is None:
-            self.kind = self.bb.get("/present/request")
+            self.kind = self.bb.get(PRESENT.REQUEST)
             if self.kind is None:
                 return Status.RUNNING
             self.job = self.start()
@@ -96,15 +97,16 @@ class ServeAdvance(JobLeaf):
         return conv["horizontal"].move(p.small_advance_mm, h_speed)
 
     def on_success(self, result: object) -> Status:
-        self.bb.set("/present/request", None)
-        self.bb.set("/present/completed", self.bb.get("/present/completed") + 1)
+        self.bb.set(PRESENT.REQUEST, None)
+        self.bb.set(PRESENT.COMPLETED, self.bb.get(PRESENT.COMPLETED) + 1)
         return Status.SUCCESS
 
 
 class Shake(JobLeaf):
     """Jam recovery: jog the horizontal belt back and forth to free the parts."""
 
-    fault_key = "/present/error"
+    fault_key = PRESENT.ERROR
+    WRITES = (PRESENT.ERROR,)
     AMPLITUDE_MM, CYCLES = 20.0, 3
 
     def start(self) -> Job:

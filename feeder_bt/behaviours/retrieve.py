@@ -10,7 +10,8 @@ from __future__ import annotations
 
 from py_trees.common import Status
 
-from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf, client
+from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
+from feeder_bt.behaviours.keys import RETRIEVE, SPEEDS
 from feeder_bt.behaviours.policies import POLICIES
 from feeder_bt.core.errors import HalError, UnknownPart
 from feeder_bt.core.geometry import wrap_deg
@@ -31,10 +32,11 @@ class NextPart(Leaf):
     """Take the next part by policy; drop parts already too far to catch (thesis 5.2.2
     ``too_far``). RUNNING while the queue is empty — it never blocks."""
 
+    READS = (SPEEDS.HORIZONTAL, SPEEDS.ROBOT)
+    WRITES = (RETRIEVE.PART, RETRIEVE.ERROR)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/speeds/horizontal_mm_s", "/speeds/robot_speed_pct"),
-                         write=("/retrieve/part", "/retrieve/error"))
         self.policy = POLICIES[ctx.scenario.retrieve.policy](ctx)
         kit = KitTracker.of(ctx.scenario.retrieve)
         stats = ctx.stats
@@ -51,8 +53,8 @@ class NextPart(Leaf):
         if len(queue) == 0:
             self.feedback_message = "waiting for a part"
             return Status.RUNNING
-        self.policy.belt_mm_s = float(self.bb.get("/speeds/horizontal_mm_s"))
-        self.policy.robot_pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        self.policy.belt_mm_s = float(self.bb.get(SPEEDS.HORIZONTAL))
+        self.policy.robot_pct = float(self.bb.get(SPEEDS.ROBOT))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
         gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
         if gone:
@@ -65,13 +67,13 @@ class NextPart(Leaf):
             self.feedback_message = (f"waiting for a {' or '.join(sorted(wanted))}"
                                      if wanted else "waiting for a part")
             return Status.RUNNING
-        self.bb.set("/retrieve/part", part)
-        self.bb.set("/retrieve/error", None)
+        self.bb.set(RETRIEVE.PART, part)
+        self.bb.set(RETRIEVE.ERROR, None)
         self.feedback_message = f"part {part.id} ({part.type})"
         return Status.SUCCESS
 
 
-PHASE = "/retrieve/phase"
+PHASE = RETRIEVE.PHASE
 
 
 class FailedPicksBelow(Leaf):
@@ -82,13 +84,11 @@ class FailedPicksBelow(Leaf):
     each miss is not enough, the cell must stop. By type, since a part that cannot be
     gripped fails between picks of another that can."""
 
-    def __init__(self, name: str, ctx: Ctx) -> None:
-        super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part",))
+    READS = (RETRIEVE.PART,)
 
     def update(self) -> Status:
         stats, limit = self.ctx.stats, self.ctx.scenario.retrieve.max_failed_picks
-        part = self.bb.get("/retrieve/part")
+        part = self.bb.get(RETRIEVE.PART)
         ptype = part.type if part is not None else "?"
         stats.failed_picks_in_a_row[ptype] += 1
         n = stats.failed_picks_in_a_row[ptype]
@@ -115,21 +115,21 @@ class PartJob(JobLeaf):
     A pick or place is timed on the cell's clock (``timing``) for the robot model fitted
     online (``feeder_bt.robot.fit``); only one that ends by itself, successfully, counts."""
 
-    fault_key = "/retrieve/error"
+    fault_key = RETRIEVE.ERROR
+    READS = (RETRIEVE.PART, SPEEDS.ROBOT)
+    WRITES = (PHASE, RETRIEVE.ERROR)
 
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/retrieve/part", "/speeds/robot_speed_pct"),
-                         write=(PHASE,))
         self.timing: Timing | None = None
 
     @property
     def part(self) -> Part:
-        return self.bb.get("/retrieve/part")
+        return self.bb.get(RETRIEVE.PART)
 
     def _timing(self, kind: str, **kw: object) -> Timing:
         pose = self.ctx.hal.robot_position.pose()
-        pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        pct = float(self.bb.get(SPEEDS.ROBOT))
         return Timing(kind, self.ctx.now(), (pose.x, pose.y), pct, **kw)  # type: ignore[arg-type]
 
 
@@ -223,6 +223,7 @@ class Reconcile(PartJob):
     - the gripper holds something no pick of ours gripped: ``UnknownPart``."""
 
     recovers = ("comms_lost",)      # a reply proves the link, not the arm's power
+    READS = (*PartJob.READS, PHASE)
 
     def start(self) -> Job:
         self.feedback_message = "asking the robot what it holds"
@@ -266,10 +267,11 @@ class Reconcile(PartJob):
 class PhaseIs(Leaf):
     """Condition: the retriever's record of the part is ``phase`` (None: nothing pending)."""
 
+    READS = (PHASE,)
+
     def __init__(self, name: str, ctx: Ctx, phase: str | None) -> None:
         super().__init__(name, ctx)
         self.phase = phase
-        self.bb = client(self, read=(PHASE,))
 
     def update(self) -> Status:
         return Status.SUCCESS if self.bb.get(PHASE) == self.phase else Status.FAILURE
@@ -287,7 +289,8 @@ class Recover(JobLeaf):
     success is the servo fault's recovery; if a link drop cuts its reply, the controller
     may have finished it anyway, and the next motion that succeeds is the recovery."""
 
-    fault_key = "/retrieve/error"
+    fault_key = RETRIEVE.ERROR
+    WRITES = (RETRIEVE.ERROR,)
 
     def start(self) -> Job:
         self.ctx.stats.recovering(self.fault_key, "servo_timeout")
@@ -295,7 +298,8 @@ class Recover(JobLeaf):
 
 
 class MoveSafe(JobLeaf):
-    fault_key = "/retrieve/error"
+    fault_key = RETRIEVE.ERROR
+    WRITES = (RETRIEVE.ERROR,)
 
     def start(self) -> Job:
         return self.ctx.hal.robot.move_safe()
@@ -309,13 +313,14 @@ class SetRobotSpeed(JobLeaf):
 class FollowRobotSpeed(Leaf):
     """Apply a robot speed written to the blackboard (by the adjuster or the operator)."""
 
+    READS = (SPEEDS.ROBOT,)
+
     def __init__(self, name: str, ctx: Ctx) -> None:
         super().__init__(name, ctx)
-        self.bb = client(self, read=("/speeds/robot_speed_pct",))
         self.applied: float | None = None
 
     def update(self) -> Status:
-        pct = float(self.bb.get("/speeds/robot_speed_pct"))
+        pct = float(self.bb.get(SPEEDS.ROBOT))
         if pct != self.applied:
             self.ctx.hal.robot.set_speed(pct)
             self.applied = pct

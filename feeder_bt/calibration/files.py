@@ -190,7 +190,7 @@ def apply_calibration_file(cell: CellSpec, line: int | None = None) -> CellSpec:
 
 
 # ---------------------------------------------------------------------------- robot frame
-# FRAME_SPEC (issue 25): ``robot.frame_file`` names a file holding ``base_mm: [x, y]`` and
+# FRAME_SPEC: ``robot.frame_file`` names a file holding ``base_mm: [x, y]`` and
 # ``base_deg: a``, the robot base's pose in the cell frame, which `feeder commission adept`
 # fits from touch points; its values replace ``robot.base_mm``/``robot.base_deg``.
 FRAME_REQUIRED = ("base_mm", "base_deg")

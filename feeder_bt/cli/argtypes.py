@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from feeder_bt.core.errors import ConfigError
+
 
 def _number(text: str, ok, what: str) -> float:
     try:
@@ -36,3 +38,23 @@ def positive_int(text: str) -> int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
     return v
+
+
+def expect_kind(path: str, kind: str, how: str, hint: str | None = None) -> None:
+    """A file given where another kind was expected is named as what it is, in one line
+    (not a line per key the other kind does not have); ``hint`` says what to give instead."""
+    from feeder_bt.config.schema import describe, file_kind
+    found = file_kind(path)
+    if found is None or found == kind:
+        return                    # the loader reports anything else in its own words
+    if hint is not None:
+        raise ConfigError(f"this is {describe(found)}, not {describe(kind)}: {hint}", file=path)
+    where = {"scenario": "give it as the first argument of `feeder run`",
+             "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
+             "faults": f"give it with --faults after a scenario "
+                       f"(feeder run SCENARIO --faults {path})",
+             "supply": f"give it with --supply after a scenario "
+                       f"(feeder run SCENARIO --supply {path})"}
+    how = f" ({how})" if how else ""
+    raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
+                      f"{where[found]}", file=path)

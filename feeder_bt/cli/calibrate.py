@@ -53,6 +53,7 @@ from feeder_bt.calibration.drivers import OperatorTouch, PlantToucher, real_wait
 from feeder_bt.calibration.files import calibration_path, write_calibration_file
 from feeder_bt.calibration.procedure import CalibrationError
 from feeder_bt.calibration.targets import parse_board
+from feeder_bt.cli.argtypes import expect_kind
 from feeder_bt.config import load_cell
 from feeder_bt.core.clock import SimClock
 from feeder_bt.core.errors import FeederError
@@ -148,6 +149,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    expect_kind(args.cell, "cell", "", "give the cell description it runs on (its `cell:` key names it)")
     cell = load_cell(args.cell, calibration_files=False)   # we may be about to write them
     if args.what == "camera":
         return _camera(args, cell)

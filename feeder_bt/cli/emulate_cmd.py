@@ -33,7 +33,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                                               "the person's actions on standard input")
     p.add_argument("controller", choices=["galil", "adept", "cell", "plate"],
                    help="galil, adept, or cell (both and the camera over one simulated cell); "
-                        "plate: an AnyFeeder over a simulated plate (issue 31)")
+                        "plate: an AnyFeeder over a simulated plate")
     p.add_argument("scenario", nargs="?", default=DEFAULT_SCENARIO,
                    help=f"scenario whose parts the simulated cell carries (default {DEFAULT_SCENARIO})")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
@@ -48,6 +48,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         "(mm, mm, deg): what `feeder commission adept` must measure")
     p.add_argument("--servo-error-at", type=int, default=None, metavar="N",
                    help="plate: the Nth action ends with a servo error (m13)")
+    p.add_argument("--echo", action="store_true",
+                   help="plate: echo each command line before the motor codes, as some "
+                        "feeders do")
+    p.add_argument("--motor-gap", type=float, default=0.0, metavar="S",
+                   help="plate: motor 2 reports this long after motor 1 (default 0)")
+    p.add_argument("--late-error-at", type=int, default=None, metavar="N",
+                   help="plate: in the Nth action motor 2 never starts and reports m28 "
+                        "(no sync) after motor 1 is done")
     p.add_argument("--camera-delay-ms", type=float, default=0.0, metavar="MS",
                    help="the emulated camera exposes this long after its trigger (default 0): "
                         "what the timing step of `feeder commission camera` must find")
@@ -96,7 +104,7 @@ def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
     from feeder_bt.sim.realtime import Plant
 
     if args.controller == "plate":
-        return emulate_plate(args, stop)
+        return emulate_plate(args, stop, stdin)
     scenario, cell = load_scenario(args.scenario, args.cell)
     plant = Plant(scenario, cell, args.seed).start()
     stop = stop or threading.Event()
@@ -150,10 +158,12 @@ def cmd_emulate(args: argparse.Namespace, stop: threading.Event | None = None,
 PLATE_SCENARIO = "scenarios/plate_lenses.yaml"
 
 
-def emulate_plate(args: argparse.Namespace, stop: threading.Event | None = None) -> int:
+def emulate_plate(args: argparse.Namespace, stop: threading.Event | None = None,
+                  stdin: TextIO | None = None) -> int:
     """``feeder emulate plate``: the AnyFeeder emulator over a simulated plate, its bytes
-    raw on ``--port`` (a serial-to-Ethernet bridge), until Ctrl-C or SIGTERM."""
-    from feeder_bt.emulators.anyfeeder import AnyFeederEmulator
+    raw on ``--port`` (a serial-to-Ethernet bridge), until Ctrl-C or SIGTERM; the person's
+    eyes on standard input (``look``)."""
+    from feeder_bt.emulators.anyfeeder import AnyFeederEmulator, PlateOperator
     from feeder_bt.sim.realtime import Plant
 
     path = PLATE_SCENARIO if args.scenario == DEFAULT_SCENARIO else args.scenario
@@ -166,8 +176,16 @@ def emulate_plate(args: argparse.Namespace, stop: threading.Event | None = None)
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
     plant = Plant(scenario, cell, args.seed).start()
     emu = AnyFeederEmulator(plant, host=args.host, port=args.port or 0,
-                            servo_error_at=getattr(args, "servo_error_at", None)).start()
-    print(f"anyfeeder emulator: socket://{args.host}:{emu.port}", flush=True)
+                            servo_error_at=getattr(args, "servo_error_at", None),
+                            echo=getattr(args, "echo", False),
+                            motor_gap_s=getattr(args, "motor_gap", 0.0),
+                            late_error_at=getattr(args, "late_error_at", None)).start()
+    print(f"anyfeeder emulator: socket://{args.host}:{emu.port}"
+          f"{' (echo)' if emu.echo else ''}", flush=True)
+    print("actions on standard input ('help'); Ctrl-C to stop", flush=True)
+    threading.Thread(target=read_actions, args=(PlateOperator(emu), stdin or sys.stdin,
+                                                sys.stdout, threading.Lock()),
+                     name="operator", daemon=True).start()
     try:
         while not stop.wait(0.5):
             pass

@@ -10,9 +10,9 @@ import os
 import sys
 from pathlib import Path
 
-from feeder_bt.cli.argtypes import positive
+from feeder_bt.analysis.summary import summary
+from feeder_bt.cli.argtypes import expect_kind, positive
 from feeder_bt.core.errors import ConfigError, FeederError
-from feeder_bt.core.vocabulary import story_text
 
 # feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
@@ -131,8 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     from feeder_bt.config.schema import KINDS
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
-                       "that checks YAML as you type (docs/getting-started.md)")
-    s.add_argument("kind", choices=list(KINDS))
+                       "that checks YAML as you type (docs/getting-started.md), or of "
+                       "the run report (--report), the JSON contract for CI")
+    s.add_argument("kind", choices=[*KINDS, "report"])
     s.add_argument("-o", "--output", help="write to this file instead of standard output")
 
     r.set_defaults(handler=cmd_run)
@@ -157,23 +158,6 @@ def _check_run_args(args: argparse.Namespace) -> None:
                             (args.supply, "supply", "--supply")):
         if path is not None:
             expect_kind(path, kind, how)
-
-
-def expect_kind(path: str, kind: str, how: str) -> None:
-    """A file given where another kind was expected is named as what it is."""
-    from feeder_bt.config.schema import describe, file_kind
-    found = file_kind(path)
-    if found is None or found == kind:
-        return                    # the loader reports anything else in its own words
-    where = {"scenario": "give it as the first argument of `feeder run`",
-             "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
-             "faults": f"give it with --faults after a scenario "
-                       f"(feeder run SCENARIO --faults {path})",
-             "supply": f"give it with --supply after a scenario "
-                       f"(feeder run SCENARIO --supply {path})"}
-    how = f" ({how})" if how else ""
-    raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
-                      f"{where[found]}", file=path)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -208,90 +192,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.report:
         print(f"report: {args.report}")
     return 0
-
-
-def summary(report: dict) -> str:
-    """The run's summary (with its faults, misses and alarms: feeder_bt/core/vocabulary.py), lines that fit 80 columns; its parts/min is the report's and the
-    live view's last."""
-    p = report["parts"]
-    how = " (interrupted)" if report.get("interrupted") else ""
-    kinds = ", ".join(f"{k} {v}" for k, v in p["retrieved"].items())
-    return (f"{report['scenario']}: {report['state']}{how} after {report['feed_seconds']:.0f} s"
-            f" ({report['wall_seconds']:.1f} s wall)\n"
-            f"  {report['parts_per_minute']:.1f} parts/min, retrieved "
-            f"{sum(p['retrieved'].values())} ({kinds})\n"
-            f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
-            + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
-               if p.get("recirculated_per_placed") is not None else "")
-            + _ceiling_line(report) + _fit_line(report) + _robot_time_line(report)
-            + _kits_line(report)
-            + _robots_line(report) + "\n"
-            + story_text(report))
-
-
-def _fit_line(report: dict) -> str:
-    """The robot model the policies learnt, and how well it predicted the arm's moves."""
-    fitted = (report.get("robot_model") or {}).get("fitted") or {}
-    res = fitted.get("residual") or {}
-    if not res.get("moves"):
-        return ""
-    return (f"\n  robot fit: x{fitted['time_scale']:.3f} {1000 * fitted['offset_s']:+.0f} ms;"
-            f" residual rms {res['rms_ms']:.0f} ms ({res['rms_pct']:.1f} %),"
-            f" max {res['max_ms']:.0f} ms")
-
-
-def _robot_time_line(report: dict) -> str:
-    """Where the arm's time went (``robot_time``): what limits the cell at a glance."""
-    rt = report.get("robot_time") or {}
-    if not rt:
-        return ""
-    return (f"\n  robot: cycles {rt['cycles_pct']:.1f} %, waiting for parts "
-            f"{rt['waiting_pct']:.1f} %, missed {rt['missed_pct']:.1f} %, "
-            f"idle {rt['idle_pct']:.1f} %")
-
-
-def _kits_line(report: dict) -> str:
-    """Kits (retrieve.kit or sequence): how many, how fast, against the kit ceiling."""
-    from feeder_bt.policy.kits import describe_kits
-    k = report.get("kits")
-    return f"\n  {describe_kits(k)}" if k else ""
-
-
-def _robots_line(report: dict) -> str:
-    """The part server's distrust (issue 28): PLACED reports the simulated world did not
-    see (not counted as retrieved) and robots cut off; nothing when there was none."""
-    ps = report.get("part_server") or {}
-    bad = [(ps.get("mismatch", 0), "PLACED the world did not see (not counted)"),
-           (ps.get("cut_off", 0), "robot(s) cut off for parts never reported")]
-    said = ", ".join(f"{n} {what}" for n, what in bad if n)
-    return f"\n  part server: {said}" if said else ""
-
-
-def _ceiling_line(report: dict) -> str:
-    """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
-    run came; with an inflow bound or the selection-aware robot bounds (a simulated run)
-    the bounds get lines of their own (80 columns)."""
-    if "ceiling_ppm" not in report:
-        return ""
-    pct = report["of_ceiling_pct"]
-    of = f": {pct:.0f} % of it" if pct is not None else ""
-    supply = f"supply {report['supply_bound_ppm']:.1f}"
-    if report.get("robot_bound_selection_ppm") is None and "inflow_bound_ppm" not in report:
-        return (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound; "
-                f"robot {report['robot_bound_ppm']:.1f}, {supply}){of}")
-    robot = f"robot {report['robot_bound_ppm']:.1f}"
-    if report.get("robot_bound_selection_ppm") is not None:
-        mean = report.get("robot_bound_mean_ppm")
-        robot += (" corner" + (f", {mean:.1f} mean" if mean is not None else "")
-                  + f", {report['robot_bound_selection_ppm']:.1f} selection;")
-    else:
-        robot += ","
-    out = (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound){of}"
-           f"\n  bounds: {robot} {supply}")
-    if "inflow_bound_ppm" in report:
-        out += (f"\n  inflow bound {report['inflow_bound_ppm']:.1f} parts/min (parts reach "
-                f"the robot {report['inflow_lag_s']:.1f} s after they come)")
-    return out
 
 
 def cmd_tree(args: argparse.Namespace) -> int:
@@ -358,8 +258,10 @@ def cmd_check(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
+    from feeder_bt.analysis.run_report import report_schema
     from feeder_bt.config.schema import schema
-    text = json.dumps(schema(args.kind), indent=2) + "\n"
+    doc = report_schema() if args.kind == "report" else schema(args.kind)
+    text = json.dumps(doc, indent=2) + "\n"
     if args.output:
         Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)
         Path(args.output).write_text(text)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,6 +63,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise BadInput(f"--frames must be >= 1, got {args.frames}")
     out = Path(args.out)
     got = render_frames(args.scenario, args.frames, args.seed, args.cell)
+    stale = clear_earlier_render(out)
     write_image(out / "golden.png", got.golden)
     for i, (img, truth) in enumerate(zip(got.frames, got.truth, strict=True)):
         write_image(out / f"frame_{i:03d}.png", img)
@@ -71,8 +73,26 @@ def cmd_render(args: argparse.Namespace) -> int:
     note = "" if len(got.frames) == args.frames else \
         f" (only {len(got.frames)} of {args.frames} within {MAX_RUN_S:.0f} s of feeding)"
     print(f"wrote golden.png and {len(got.frames)} frame(s) with {parts} part(s) in view "
-          f"to {out}{note}" + (", with truth JSON" if args.truth else ""))
+          f"to {out}{note}" + (", with truth JSON" if args.truth else "")
+          + (f"; removed {stale} file(s) of an earlier render there" if stale else ""))
     return 0
+
+
+def clear_earlier_render(out: Path) -> int:
+    """Remove what an earlier ``feeder render`` wrote to ``out`` (its golden image and its
+    frames with their truth), so that a folder holds one render and ``feeder locate
+    DIR/frame_*.png`` reads no frame of another scenario; any other file is left alone."""
+    if not out.is_dir():
+        return 0
+    old = [p for p in out.iterdir() if p.is_file() and (
+        p.name == "golden.png" or re.fullmatch(r"frame_\d{3,}\.(png|json)", p.name))]
+    for p in old:
+        try:
+            p.unlink()
+        except OSError as e:
+            raise BadInput(f"{p}: cannot remove the earlier render's file: "
+                           f"{e.strerror or e}") from None
+    return len(old)
 
 
 def render_frames(scenario_path: str, n: int, seed: int = 1,

@@ -85,7 +85,7 @@ def kits_line(row: dict[str, Any]) -> str:
 
 
 def access_counts(conn: Any, run_id: int) -> dict[str, int]:
-    """How many of each operator access event (issue 19) a run recorded."""
+    """How many of each operator access event a run recorded."""
     kinds = tuple(ACCESS_KINDS)
     marks = ",".join("?" * len(kinds))
     try:

@@ -1,4 +1,4 @@
-"""A vision class against its part's outline (issue 27, "no silent zero"): its area range
+"""A vision class against its part's outline ("no silent zero"): its area range
 and its rulers' ranges.
 
 A class whose ``area_mm2`` range cannot hold the area of the outline it names (a unit

@@ -51,6 +51,12 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         elif p.trigger == "Software":
             ctx.add_problem("camera.pylon.trigger_signal",
                             "pulses a line: set camera.pylon.trigger to Line1 (or Line2, Line3)")
+    if p.trigger == "Software":
+        for key, what in (("line_debouncer_us", "filters the trigger line"),
+                          ("trigger_delay_us", "delays a line trigger, never a software one")):
+            if getattr(p, key) is not None:
+                ctx.add_problem(f"camera.pylon.{key}", f"{what}: set camera.pylon.trigger "
+                                                       "to Line1 (or Line2, Line3)")
     e = cell.encoder
     if e.robot_start >= 2 ** e.robot_bits:
         ctx.add_problem("encoder.robot_start", f"must be < 2**robot_bits "
@@ -71,7 +77,7 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
     _check_galil(cell, ctx)
 
 
-# Galil wiring (issue 15; docs/real-cell.md): I/O bits start at 1, the input monitor reports
+# Galil wiring (docs/real-cell.md): I/O bits start at 1, the input monitor reports
 # inputs 1-8, or 1-16 on a card with 16 (``galil.inputs``: TI 1 is only valid on a 5-8 axis
 # card, Galil command reference, TI), and the DMC-21x3 latches each axis from its own input.
 GALIL_MAX_INPUT = 16
@@ -270,7 +276,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         if key.endswith("_mm_s"):
             speed(f"adjust.params.{key}", v,
                   "" if key in sc.adjust.params else f" (the {sc.adjust.algorithm} default)")
-    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range (issue 16)
+    cls = ADJUSTERS.get(sc.adjust.algorithm)     # the adjuster's whole output range
     limits = {"horizontal": hmax, "incline": imax}
     try:
         envelope = cls(ctx.adjust_params).envelope(pct) if cls is not None else []

@@ -38,7 +38,12 @@ from feeder_bt.core.model import (
     Threshold,
     VisionRecipe,
 )
-from feeder_bt.core.plate_model import PlatePolicy, PlateSpec
+from feeder_bt.core.plate_model import (
+    PlatePolicy,
+    PlateRepetitions,
+    PlateSpec,
+    PlateSpeeds,
+)
 
 # ============================================================================ allowed values
 
@@ -56,6 +61,9 @@ IO_DIRS: tuple[str, ...] = ("in", "out")
 #: mono formats a frame is converted from (GenICam SFNC names)
 PYLON_TRIGGERS: tuple[str, ...] = ("Software", "Line1", "Line2", "Line3")
 PYLON_PIXEL_FORMATS: tuple[str, ...] = ("Mono8", "Mono10", "Mono12", "Mono16")
+#: the FrameStart edges that give one frame per pulse (AnyEdge would give two, the Level
+#: modes a frame for as long as the line is held)
+PYLON_TRIGGER_ACTIVATIONS: tuple[str, ...] = ("RisingEdge", "FallingEdge")
 
 #: Shape kinds and the ``Shape`` fields each one is written with (all required).
 SHAPE_KINDS: dict[str, tuple[str, ...]] = {
@@ -120,6 +128,7 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (GalilSpec, "free_handles"): ("ours", "others", "none"),
     (PylonSpec, "trigger"): PYLON_TRIGGERS,
     (PylonSpec, "pixel_format"): PYLON_PIXEL_FORMATS,
+    (PylonSpec, "trigger_activation"): PYLON_TRIGGER_ACTIVATIONS,
 }
 
 #: Numeric fields: (dataclass, field) -> allowed interval. Cross-file limits (conveyor
@@ -179,6 +188,8 @@ RANGES: dict[tuple[type, str], Range] = {
     (PylonSpec, "frame_timeout_s"): Range(0.01, 60),
     (PylonSpec, "packet_size"): Range(220, 16404),        # GevSCPSPacketSize, bytes
     (PylonSpec, "inter_packet_delay"): NON_NEGATIVE,      # GevSCPD, ticks
+    (PylonSpec, "line_debouncer_us"): Range(0, 1_000_000),  # Basler: 0 to about 1 s
+    (PylonSpec, "trigger_delay_us"): Range(0, 10_000_000),  # Basler ace: 0 to 10 s
     (CameraCalibration, "mm_per_px"): POSITIVE,
     (TargetSpec, "max_rms_px"): POSITIVE,
     (TargetSpec, "max_belt_mm"): POSITIVE,
@@ -277,7 +288,7 @@ ADJUST_PARAMS: dict[str, dict[str, Range]] = {
 }
 ADJUST_ALGORITHMS: tuple[str, ...] = tuple(ADJUST_PARAMS)
 ENUMS[(AdjustParams, "algorithm")] = ADJUST_ALGORITHMS
-# a vibratory-plate cell (issue 31, scenario/plate_model.py)
+# a vibratory-plate cell (core/plate_model.py)
 ENUMS[(CellSpec, "presentation")] = ("belt", "plate")
 ENUMS[(PlatePolicy, "policy")] = ("smart", "fixed")
 for _f in ("feed_reps", "flip_reps", "dispense_reps"):
@@ -286,6 +297,15 @@ RANGES[(PlatePolicy, "purge_reps")] = Range(1, 127)     # Table 3-2: purge 1...1
 for _f in ("feed_mm_per_rep", "rep_s", "dispense_per_rep", "purge_mm_per_rep", "timeout_s"):
     RANGES[(PlateSpec, _f)] = POSITIVE
 RANGES[(PlateSpec, "flip_prob")] = Range(0, 1)
+for _f in ("quiet_s", "echo_probe_s"):
+    RANGES[(PlateSpec, _f)] = POSITIVE
+for _f in ("feed_forward", "feed_backward", "flip_forward", "flip_backward", "flip",
+           "dispense", "purge"):
+    RANGES[(PlateSpeeds, _f)] = Range(1, 10)            # Table 3-2: [speed]
+for _f in ("feed_forward", "feed_backward", "flip_forward", "flip_backward", "flip",
+           "dispense", "heavy_dispense"):
+    RANGES[(PlateRepetitions, _f)] = Range(1, 10)       # Table 3-2: [turns]
+RANGES[(PlateRepetitions, "purge")] = Range(1, 127)
 
 #: Ordering constraints between adjuster parameters: (algorithm, smaller, larger, strict).
 ADJUST_ORDER: tuple[tuple[str, str, str, bool], ...] = (

@@ -111,6 +111,15 @@ def _optional_of(tp: Any) -> tuple[bool, Any]:
 # ============================================================================ the walker
 
 
+def _scalar_with_default(f: dataclasses.Field, tp: Any) -> bool:
+    """A field of one number, word or flag that the dataclass can fill by itself."""
+    has_default = (f.default is not dataclasses.MISSING
+                   or f.default_factory is not dataclasses.MISSING)
+    args = [a for a in typing.get_args(tp) if a is not type(None)]
+    return has_default and (tp in (int, float, str, bool) or (len(args) == 1 and args[0] in (
+        int, float, str, bool)))
+
+
 class _Gather:
     """Runs independent steps (the keys of a mapping, the items of a list): each failure is
     noted in the file's problems and the next step still runs; ``done`` then raises the
@@ -156,6 +165,10 @@ class _Ctx:
         self._constructor = yaml.constructor.SafeConstructor()
         self.problems: list[ConfigError] = []   # every problem found, each noted once
         self._noted: set[int] = set()
+        # sections in which a bad value was replaced by its default to go on checking: a
+        # check across that section's keys would judge the default, not the file
+        self.stood_in: set[str] = set()
+        self._own: set[int] = set()
         # dotted key -> the unknown-key error that suggested it ("did you mean"): that
         # key's "missing" is the same mistake, not a second one
         self.suggested: dict[str, ConfigError] = {}
@@ -168,8 +181,14 @@ class _Ctx:
             line = self.line(path)
         return ConfigError(_one_line(what), file=self.file, line=line, key=path or None)
 
-    def note(self, e: ConfigError) -> ConfigError:
-        """List a problem (once: an error re-raised up through the walk is the same one)."""
+    def note(self, e: ConfigError, own: bool = False) -> ConfigError:
+        """List a problem (once: an error re-raised up through the walk is the same one).
+        A problem in a section where a default stood in for a bad value is left out unless
+        it is a key's ``own`` mistake: a check across the section would judge the default."""
+        if own:
+            self._own.add(id(e))
+        elif id(e) not in self._own and self._judges_a_default(e.key or ""):
+            return e
         if id(e) not in self._noted:
             self._noted.add(id(e))
             self.problems.append(e)
@@ -178,6 +197,24 @@ class _Ctx:
     def add_problem(self, path: str, what: str, line: int | None = None) -> None:
         """List a problem and go on checking (``raise self.error(...)`` stops instead)."""
         self.note(self.error(path, what, line=line))
+
+    def _judges_a_default(self, path: str) -> bool:
+        """Is ``path`` in a section where a bad value stood in by its default?"""
+        return any(path == s or path.startswith(s + ".") or path.startswith(s + "[")
+                   for s in self.stood_in)
+
+    @contextmanager
+    def standing_in(self, path: str | None) -> Iterator[None]:
+        """A failure of ``path`` below is its own mistake, listed, and the field's default
+        stands in: the section holding it (the key alone at the file's top) is then not
+        judged across keys."""
+        try:
+            yield
+        except ConfigError as e:
+            if path is not None:
+                self._own.add(id(e))
+                self.stood_in.add(_parent(path) or path)
+            raise
 
     def gather(self, node: Node | None = None) -> _Gather:
         """Steps over the entries of ``node`` (a mapping whose bad keys break it too)."""
@@ -442,10 +479,13 @@ class _Ctx:
             if key in extra:
                 continue
             if key not in fields:             # listed; the other keys still make the value
-                self.note(self.unknown_error(key, path, list(fields) + list(extra)))
+                self.note(self.unknown_error(key, path, list(fields) + list(extra)), own=True)
                 continue
             given.add(key)
-            with g.step():
+            # a bad number or word where the field has a default is listed, and the default
+            # stands in, so that the checks across keys still run on the rest of the file
+            stands_in = _scalar_with_default(fields[key], hints[key])
+            with g.step(breaks=not stands_in), self.standing_in(sub if stands_in else None):
                 builder = _FIELD_BUILDERS.get((cls, key))
                 if builder is not None:
                     kwargs.update(builder(self, vnode, sub))

@@ -1,5 +1,5 @@
 """Who may reach an operator surface at all, and what is recorded when they are refused
-(issue 19). The web UI uses all of it; any other operator surface the project adds (an
+. The web UI uses all of it; any other operator surface the project adds (an
 OPC UA server, the part server) must use the same pieces: ``Settings`` from the users file,
 ``parse_body`` for whatever a client sends, ``Gate`` (or ``host_allowed``) before anything
 else, ``guard.LoginGuard`` for passwords, and ``AccessRecorder`` for the event log.

@@ -19,9 +19,12 @@ import py_trees
 from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx, Stats, init_blackboard
+from feeder_bt.behaviours.board import Board
+from feeder_bt.behaviours.keys import FAULTS, RETRIEVE, SPEEDS
 from feeder_bt.core.clock import Clock
 from feeder_bt.core.encoder import EncoderSync
 from feeder_bt.core.errors import FeederError
+from feeder_bt.core.jobs import Activity
 from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
@@ -50,6 +53,9 @@ class CellCommandError(FeederError):
 
 
 class Cell:
+    """One cell: its state, its trees, and what is its own in a process that may hold
+    more than one — its blackboard (``board``) and its ticker's news (``activity``)."""
+
     def __init__(self, cell: CellSpec, hal: Hal, clock: Clock) -> None:
         self.cell, self.hal, self.clock = cell, hal, clock
         self.state = CellState.STOPPED
@@ -64,6 +70,10 @@ class Cell:
         self.ticks = 0
         self.version = 0
         self.auto_adjust = True     # the operator may hold the adjuster; kept across starts
+        #: this cell's blackboard: its trees' keys, apart from any other cell's; code
+        #: outside the trees reads it here (``board.get(key)``, ``speeds()``)
+        self.board = Board()
+        self.activity = Activity()  # jobs ended and cycles restarted, for the ticker
 
     # ------------------------------------------------------------------ commands
     def load(self, scenario: Scenario) -> None:
@@ -81,18 +91,17 @@ class Cell:
             raise CellCommandError("no scenario loaded")
         if self.estop_pressed():
             raise CellCommandError("the e-stop is pressed: release it first")
-        storage = py_trees.blackboard.Blackboard.storage
-        # this cell's own last run only (the blackboard is process-wide)
-        ran = self.ctx is not None
-        held = storage.get("/retrieve/part") if ran else None
-        phase = storage.get("/retrieve/phase") if ran else None
+        board = self.board
+        ran = self.ctx is not None          # this cell's own last run only
+        held = board.get(RETRIEVE.PART) if ran else None
+        phase = board.get(RETRIEVE.PHASE) if ran else None
         self.ctx = self._make_ctx(self.scenario)
         if held is not None and held.type in self.scenario.parts and (
                 phase is not None or self.hal.robot.holding()):
             # stopped (an e-stop) between pick and place, or with a reply lost: the new
             # run settles with the controller and places the part first
-            storage["/retrieve/part"] = held
-            storage["/retrieve/phase"] = phase or "held"
+            board.set(RETRIEVE.PART, held)
+            board.set(RETRIEVE.PHASE, phase or "held")
         if self.stats.started_at is None:
             self.stats.started_at = self.clock.now()
         self.hal.motors_on()            # the operator's Start: the first SH is a person's
@@ -162,11 +171,17 @@ class Cell:
     def set_speeds(self, **speeds: float) -> None:
         """Operator or tool writes speeds (``horizontal_mm_s``, ``incline_pct``,
         ``robot_speed_pct``) to the blackboard; the trees follow."""
-        bb = py_trees.blackboard.Client(name="operator")
         for key, value in speeds.items():
-            bb.register_key(key=f"/speeds/{key}", access=py_trees.common.Access.WRITE)
-            bb.set(f"/speeds/{key}", float(value))
+            self.board.set(SPEEDS.of(key), float(value))
         self.version += 1
+
+    def speeds(self) -> dict[str, float | None]:
+        """The speeds the trees follow now, by short name (None before the first start)."""
+        out: dict[str, float | None] = {}
+        for key in SPEEDS.ALL:
+            v = self.board.get(key)
+            out[key.rsplit("/", 1)[1]] = None if v is None else float(v)
+        return out
 
     def set_auto_adjust(self, engaged: bool) -> None:
         """Engage or hold the auto-adjuster: held, it leaves the speeds where the operator
@@ -176,7 +191,12 @@ class Cell:
 
     # ------------------------------------------------------------------ ticking
     def tick(self) -> None:
-        """One tick of whichever tree the state calls for."""
+        """One tick of whichever tree the state calls for; the jobs that end in it are
+        this cell's news (``activity``)."""
+        with self.activity.counting():
+            self._tick()
+
+    def _tick(self) -> None:
         self.ticks += 1
         if self.state not in (CellState.STOPPED, CellState.FAULT) and self.estop_pressed():
             self.estop()
@@ -185,7 +205,7 @@ class Cell:
             return
         root.tick_once()
         if self.state is CellState.RUNNING:
-            reason = py_trees.blackboard.Blackboard.storage.get("/faults/escalate")
+            reason = self.board.get(FAULTS.ESCALATE)
             if reason:
                 self.fault(reason)
             return
@@ -217,7 +237,7 @@ class Cell:
     KEPT_ON_RESTART = ("robot_fit", "recipe_watch")
 
     def _make_ctx(self, scenario: Scenario) -> Ctx:
-        init_blackboard(scenario)
+        init_blackboard(scenario, self.board)
         kept: dict[str, Any] = {}
         if self.stats.scenario != scenario.name:   # a restart of the same job keeps counting
             self.stats = Stats()
@@ -240,7 +260,8 @@ class Cell:
         ctx = Ctx(hal=self.hal, clock=self.clock, scenario=scenario, cell=self.cell,
                   queue=queue, encoder=self.encoder, stats=self.stats,
                   vision=VisionWorker(locator, self.clock, self.cell.camera.vision_latency_s),
-                  adjuster=_Holdable(adjuster, self))
+                  adjuster=_Holdable(adjuster, self), board=self.board,
+                  activity=self.activity)
         ctx.extras.update(kept)
         return ctx
 

@@ -1,14 +1,22 @@
-"""Connection limits for every listener (issue 28): the dashboard, ``feeder replay --ui``,
-the part server and the OPC UA server all admit TCP connections through a ``ConnGate``.
+"""Connection limits for every listener: the dashboard, ``feeder replay --ui``, the part
+server and the OPC UA server all admit TCP connections through a ``ConnGate``.
 
 A peer on the network must not be able to starve the cell by opening connections and
-sending nothing. So each listener has:
+sending nothing, nor keep the operator who holds control from her Stop. So each listener
+has:
 
-- a cap on connections **per address** (a new one over it is closed at once), and a cap
-  **in all**: when it is full, a new connection takes the place of the oldest one that is
-  doing nothing (no request in flight, not a signed-in websocket, not an activated OPC UA
-  session, not a robot that said who it is); only if every connection is busy is the new
-  one refused. A held idle connection therefore never keeps out a newcomer;
+- a cap on connections **per address** and a cap **in all**. Over either, the newcomer
+  takes the place of the oldest connection that is doing nothing (no request in flight,
+  not an activated OPC UA session, not a robot that said who it is; an idle websocket is
+  such a connection too) from that address (per-address cap) or from anywhere (cap in
+  all). Eviction comes before refusal: held idle connections never keep a newcomer out,
+  and behind a reverse proxy, where every user shares one address, one user's idle
+  connections cannot keep out another's;
+- a **reserve** outside the caps (``ConnLimits.reserve``) for whom the listener vouches
+  (``vouch``): the session that holds control (its requests and its websocket), a robot
+  that proved who it is. A vouched-for connection is never closed for a newcomer. When
+  every capped connection is busy, a newcomer goes *on trial* in the reserve; the
+  listener closes it unless its first request is vouched for (``on_trial``);
 - a deadline for a connection's first request (``header_s``; the listeners apply it) and
   an idle time-out;
 - a listen backlog as large as the system allows (``backlog()``), so a burst waits in the
@@ -43,6 +51,7 @@ class ConnLimits:
     header_s: float = 10.0      # a connection's first request must arrive within this
     idle_s: float = 60.0        # a connection silent this long is closed (where it applies)
     period_s: float = 60.0      # at most one summary line of refusals per period
+    reserve: int = 0            # connections outside the caps for whom the listener vouches
 
 
 def backlog(want: int = 4096) -> int:
@@ -75,6 +84,29 @@ def peer_ip(transport: Any) -> str:
     return str(peer[0]) if isinstance(peer, tuple) and peer else "?"
 
 
+CAPPED, TRIAL, RESERVED = "capped", "trial", "reserved"
+
+
+class _Entry:
+    """What the gate knows of one connection."""
+
+    __slots__ = ("ip", "busy", "kept", "pool")
+
+    def __init__(self, ip: str, busy: Callable[[], bool], pool: str) -> None:
+        self.ip, self.busy = ip, busy
+        self.pool = pool                               # CAPPED, TRIAL or RESERVED
+        self.kept: Callable[[], bool] | None = None    # set by vouch(): the reserve's
+
+    def protected(self) -> bool:
+        """Never closed for a newcomer: work in progress, or the reserve owner's."""
+        try:
+            if self.kept is not None and self.kept():
+                return True
+            return bool(self.busy())
+        except Exception:          # a half-made protocol: treat it as idle
+            return False
+
+
 class ConnGate:
     """Admits connections to one listener; see the module docstring.
 
@@ -87,10 +119,15 @@ class ConnGate:
         fds = raise_fd_limit()
         # never more connections than file descriptors to spare (each costs one)
         self.total = max(8, min(self.limits.total, (fds - 64) // 2))
+        self.reserve = max(0, min(self.limits.reserve, self.total))
+        self.trials = (self.reserve + 1) // 2     # of the reserve, at most this on trial
         self.say = say or (lambda line: print(line, file=sys.stderr, flush=True))
-        self._conns: dict[Any, tuple[str, Callable[[], bool]]] = {}   # oldest first
-        self._per_ip: Counter[str] = Counter()
-        self.counts: Counter[str] = Counter()     # admitted, refused_*, evicted, errors
+        self._conns: dict[Any, _Entry] = {}       # oldest first
+        self._per_ip: Counter[str] = Counter()    # capped connections (not the reserve's)
+        self._capped = 0                          # ... in all
+        self._vouched = 0                         # in the reserve, vouched for
+        self._on_trial = 0                        # in the reserve, on trial
+        self.counts: Counter[str] = Counter()     # admitted, refused, evicted, errors, ...
         self._pending: Counter[str] = Counter()   # not yet told
         self._told_at = -1e18
         self._flush: asyncio.TimerHandle | None = None
@@ -98,47 +135,107 @@ class ConnGate:
     # ------------------------------------------------------------------ admitting
     def admit(self, transport: Any, busy: Callable[[], bool]) -> bool:
         """Take ``transport`` in, or abort it (False). ``busy()`` says whether the
-        connection is doing something worth keeping when the listener is full."""
+        connection is doing something worth keeping when the listener is full.
+
+        Over a cap, the oldest idle connection (from the same address, for the
+        per-address cap) is closed to make room: a peer holding idle connections can
+        never keep a newcomer out. Only if none is idle does the newcomer go on trial in
+        the reserve (the listener must see it vouched for by its first request, else
+        close it: ``on_trial``), and only if the reserve is full too is it refused."""
         ip = peer_ip(transport)
-        if self._per_ip[ip] >= self.limits.per_address:
-            self._refuse(transport, f"over {self.limits.per_address} from one address")
+        why = ""
+        if self._per_ip[ip] >= self.limits.per_address and not self._evict(CAPPED, ip):
+            why = f"over {self.limits.per_address} from one address, all busy"
+        elif self._capped >= self.total and not self._evict(CAPPED):
+            why = f"{self.total} connections, all busy"
+        pool = TRIAL if why else CAPPED
+        if pool == TRIAL and not self._room(trial=True):
+            self._refuse(transport, why)
             return False
-        if len(self._conns) >= self.total and not self._evict_idle():
-            self._refuse(transport, f"{self.total} connections, all busy")
-            return False
-        self._conns[transport] = (ip, busy)
-        self._per_ip[ip] += 1
+        self._conns[transport] = _Entry(ip, busy, pool)
+        self._count(ip, pool, +1)
+        if pool == TRIAL:
+            self.counts["on_trial"] += 1
         self.counts["admitted"] += 1
         return True
+
+    def vouch(self, transport: Any, kept: Callable[[], bool]) -> bool:
+        """The listener knows this connection is the reserve owner's (the session that
+        holds control, a robot that proved who it is) while ``kept()`` is true: it is
+        never closed for a newcomer, and it moves out of the caps into the reserve if
+        there is room there. Returns whether it is in the reserve (one on trial is then
+        no longer on trial)."""
+        entry = self._conns.get(transport)
+        if entry is None:
+            return False
+        entry.kept = kept
+        if entry.pool == RESERVED:
+            return True
+        if entry.pool == CAPPED and not self._room(trial=False):
+            return False                     # kept from eviction, but within the caps
+        self._count(entry.ip, entry.pool, -1)
+        entry.pool = RESERVED
+        self._count(entry.ip, RESERVED, +1)
+        return True
+
+    def unkeep(self, transport: Any) -> None:
+        """This connection's latest request was not the reserve owner's (a proxy's
+        pooled connection carries everyone's): it may be closed for a newcomer again."""
+        entry = self._conns.get(transport)
+        if entry is not None:
+            entry.kept = None
+
+    def on_trial(self, transport: Any) -> bool:
+        """Whether this connection came in on trial and has not been vouched for: the
+        listener closes it at its first request that is not the reserve owner's."""
+        entry = self._conns.get(transport)
+        return entry is not None and entry.pool == TRIAL
 
     def release(self, transport: Any) -> None:
         """The connection ended (idempotent)."""
         entry = self._conns.pop(transport, None)
         if entry is not None:
-            ip = entry[0]
-            self._per_ip[ip] -= 1
-            if self._per_ip[ip] <= 0:
-                del self._per_ip[ip]
+            self._count(entry.ip, entry.pool, -1)
 
     def replace(self, transport: Any, busy: Callable[[], bool]) -> None:
         """The same connection now judged by another ``busy`` (an upgrade to a websocket,
         a robot that said who it is)."""
         entry = self._conns.get(transport)
         if entry is not None:
-            self._conns[transport] = (entry[0], busy)
+            entry.busy = busy
 
-    def _evict_idle(self) -> bool:
-        for transport, (_, busy) in self._conns.items():     # oldest first
-            try:
-                idle = not busy()
-            except Exception:          # a half-made protocol: treat it as idle
-                idle = True
-            if idle:
-                self.release(transport)
-                transport.abort()
-                self.counts["evicted"] += 1
-                self.note("an idle connection closed for a newcomer")
-                return True
+    def _count(self, ip: str, pool: str, n: int) -> None:
+        if pool == CAPPED:
+            self._capped += n
+            self._per_ip[ip] += n
+            if self._per_ip[ip] <= 0:
+                del self._per_ip[ip]
+        elif pool == TRIAL:
+            self._on_trial += n
+        else:
+            self._vouched += n
+
+    def _room(self, trial: bool) -> bool:
+        """Whether the reserve takes one more (on trial, or vouched for), making room by
+        closing the oldest idle one there that is no longer kept, or on trial."""
+        if trial and self._on_trial >= self.trials and not self._evict(TRIAL):
+            return False
+        if self._vouched + self._on_trial < self.reserve:
+            return True
+        return self._evict(RESERVED) or (not trial and self._evict(TRIAL))
+
+    def _evict(self, pool: str, ip: str | None = None) -> bool:
+        """Close the oldest idle connection in ``pool`` (from ``ip``, or from anywhere)
+        that is not kept; False if there is none."""
+        for transport, entry in self._conns.items():     # oldest first
+            if entry.pool != pool or (ip is not None and entry.ip != ip) \
+                    or entry.protected():
+                continue
+            self.release(transport)
+            transport.abort()
+            self.counts["evicted"] += 1
+            self.note("an idle connection closed for a newcomer")
+            return True
         return False
 
     def _refuse(self, transport: Any, why: str) -> None:
@@ -177,7 +274,7 @@ class ConnGate:
 
     def stats(self) -> dict[str, int]:
         return {"open": len(self._conns), "addresses": len(self._per_ip),
-                **dict(self.counts)}
+                "reserve_open": self._vouched + self._on_trial, **dict(self.counts)}
 
     def loop_errors(self, loop: asyncio.AbstractEventLoop) -> None:
         """Make ``loop``'s unhandled errors (``socket.accept() out of system resource``

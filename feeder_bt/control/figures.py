@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import py_trees
 
+from feeder_bt.behaviours.keys import SPEEDS
 from feeder_bt.control.cell import Cell
 
 
@@ -23,7 +24,7 @@ def figures(cell: Cell, feed_seconds: float | None = None) -> dict[str, float | 
     now = cell.clock.now()
     if feed_seconds is None:
         feed_seconds = 0.0 if s.started_at is None else now - s.started_at
-    speeds = py_trees.blackboard.Blackboard.storage
+    board = cell.board
     return {
         "state": cell.state.value,
         "scenario": cell.scenario.name if cell.scenario else "-",
@@ -34,9 +35,9 @@ def figures(cell: Cell, feed_seconds: float | None = None) -> dict[str, float | 
         "missed": s.counts["missed"],
         "too_far": s.counts["too_far"],
         "queue": len(cell.ctx.queue) if cell.ctx else 0,
-        "horizontal": speeds.get("/speeds/horizontal_mm_s", 0.0),
-        "incline": speeds.get("/speeds/incline_pct", 0.0),
-        "robot": speeds.get("/speeds/robot_speed_pct", 0.0),
+        "horizontal": board.get(SPEEDS.HORIZONTAL, 0.0),
+        "incline": board.get(SPEEDS.INCLINE, 0.0),
+        "robot": board.get(SPEEDS.ROBOT, 0.0),
     }
 
 

@@ -1,4 +1,4 @@
-"""Slowing password guessing without locking the rightful user out (issue 19).
+"""Slowing password guessing without locking the rightful user out.
 
 Counting failures per user name lets anyone keep that user out. Instead, a login attempt is
 judged by where it comes from:
@@ -162,7 +162,7 @@ class LoginGuard:
 
     def known(self, a: Attempt) -> bool:
         """A known browser, or the address this user logged in from before: served before
-        strangers when password checks are scarce (issue 28)."""
+        strangers when password checks are scarce."""
         if self.trusted(a):
             return True
         return self.clock() - self._good.get((a.name, a.ip), -1e18) <= self.known_s

@@ -13,8 +13,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import py_trees
-
 from feeder_bt.config import load_scenario
 from feeder_bt.control.bridge import Command, Outcome
 from feeder_bt.control.cell import Cell, CellCommandError, CellState
@@ -29,7 +27,7 @@ SIMPLE = {"start": "start", "stop": "stop", "pause": "pause", "resume": "resume"
 COMMANDS = (*SIMPLE, "load", "speeds", "adjust")
 MAX_AUDIT = 1000
 MAX_NUMBER_CHARS = 32          # a speed given as text: longer is refused before conversion
-# Physical floors (issue 28): below them a speed is not a working speed but a stopped
+# Physical floors: below them a speed is not a working speed but a stopped
 # machine (pause the cell instead), and 1e-300 would only hide a mistake. The V+ speed
 # factor is a percentage of full speed, 100 normal (V+ Operating System Reference Guide,
 # SPEED monitor command); its lower bound here is ours: check at commissioning.
@@ -119,14 +117,9 @@ def parse_speeds(args: Mapping[str, Any], limits: Limits, current: Mapping[str, 
     return out
 
 
-def blackboard_speeds() -> dict[str, float | None]:
-    """The speeds the trees follow now (None before the first start)."""
-    storage = py_trees.blackboard.Blackboard.storage
-    out: dict[str, float | None] = {}
-    for key in SPEED_KEYS:
-        v = storage.get(f"/speeds/{key}")
-        out[key] = None if v is None else float(v)
-    return out
+def blackboard_speeds(cell: Cell) -> dict[str, float | None]:
+    """The speeds the cell's trees follow now (None before the first start)."""
+    return cell.speeds()
 
 
 def scenario_files(folder: Path) -> dict[str, Path]:
@@ -223,7 +216,7 @@ class CellOps:
         if cell.state not in (CellState.STARTING, CellState.RUNNING, CellState.PAUSED):
             return Outcome.refused("refused: speeds can be set while the cell runs or is "
                                    f"paused (it is {cell.state.value}); start it first")
-        current = {k: v for k, v in blackboard_speeds().items() if v is not None}
+        current = {k: v for k, v in blackboard_speeds(cell).items() if v is not None}
         try:
             speeds = parse_speeds(args, self.limits, current, self._adjuster_max())
         except FeederError as e:

@@ -144,14 +144,14 @@ class CellPanel:
             # parts placed turned or face-down: only a simulated cell can know (its world's
             # count, as in ``feeder report``); None on a real cell
             "misoriented": self._world_count("misoriented"),
-            # parts worn past their max_passes (issue 30): the simulated world's count too
+            # parts worn past their max_passes: the simulated world's count too
             "scrapped": self._world_count("scrapped"),
             # faults (recovered so far) and misses apart: vocabulary.py
             "faults": sum(split(s.faults)[0].values()),
             "recovered": sum(s.recoveries.values()),
             "misses": sum(split(s.faults)[1].values()),
             "queue": int(f["queue"]),
-            "speeds": blackboard_speeds() if cell.ctx is not None else
+            "speeds": blackboard_speeds(cell) if cell.ctx is not None else
             dict.fromkeys(("horizontal_mm_s", "incline_pct", "robot_speed_pct")),
             "hal": self._hal_speeds(),
             "auto_adjust": bool(cell.auto_adjust),
@@ -165,7 +165,7 @@ class CellPanel:
     def _world_count(self, key: str) -> int | None:
         """A count only the simulated world can know (as ``report.parts`` has it); None
         on a real cell."""
-        world = getattr(self.cell.hal, "world", None)
+        world = self.cell.hal.truth
         counts = getattr(world, "counts", None)
         return int(counts[key]) if counts is not None else None
 

@@ -2,10 +2,11 @@
 tick's time, ticks the cell's tree, records how long the tick took.
 
 On a virtual clock with ``fast``, ticks in which nothing can change are skipped: when two
-ticks in a row leave every node's status, the queue, the statistics, the finished-job
-count and the count of branch cycles unchanged, the clock jumps to the next time something is known to happen (a job's
-end, a belt-distance notification, a timer), rounded up to the tick grid. The ticks that
-run see exactly what they would have seen without skipping, so results are the same.
+ticks in a row leave every node's status, the queue, the statistics, and the cell's own
+count of finished jobs and of branch cycles (``Cell.activity``) unchanged, the clock jumps
+to the next time something is known to happen (a job's end, a belt-distance notification,
+a timer), rounded up to the tick grid. The ticks that run see exactly what they would have
+seen without skipping, so results are the same.
 """
 
 from __future__ import annotations
@@ -20,8 +21,6 @@ import numpy as np
 
 from feeder_bt.control.cell import Cell
 from feeder_bt.core.clock import EPS, SimClock
-from feeder_bt.core.jobs import Job
-from feeder_bt.trees.build import Loop
 
 _STATUS = operator.attrgetter("status")
 
@@ -64,7 +63,8 @@ class Ticker:
     def _signature(self) -> tuple:
         c = self.cell
         q = c.ctx.queue.version if c.ctx is not None else 0
-        return (Job.finished_total, Loop.restarts, q, c.stats.version, c.version, c.state,
+        a = c.activity               # this cell's own: another cell's jobs are not news
+        return (a.jobs_finished, a.loop_restarts, q, c.stats.version, c.version, c.state,
                 tuple(map(_STATUS, self._nodes())))
 
     def _nodes(self) -> list:
@@ -122,7 +122,11 @@ class Ticker:
     def run(self, until: float | None = None, stop: Callable[[], bool] | None = None,
             every: Callable[[], None] | None = None) -> None:
         """Tick until clock time ``until`` or ``stop()`` is true; ``every()`` after each tick."""
-        t_end = math.inf if until is None else until
+        with self.cell.activity.counting():     # what ends meanwhile is this cell's news
+            self._run(math.inf if until is None else until, stop, every)
+
+    def _run(self, t_end: float, stop: Callable[[], bool] | None,
+             every: Callable[[], None] | None) -> None:
         while self.clock.now() < t_end - 1e-12:
             self.tick_once()
             if every is not None:

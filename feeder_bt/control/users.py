@@ -78,7 +78,7 @@ CONTEXT_WORDS = ["feeder", "feeder_bt", "feederbt", "cell", "operator", "admin",
 def check_password(password: str, name: str = "") -> str:
     """A new password: long enough, not too long, and not one anybody would guess first:
     judged by zxcvbn (Dropbox's estimator: dictionaries, keyboard walks, dates, l33t, the
-    user's name; issue 28) when it is installed, else by the bundled word list."""
+    user's name) when it is installed, else by the bundled word list."""
     if len(password) < MIN_PASSWORD:
         raise UsersError(f"password too short: at least {MIN_PASSWORD} characters")
     if len(password) > MAX_PASSWORD:

@@ -91,7 +91,7 @@ class EncoderSync:
 
 
 class FreshAnchor:
-    """The pair of counts a sync is anchored on: fresh, aged, and at rest (issue 25).
+    """The pair of counts a sync is anchored on: fresh, aged, and at rest.
 
     Both controllers' counts reach the PC as cached reads of different ages: the Galil's
     from a ``TP`` poll, the robot's from its position poller. A pair taken from the caches

@@ -79,6 +79,16 @@ class ServoTimeout(HalError):
     kind = "servo_timeout"
 
 
+class PowerOff(HalError):
+    """The arm lost power from outside the program: an e-stop, a guard door, a light curtain
+    (V+ -604 *Robot power off*, or the server's -9007 with its e-stop input on). Never
+    recovered by software, whatever ``recover_power_on`` says: a guard that resets itself
+    must not give the arm its power back. The cell goes to FAULT; a person releases the
+    stop, turns arm power on at the controller and resets the cell."""
+
+    kind = "power_off"
+
+
 class EnvelopeError(HalError):
     kind = "envelope"
 
@@ -114,7 +124,7 @@ class CardFault(ConveyorFault):
 
 class PlateFault(HalError):
     """A plate feeder's drive reported an error (AnyFeeder: a servo error, an error
-    state, no sync signal); the message carries the manual's words (issue 31)."""
+    state, no sync signal); the message carries the manual's words."""
     kind = "plate"
 
 

@@ -7,9 +7,11 @@ A leaf starts a job in ``initialise()``, polls it in ``update()`` and cancels it
 
 from __future__ import annotations
 
+import contextlib
 import enum
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
+from contextvars import ContextVar
 from typing import Any
 
 from feeder_bt.core.clock import EPS, Clock
@@ -23,10 +25,38 @@ class JobState(enum.Enum):
     CANCELLED = "cancelled"
 
 
+class Activity:
+    """One cell's news, counted so that its ticker does not skip a tick that has some: jobs
+    that ended and branch cycles that began again (``trees.build.Loop``).
+
+    A job does not know its cell, so the cell's ticker makes its ``Activity`` the one
+    ``counting()`` while it steps the cell: every job that ends meanwhile, in that thread,
+    is the cell's. Two cells in one process, or in two threads, count apart."""
+
+    def __init__(self) -> None:
+        self.jobs_finished = 0
+        self.loop_restarts = 0
+
+    @contextlib.contextmanager
+    def counting(self) -> Iterator[Activity]:
+        """Jobs that end inside the block are this activity's."""
+        token = _COUNTING.set(self)
+        try:
+            yield self
+        finally:
+            _COUNTING.reset(token)
+
+    @staticmethod
+    def current() -> Activity | None:
+        """The activity counting now in this thread (None: nobody's)."""
+        return _COUNTING.get()
+
+
+_COUNTING: ContextVar[Activity | None] = ContextVar("feeder_activity", default=None)
+
+
 class Job:
     """Handle to an operation in progress. Subclasses decide how it finishes."""
-
-    finished_total = 0      # every job that ended, ever: lets the ticker notice activity
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -72,7 +102,9 @@ class Job:
         if self.state is not JobState.RUNNING:
             return
         self.state, self.result, self.error = state, result, error
-        Job.finished_total += 1
+        activity = _COUNTING.get()
+        if activity is not None:            # lets the cell's ticker notice it
+            activity.jobs_finished += 1
         callbacks, self._callbacks = self._callbacks, []
         for fn in callbacks:
             fn(self)

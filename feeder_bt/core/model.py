@@ -68,7 +68,7 @@ class Finger:
 
 @dataclass
 class PickSpec:
-    """Where a part is gripped and what the gripper needs clear around it (issue 27): the
+    """Where a part is gripped and what the gripper needs clear around it: the
     locator offers the first grip whose footprint (the cup, or the fingers, grown by
     ``clearance_mm``) is clear of every other blob; the simulator judges a grip over a
     hole, or whose footprint lies on a neighbour, as a miss."""
@@ -87,13 +87,13 @@ class PartSpec:
     place: PlacePose
     tool_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     orientation_tolerance_deg: float = 5.0
-    # issue 27: the outline looks the same turned by 360/symmetry degrees (a chain-link
+    # The outline looks the same turned by 360/symmetry degrees (a chain-link
     # plate: 2, a square: 4, a hex nut: 6), and, with mirror_symmetric, turned over; angles
     # are then only defined (placed, judged, searched) modulo 360/symmetry
     symmetry: int = 1
     mirror_symmetric: bool = False
     pick: PickSpec | None = None         # None: gripped at the area centroid, nothing checked
-    # wear (issue 30): the most times a part may travel the belt; one that falls off the end
+    # wear: the most times a part may travel the belt; one that falls off the end
     # on its last pass goes to scrap (parts.scrapped) instead of back to the hopper; 0: no limit
     max_passes: int = 0
     # the simulated cell only (hal/sim/slip.py): this part's friction on the belt; 0: the
@@ -188,7 +188,7 @@ class PresentParams:
     big_advance_mm: float = 1100.0       # incremental: load the horizontal belt
     small_advance_mm: float = 240.0      # incremental: about half the camera window
     big_advance_incline_mm: float = 400.0
-    plate: PlatePolicy = field(default_factory=PlatePolicy)   # a plate cell (issue 31)
+    plate: PlatePolicy = field(default_factory=PlatePolicy)   # a plate cell
 
 
 @dataclass
@@ -312,7 +312,8 @@ class TargetSpec:
 @dataclass
 class PylonSpec:
     """A GenICam camera through Basler's pylon (``camera.source: pylon:SERIAL``), set with
-    the GenICam standard feature names (docs/real-cell.md, "An industrial camera"). The
+    the GenICam standard feature names, SFNC 2 or the older SFNC 1 ones, whichever the
+    camera offers (docs/real-cell.md, "An industrial camera"). The
     exposure is ``camera.exposure_ms`` (ExposureTime), the size ``width_px`` x ``height_px``."""
 
     trigger: str = "Software"            # TriggerSource of FrameStart: Software | Line1
@@ -326,6 +327,14 @@ class PylonSpec:
     # frames need the NIC's MTU to match) and GevSCPD, the inter-packet delay in ticks
     packet_size: int | None = None
     inter_packet_delay: int | None = None
+    # a line trigger only (Line1..3): the edge that starts a frame (TriggerActivation; it
+    # must be the edge the Galil latches, opto-coupler inversion included), the line's
+    # debouncer (LineDebouncerTime, SFNC 1 LineDebouncerTimeAbs) and the FrameStart
+    # trigger delay (TriggerDelay, SFNC 1 TriggerDelayAbs), both in microseconds and left
+    # as the camera has them when None; both delay the exposure after the latched pulse
+    trigger_activation: str = "RisingEdge"
+    line_debouncer_us: float | None = None
+    trigger_delay_us: float | None = None
     # an emulated camera only (PYLON_CAMEMU): a folder of images it serves in name order
     # (ImageFilename, ImageFileMode On), relative to the cell file; recorded frames or a
     # rendered target through the vendor SDK without a camera
@@ -425,14 +434,14 @@ class GalilSpec:
     latch_input: int | None = None
     programs: list[str] = field(default_factory=lambda: ["monitor.dmc"])  # in galil_programs/
     notify_mm: float = 5.0               # distance notifier period on the latch axis
-    # --- issue 15: safe reconnects (docs/real-cell.md, "The Galil controller")
+    # --- safe reconnects (docs/real-cell.md, "The Galil controller")
     rtscts: bool = False                 # serial ports: RTS/CTS hardware handshake
     servo_on: str = "never"              # never | start | reconnect: when the driver may SH
     free_handles: str = "ours"           # ours | others | none: IH clean-up at connect
     watchdog_s: float = 1.0              # host silent this long: the card stops the belts
     off_on_error: bool = True            # OE 1 on our axes: motor off on a position error
     stall_mm: float = 1.0                # jogging, encoder moved less than this in 2 s: stall
-    # --- issue 25: stops that stop (docs/real-cell.md, "Safety settings sent at connect")
+    # --- stops that stop (docs/real-cell.md, "Safety settings sent at connect")
     error_limit_mm: float = 5.0          # ER: position error (mm) that trips the off-on-error
     torque_limit_v: float = 5.0          # TL: continuous motor command limit, volts (TK 0)
     limit_switches: str = "low"          # CN n0: the level of an active limit switch: low | high
@@ -452,7 +461,9 @@ class AdeptSpec:
     notify_port: int = 1404
     timeout_s: float = 5.0               # connect/reply time-out for short commands
     motion_timeout_s: float = 20.0       # longest a pick/place/move may take
-    recover_power_on: bool = False       # may RECOVER turn arm power on (else: the operator)
+    # may RECOVER turn arm power on after a servo fault (else: the operator); never after
+    # an e-stop or a guard took it (PowerOff: always a person)
+    recover_power_on: bool = False
     belt_direction: str = "forward"      # the robot's belt channel counts: forward | reverse
     poll_hz: float = 50.0                # position poller rate (POLL: pose and belt count)
 
@@ -517,5 +528,5 @@ class CellSpec:
     galil: GalilSpec = field(default_factory=GalilSpec)
     adept: AdeptSpec = field(default_factory=AdeptSpec)
     sim: SimImperfections = field(default_factory=SimImperfections)   # simulated cell only
-    presentation: str = "belt"           # belt | plate (issue 31, docs/plate-feeders.md)
+    presentation: str = "belt"           # belt | plate (docs/plate-feeders.md)
     plate: PlateSpec = field(default_factory=PlateSpec)

@@ -16,11 +16,24 @@ program needs only to split a line on spaces: the second field says what the res
     HELP [command]                   -> OK HELP ...
     QUIT                             -> OK BYE (the server closes the connection)
 
+A robot named in the robots file with a secret proves who it is first, once per
+connection, by challenge and response (the secret never crosses the network, and what
+crosses it is worth nothing on another connection):
+
+    HELLO NAME                       -> OK CHALLENGE nonce (32 hex digits, new each time)
+    PROOF hex                        -> OK HELLO NAME
+                                        hex = HMAC-SHA256(key, nonce), 64 hex digits,
+                                        key = SHA-256(secret) (its 32 bytes)
+    HELLO NAME SECRET                -> the old plain form: refused unless the robots file
+                                        allows it for that robot (``plain_secret``)
+
 Nothing here does any I/O, so both ends and the tests share one parser.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 from dataclasses import dataclass
 
 MAX_LINE = 256                 # a longer request is refused (and the connection closed)
@@ -157,6 +170,17 @@ class Offer:
     def line(self) -> str:
         return (f"OK PART {self.id} {self.type} {self.x:.3f} {self.y:.3f} {self.z:.3f} "
                 f"{self.rz:.3f} {self.latch} {self.left_s:.3f}")
+
+
+def secret_key(secret: str) -> bytes:
+    """The HMAC key of a robot's secret: its SHA-256, the same hash the robots file keeps
+    (so the file needs no other record of the secret; see docs/part-server.md)."""
+    return hashlib.sha256(secret.encode("utf-8")).digest()
+
+
+def prove(key: bytes, nonce: str) -> str:
+    """A robot's answer to ``OK CHALLENGE nonce``: HMAC-SHA256(key, nonce) in hex."""
+    return hmac.new(key, nonce.encode("ascii", "replace"), hashlib.sha256).hexdigest()
 
 
 def parse_reply(line: str) -> tuple[str, list[str]]:

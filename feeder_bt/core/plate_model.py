@@ -1,4 +1,4 @@
-"""What a vibratory-plate cell and a plate scenario add to the YAML (issue 31).
+"""What a vibratory-plate cell and a plate scenario add to the YAML.
 
 A cell chooses its presentation kind with ``presentation: plate`` and describes the plate
 (``plate:``); a scenario chooses how the plate is worked (``present.plate:``: smart feeding
@@ -13,19 +13,53 @@ from dataclasses import dataclass, field
 
 @dataclass
 class PlateCommands:
-    """The AnyFeeder's command numbers (``x=N``): 1-4 are in the Adept AnyFeeder User's
-    Guide Rev. B, Table 3-3; the others could not be confirmed from a public source and
-    are settings to check at commissioning (docs/plate-feeders.md)."""
+    """The AnyFeeder's command numbers (``x=N``). 1-4: the Adept AnyFeeder User's Guide
+    Rev. B, Table 3-3; 5-8: Rev. A p. 31; 1-7, 15, 16, 30, 31: the public ROS 2 driver
+    SHOP4CF/anyfeeder_connector (``executeCommand``), used on SXM and SX feeders. Cell
+    settings all the same: ``feeder commission plate`` jogs each (docs/plate-feeders.md)."""
 
     feed_forward: int = 1        # Table 3-3: x=1
     feed_backward: int = 2       # Table 3-3: x=2
     flip_forward: int = 3        # Table 3-3: x=3 (feed + flip forward)
     flip_backward: int = 4       # Table 3-3: x=4
-    flip: int = 5                # check at commissioning
-    dispense: int = 6            # check at commissioning
-    purge: int = 7               # check at commissioning
-    init: int = 15               # check at commissioning
-    reset: int = 16              # check at commissioning (clears a servo / error state)
+    flip: int = 5                # Rev. A p. 31; anyfeeder_connector
+    dispense: int = 6            # Rev. A p. 31; anyfeeder_connector
+    purge: int = 7               # Rev. A p. 31; anyfeeder_connector
+    heavy_dispense: int = 8      # Rev. A p. 31
+    stop: int = 15               # anyfeeder_connector: Stop
+    init: int = 16               # anyfeeder_connector: Initialize
+    reset: int = 30              # anyfeeder_connector: ResetError
+    restart: int = 31            # anyfeeder_connector: RestartFirmware (defaults again)
+
+
+@dataclass
+class PlateSpeeds:
+    """Speeds 1...10 the driver writes after each init (``ab[N+16]=V x=N+16``: Rev. A
+    p. 32 for 19-22, anyfeeder_connector for 17, 18, 23); unset: the feeder's own."""
+
+    feed_forward: int | None = None      # ab[17]
+    feed_backward: int | None = None     # ab[18]
+    flip_forward: int | None = None      # ab[19]
+    flip_backward: int | None = None     # ab[20]
+    flip: int | None = None              # ab[21]
+    dispense: int | None = None          # ab[22]
+    purge: int | None = None             # ab[23]
+
+
+@dataclass
+class PlateRepetitions:
+    """Repetitions the driver writes after each init (``ab[N]=V``, no response: Rev. A
+    p. 31): what a bare ``x=N`` does. The trees' actions send their own with each command;
+    these matter for heavy dispense and for anything else driving the feeder."""
+
+    feed_forward: int | None = None      # ab[1]
+    feed_backward: int | None = None     # ab[2]
+    flip_forward: int | None = None      # ab[3]
+    flip_backward: int | None = None     # ab[4]
+    flip: int | None = None              # ab[5]
+    dispense: int | None = None          # ab[6]
+    purge: int | None = None             # ab[7], 1...127
+    heavy_dispense: int | None = None    # ab[8]
 
 
 @dataclass
@@ -51,9 +85,13 @@ class PlateSpec:
     init_s: float = 2.0                  # the init (homing) time
     # the serial link (a real or emulated feeder)
     url: str = ""                        # serial device or socket://HOST:PORT
-    baud: int = 9600                     # check at commissioning
+    baud: int = 9600                     # anyfeeder_connector: 9600 8N1, no flow control
     timeout_s: float = 10.0              # a reply later than the action time + this: fault
+    quiet_s: float = 0.05                # before each command the line must be this quiet
+    echo_probe_s: float = 0.5            # at connect, how long to wait for an echo
     commands: PlateCommands = field(default_factory=PlateCommands)
+    speeds: PlateSpeeds = field(default_factory=PlateSpeeds)
+    repetitions: PlateRepetitions = field(default_factory=PlateRepetitions)
 
 
 @dataclass

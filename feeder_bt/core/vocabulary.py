@@ -1,5 +1,5 @@
 """One vocabulary for what went wrong in a run, used by the terminal summary, `feeder report`,
-its plot, `feeder replay` and the dashboard (issue 29).
+its plot, `feeder replay` and the dashboard.
 
 - a **fault** stops or degrades the cell: a device failed (the robot's servo timed out, a
   controller link dropped, the camera lost a frame, a conveyor stalled, an e-stop) and the
@@ -27,6 +27,7 @@ WORDS = {"missed_grab": "missed grab", "envelope": "out of reach", "servo_timeou
          "servo timeout", "comms_lost": "link lost", "grab_failed": "camera frame lost",
          "conveyor": "conveyor", "conveyor_jam": "conveyor jam",
          "card_fault": "conveyor controller fault", "estop": "e-stop",
+         "power_off": "robot power off (e-stop or guard)",
          "dropped": "part dropped", "cell": "cell fault"}
 
 
@@ -80,10 +81,10 @@ def story(report: dict[str, Any]) -> list[str]:
 
 
 def alarm_counts(report: dict[str, Any]) -> dict[str, int]:
-    """The faults that stopped the cell until the operator's reset: e-stops and the cell's
-    own fault state (the OPC UA alarm, docs/plant.md)."""
+    """The faults that stopped the cell until the operator's reset: e-stops, the arm's power
+    lost to one (or to a guard), and the cell's own fault state (the OPC UA alarm, docs/plant.md)."""
     faults = report.get("faults") or {}
-    out = {k: faults[k] for k in ("estop", "cell") if faults.get(k)}
+    out = {k: faults[k] for k in ("estop", "power_off", "cell") if faults.get(k)}
     if report.get("fault") and "cell" not in out:
         out["cell"] = 1
     return out

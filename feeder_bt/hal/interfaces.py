@@ -126,7 +126,7 @@ def speed_refused(conveyor: str, job: str, mm_s: float, max_mm_s: float,
     """A failed ``conveyor.job`` when ``mm_s`` is above the conveyor's ``max_mm_s`` (None
     when it is within). Every conveyor, simulated or real, refuses rather than clamps, so a
     run keeps to the limits the loader checks and an over-limit command is said in one line
-    (issue 16). Exactly ``max_mm_s`` is allowed (``shake`` runs at it)."""
+   . Exactly ``max_mm_s`` is allowed (``shake`` runs at it)."""
     if abs(mm_s) <= max_mm_s * (1.0 + 1e-9):
         return None
     where = f" ({cell_file})" if cell_file else ""
@@ -218,7 +218,7 @@ PLATE_ACTIONS = ("dispense", "feed_forward", "feed_backward", "flip", "flip_forw
 
 class PlateFeeder(Protocol):
     """A vibratory plate with a bulk container and a backlight (an AnyFeeder-class
-    feeder, issue 31): the incremental presentation of thesis chapter 2. Each action is a
+    feeder): the incremental presentation of thesis chapter 2. Each action is a
     job that ends when the parts are at rest on the plate."""
 
     def init(self) -> Job:
@@ -243,6 +243,36 @@ class PlateFeeder(Protocol):
     def status(self) -> PlateStatus: ...
 
 
+class WorldTruth(Protocol):
+    """What only a simulated cell knows: where every part really is and what really
+    happened to it. The run report's accounting, the dashboard's misoriented count and the
+    part server's check of a robot's PLACED read it; the trees never do, and on a real cell
+    there is none (``Hal.truth`` is None). ``feeder_bt.sim.world.World`` is the one."""
+
+    counts: dict[str, int]                 # released, landed, recirculated, misoriented, ...
+    total: int                             # parts that entered the cell
+    problems: list[str]                    # accounting findings, each part named
+    misplaced_by_type: dict[str, int]
+    placed_by_type: dict[str, int]
+    pick_waited_s: float
+    slid_mm: float
+    broken: bool                           # the accounting found a part lost or duplicated
+    robot_model: object                    # the arm as it really moves (robot.scara)
+    passlog: object                        # the record of every part's pass (sim.passlog)
+    horizontal: object                     # the belts' axes (their ``clamped`` counts)
+    incline: object
+    clock: object
+    listeners: list
+
+    def audit(self) -> None: ...
+
+    def lost(self) -> list: ...
+
+    def duplicated(self) -> list: ...
+
+    def census(self) -> dict: ...
+
+
 @dataclass
 class Hal:
     """The whole cell as the trees see it."""
@@ -254,14 +284,17 @@ class Hal:
     io: DigitalIO
     kind: str = "sim"
     extras: dict = field(default_factory=dict)
-    plate: PlateFeeder | None = None     # a plate cell's feeder (issue 31); None: belts
+    plate: PlateFeeder | None = None     # a plate cell's feeder; None: belts
+    # the simulated world's truth, for the report's accounting and checks only (never the
+    # trees'); None on a real cell
+    truth: WorldTruth | None = None
 
     def step(self, now: float) -> None:
         """Advance anything that runs on the clock (the simulated world) to ``now``."""
 
     def motors_on(self) -> None:
         """The operator's Start: a real cell's belt amplifiers go on (``SH``) only when a
-        person asks, never at a connect (issue 25). Nothing to do on a simulated belt."""
+        person asks, never at a connect. Nothing to do on a simulated belt."""
 
     def changeover(self, scenario) -> None:
         """The operator swaps the parts for another scenario's (the simulated cell refills

@@ -12,7 +12,7 @@
   (``--sim-robot-port``), ``outside_robot`` such a program;
 - ``adapters``: what one run opens, pumps after each tick and closes.
 
-Every listener admits connections through ``ui.conns.ConnGate`` (issue 28).
+Every listener admits connections through ``ui.conns.ConnGate``.
 
 Each is a thin translation onto the cell's own operations. This module imports nothing
 heavy, so the command line can parse its options without loading asyncua.

@@ -57,7 +57,7 @@ class PlantAdapters:
             trust = RobotTrust.load(opts.robots)
             self.desk = Desk(cell.clock, pick_grace_s=opts.pick_grace_s)
             install(cell, self.desk)
-            world = getattr(cell.hal, "world", None)
+            world = cell.hal.truth
             if world is not None:
                 self.desk.verify_placed = _world_check(world)
             self.trust = trust
@@ -68,7 +68,7 @@ class PlantAdapters:
                 raise FeederError(f"--part-server {opts.part_server}: {e.strerror or e}") \
                     from None
             print(f"part server: {where}", file=sys.stderr, flush=True)
-            if opts.sim_robot and getattr(cell.hal, "world", None) is not None:
+            if opts.sim_robot and cell.hal.truth is not None:
                 self.program = self._sim_robot(where)
             if opts.sim_robot_port:
                 self._robot_port(opts.sim_robot_port)
@@ -90,11 +90,13 @@ class PlantAdapters:
         else:
             host, _, port = where.rpartition(":")
             link = TcpLink(host, int(port))
-            if self.trust.robots:            # it says who it is, like any robot
-                link.send(f"HELLO sim-robot {self.trust.add_runtime('sim-robot')}")
-                reply = link.receive(timeout=10.0)
-                if reply is None or not reply.startswith("OK HELLO"):
-                    raise FeederError(f"the simulated robot was refused: {reply}")
+            client = PartClient(link)
+            if self.trust.robots:            # it proves who it is, like any robot
+                try:
+                    client.hello("sim-robot", self.trust.add_runtime("sim-robot"))
+                except FeederError as e:
+                    raise FeederError(f"the simulated robot was refused: {e}") from None
+            return SimRobotProgram(client, cell.hal.robot, cell.scenario, cell.clock)
         return SimRobotProgram(PartClient(link), cell.hal.robot, cell.scenario, cell.clock)
 
     trust = None
@@ -104,7 +106,7 @@ class PlantAdapters:
         """The simulated robot's port for an outside program (--sim-robot-port)."""
         from feeder_bt.plant.robot_port import RobotPort
         cell, opts = self.cell, self.opts
-        if opts.sim_robot or getattr(cell.hal, "world", None) is None:
+        if opts.sim_robot or cell.hal.truth is None:
             raise FeederError("--sim-robot-port: with --no-sim-robot on the simulated cell "
                               "(the built-in program would move the same robot)")
         host, port = parse_hostport(text, 7601, "--sim-robot-port")

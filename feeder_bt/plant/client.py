@@ -34,6 +34,8 @@ from feeder_bt.core.part_protocol import (
     parse_offer,
     parse_reply,
     parse_status,
+    prove,
+    secret_key,
 )
 
 
@@ -188,9 +190,18 @@ class PartClient:
             raise PartServerError(fields[0])
         return kind, fields
 
-    def hello(self, name: str, secret: str) -> None:
-        """Say which robot this is (a part server with a robots file asks it first)."""
-        self.request(f"HELLO {name} {secret}")
+    def hello(self, name: str, secret: str, plain: bool = False) -> None:
+        """Prove which robot this is (a part server with a robots file asks it first):
+        ``HELLO NAME``, then the challenge's HMAC, so the secret never crosses the
+        network. ``plain``: the old ``HELLO NAME SECRET``, replayable, for a server whose
+        robots file allows it for this robot (trusted networks only)."""
+        if plain:
+            self.request(f"HELLO {name} {secret}")
+            return
+        kind, fields = self.request(f"HELLO {name}")
+        if kind != "CHALLENGE" or len(fields) != 1:
+            raise PartServerError(f"unexpected reply to HELLO: {kind}")
+        self.request(f"PROOF {prove(secret_key(secret), fields[0])}")
 
     def part(self, type: str | None = None, within: float | None = None,
              wait: float = 0.0) -> Offer | None:

@@ -162,7 +162,7 @@ class CellUaServer:
         server = self.server = Server(user_manager=UaUsers(self.users, record))
         await server.init()
         CLOSED[id(server.iserver)] = self._session_closed
-        # connections (issue 28): our gate caps them per address and in all, and makes room
+        # connections: our gate caps them per address and in all, and makes room
         # for a newcomer by closing the oldest without an activated session. asyncua's own
         # max_connections is only a backstop far above ours: it counts a closed connection
         # until its connection_lost runs, so under a burst it would refuse (reset) the very
@@ -406,7 +406,7 @@ class CellUaServer:
         speeds: dict[str, float] = {}
         for key, v in zip(SPEED_KEYS, values, strict=True):
             # a Double (or any number but a Boolean); anything else is the caller's mistake,
-            # never our BadUnexpectedError (issue 28)
+            # never our BadUnexpectedError
             if v is None:
                 continue
             if isinstance(v, bool) or not isinstance(v, int | float):

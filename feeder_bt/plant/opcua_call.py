@@ -1,4 +1,4 @@
-"""Calling the cell's OPC UA methods without losing a refusal's reason (issue 29).
+"""Calling the cell's OPC UA methods without losing a refusal's reason.
 
 The server answers a refused call with a bad status code *and* its one line of text as the
 output argument (plant/opcua.py ``_refuse``), but asyncua's ``Node.call_method`` raises on

@@ -6,13 +6,17 @@ tick thread answers it (``ServeRobots`` while feeding, ``Desk.serve_idle`` other
 the answer is handed back to the loop, which writes it. The cell never waits on a robot,
 and a robot that goes away leaves only records that time out (behaviours/serve.py).
 
-Nobody on the network can starve it (issue 28): connections pass a ``ui.conns.ConnGate``
-(a cap per address and in all; when full, the oldest connection that has not said who it
-is makes room), a connection must send its first line within ``header_s`` and is closed
+Nobody on the network can starve it: connections pass a ``control.conns.ConnGate`` (a cap
+per address and in all; over either, the oldest connection that has not said who it is
+makes room; a robot that proved who it is moves into the gate's reserve, outside the
+caps, and when every capped connection is busy a newcomer is let in on trial and closed
+unless its first line proves it a robot), a connection must send its first line within ``header_s`` and is closed
 after ``idle_s`` of silence with nothing asked; the backlog is the system's ceiling.
 Robots must be trusted (``robots.RobotTrust``): a robot named in the robots file proves
-who it is (``HELLO NAME SECRET``, or its address); without a robots file only loopback
-peers are served. A robot cut off by the desk (parts taken and never reported) has its
+who it is by challenge and response (``HELLO NAME`` → ``OK CHALLENGE nonce``, a fresh nonce
+per connection; ``PROOF hmac``), or by its address; the plain ``HELLO NAME SECRET`` only
+where the file allows it for that robot. Without a robots file only loopback peers are
+served. A robot cut off by the desk (parts taken and never reported) has its
 connections closed and its ``HELLO`` refused until the cut-off ends.
 
 ``install(cell, desk)`` makes the cell build the part server's trees (trees/serve.py)
@@ -23,6 +27,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import secrets
 import socket
 import threading
 from concurrent.futures import Future
@@ -38,8 +43,10 @@ from feeder_bt.trees.desk import build_serving, build_serving_cleanup, build_ser
 DEFAULT_PORT = 7600
 SWEEP_S = 1.0              # how often idle connections are looked for
 IN_FLIGHT = 8              # requests a connection may have waiting; then it is not read
-LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0)
+LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0, reserve=32)
 FREE = ("HELP", "QUIT")    # what a robot may ask before it has said who it is
+AUTH = ("HELLO", "PROOF")  # how it says who it is
+NONCE_BYTES = 16           # a challenge: 128 random bits, new for every HELLO NAME
 
 
 def install(cell: Cell, desk: Desk) -> None:
@@ -85,6 +92,7 @@ class _Conn(asyncio.Protocol):
         self.lines = 0
         self.closing = False
         self.paused = False
+        self.challenge: tuple[str, str] | None = None   # (name, nonce) awaiting PROOF
 
     # ------------------------------------------------------------------ life
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -101,6 +109,7 @@ class _Conn(asyncio.Protocol):
             r = srv.trust.by_address(ip)
             if r is not None:
                 self._become(r.name)
+                srv.gate.vouch(transport, lambda: True)
         elif _loopback(ip):
             self.robot = ""                # anonymous: this machine, this connection
         srv.conns.add(self)
@@ -155,13 +164,24 @@ class _Conn(asyncio.Protocol):
         self.lines += 1
         words = line.split()
         cmd = words[0].upper() if words else ""
-        if cmd == "HELLO":
-            self._reply_now(self._hello(words))
+        on_trial = self.transport is not None and self.srv.gate.on_trial(self.transport)
+        if on_trial and cmd not in AUTH:
+            self.srv.gate.note("closed: a connection on trial that did not say HELLO")
+            self.close("ERR the part server is busy: say HELLO first, or try again")
+            return
+        if cmd in AUTH:
+            reply = self._hello(words) if cmd == "HELLO" else self._proof(words)
+            self._reply_now(reply)
+            if on_trial and reply.startswith("ERR"):
+                self.srv.gate.note("closed: a connection on trial that did not prove "
+                                   "who it is")
+                self.close()
             return
         if self.robot is None and cmd not in FREE:
             self.srv.gate.note("refused: a request before HELLO")
-            self._reply_now("ERR who are you? Send HELLO NAME SECRET first (a robot named in "
-                            "the part server's robots file)")
+            self._reply_now("ERR who are you? Send HELLO NAME first and answer its "
+                            "challenge with PROOF (a robot named in the part server's "
+                            "robots file)")
             return
         if self.robot and self.srv.cut_off(self.robot):
             self.close(f"ERR robot {self.robot} is cut off: parts handed to it were never "
@@ -183,19 +203,51 @@ class _Conn(asyncio.Protocol):
             self.transport.pause_reading()
 
     def _hello(self, words: list[str]) -> str:
+        """``HELLO NAME``: a challenge, a fresh nonce for this connection, whoever asks
+        (an unknown name gets one too: the answer tells nothing). ``HELLO NAME SECRET``:
+        the plain form, for a robot the robots file lets use it."""
         srv = self.srv
-        if len(words) != 3:
-            return "ERR usage: HELLO NAME SECRET"
+        if len(words) not in (2, 3):
+            return "ERR usage: HELLO NAME (then PROOF HMAC of the challenge)"
         if self.robot:
             return f"ERR this connection is robot {self.robot} already"
+        if len(words) == 2:
+            self.challenge = (words[1], secrets.token_hex(NONCE_BYTES))
+            return f"OK CHALLENGE {self.challenge[1]}"
+        self.challenge = None
         r = srv.trust.hello(words[1], words[2], self.ip)
         if r is None:
-            srv.gate.note("refused: a wrong HELLO")
-            srv.refused_hellos += 1
-            return "ERR HELLO: unknown robot, wrong secret or address"
+            return self._refused("ERR HELLO: unknown robot, wrong secret or address, or "
+                                 "a plain secret this robot may not send (HELLO NAME, "
+                                 "then PROOF)")
+        return self._proved(r)
+
+    def _proof(self, words: list[str]) -> str:
+        """``PROOF hex``: the answer to this connection's challenge; one try per nonce."""
+        if self.robot:
+            return f"ERR this connection is robot {self.robot} already"
+        challenge, self.challenge = self.challenge, None
+        if challenge is None:
+            return self._refused("ERR PROOF: no challenge: send HELLO NAME first")
+        if len(words) != 2:
+            return self._refused("ERR usage: PROOF HMAC (64 hex digits)")
+        r = self.srv.trust.answer(challenge[0], challenge[1], words[1], self.ip)
+        if r is None:
+            return self._refused("ERR HELLO: unknown robot, wrong proof or address")
+        return self._proved(r)
+
+    def _refused(self, reply: str) -> str:
+        self.srv.gate.note("refused: a wrong HELLO")
+        self.srv.refused_hellos += 1
+        return reply
+
+    def _proved(self, r: Any) -> str:
+        srv = self.srv
         if srv.cut_off(r.name):
             return f"ERR robot {r.name} is cut off: parts handed to it were never reported"
         self._become(r.name)
+        if self.transport is not None:
+            srv.gate.vouch(self.transport, lambda: True)   # a robot's: the reserve's
         return f"OK HELLO {r.name}"
 
     def _reply_now(self, text: str) -> None:

@@ -1,5 +1,5 @@
 """``feeder run --part-server ... --no-sim-robot --sim-robot-port [HOST:]PORT``: an outside
-program drives the simulated robot (issue 28; docs/part-server.md, "Your own robot
+program drives the simulated robot (docs/part-server.md, "Your own robot
 program on the simulated cell").
 
 Without a simulated robot program nothing moves the simulated robot, so a client that

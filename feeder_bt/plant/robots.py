@@ -1,15 +1,24 @@
-"""Which robots the part server trusts (issue 28; docs/part-server.md, "Robots must be
-trusted").
+"""Which robots the part server trusts (docs/part-server.md, "Robots must be trusted").
 
 The robots file (``feeder run --part-server ... --robots FILE``) names each robot and how it
-proves who it is: a secret it sends once per connection (``HELLO NAME SECRET``), an
-allow-list of addresses it connects from, or both (then the secret is accepted only from
-those addresses)::
+proves who it is: a secret, an allow-list of addresses it connects from, or both (then the
+secret is accepted only from those addresses)::
 
     {"format": "feeder_bt robots 1",
      "max_outstanding": 4,
      "robots": {"cobra1": {"secret_sha256": "9f86d0...", "addresses": ["10.0.0.21"]},
-                "cell2":  {"addresses": ["10.0.0.22"]}}}
+                "cell2":  {"addresses": ["10.0.0.22"]},
+                "ur5":    {"secret_sha256": "...", "plain_secret": true}}}
+
+A robot with a secret proves it by challenge and response (``core.part_protocol``): the
+server sends a fresh nonce on each connection and the robot answers
+HMAC-SHA256(SHA-256(secret), nonce), so neither the secret nor anything that works on
+another connection crosses the network. The HMAC key is the SHA-256 the file already
+keeps, so the file format is unchanged, and that hash is now the credential: whoever
+reads the file can answer for the robot. The file is written mode 0600 and must be
+protected like a password file. ``plain_secret: true`` lets one robot still send
+``HELLO NAME SECRET`` (a robot language without HMAC-SHA256), on a trusted network only:
+that line can be captured and replayed. It is off unless written.
 
 Secrets are random tokens (``python -m feeder_bt.plant.robots add NAME --robots FILE``
 makes one, prints it once and stores only its SHA-256), so a fast hash is enough: no guess
@@ -34,6 +43,7 @@ from pathlib import Path
 from typing import Any
 
 from feeder_bt.core.errors import FeederError
+from feeder_bt.core.part_protocol import prove
 
 FORMAT = "feeder_bt robots 1"
 NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_.-]{0,31}")
@@ -49,6 +59,7 @@ class Robot:
     name: str
     secret_sha256: str | None = None
     addresses: frozenset[str] = frozenset()
+    plain_secret: bool = False          # HELLO NAME SECRET accepted (replayable: opt-in)
 
 
 @dataclass
@@ -90,10 +101,28 @@ class RobotTrust:
                 return r
         return None
 
-    def hello(self, name: str, secret: str, ip: str) -> Robot | None:
-        """The robot ``HELLO name secret`` from ``ip`` proves to be, or None."""
+    def _candidate(self, name: str, ip: str) -> Robot | None:
         r = self.robots.get(name)
         if r is None or r.secret_sha256 is None or (r.addresses and ip not in r.addresses):
+            return None
+        return r
+
+    def answer(self, name: str, nonce: str, response: str, ip: str) -> Robot | None:
+        """The robot that answered the challenge ``nonce`` with ``response`` (``PROOF``)
+        from ``ip`` proves to be, or None. The key is the stored SHA-256 of its secret."""
+        r = self._candidate(name, ip)
+        if r is None or r.secret_sha256 is None:
+            prove(b"\0" * 32, nonce)            # the same work either way
+            return None
+        want = prove(bytes.fromhex(r.secret_sha256), nonce)
+        got = response.lower().encode("utf-8", "replace")
+        return r if hmac.compare_digest(want.encode("ascii"), got) else None
+
+    def hello(self, name: str, secret: str, ip: str) -> Robot | None:
+        """The robot the plain ``HELLO name secret`` from ``ip`` proves to be, or None:
+        only for a robot the file lets use it (``plain_secret``), as it can be replayed."""
+        r = self._candidate(name, ip)
+        if r is None or not r.plain_secret or r.secret_sha256 is None:
             return None
         got = hashlib.sha256(secret.encode("utf-8", "replace")).hexdigest()
         return r if hmac.compare_digest(got, r.secret_sha256) else None
@@ -110,8 +139,15 @@ def _robot(p: Path, name: str, entry: Any) -> Robot:
     if not NAME_RE.fullmatch(name):
         raise RobotsError(f"{here}: a name of 1-32 letters, digits, '_', '.', '-', starting "
                           "with a letter")
-    if not isinstance(entry, dict) or set(entry) - {"secret_sha256", "addresses"}:
-        raise RobotsError(f"{here}: an object with secret_sha256 and/or addresses")
+    if not isinstance(entry, dict) or set(entry) - {"secret_sha256", "addresses",
+                                                     "plain_secret"}:
+        raise RobotsError(f"{here}: an object with secret_sha256 and/or addresses "
+                          "(and plain_secret)")
+    plain = entry.get("plain_secret", False)
+    if not isinstance(plain, bool):
+        raise RobotsError(f"{here}.plain_secret: true or false")
+    if plain and entry.get("secret_sha256") is None:
+        raise RobotsError(f"{here}.plain_secret: only with secret_sha256")
     digest = entry.get("secret_sha256")
     if digest is not None and (not isinstance(digest, str)
                                or not re.fullmatch(r"[0-9a-f]{64}", digest)):
@@ -127,7 +163,7 @@ def _robot(p: Path, name: str, entry: Any) -> Robot:
             raise RobotsError(f"{here}.addresses: {a!r} is not an IP address") from None
     if digest is None and not out:
         raise RobotsError(f"{here}: give secret_sha256, addresses, or both")
-    return Robot(name, digest, frozenset(out))
+    return Robot(name, digest, frozenset(out), plain)
 
 
 def _write(path: Path, doc: dict[str, Any]) -> None:
@@ -148,6 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("name")
     ap.add_argument("--robots", required=True, metavar="FILE")
     ap.add_argument("--address", action="append", default=[], metavar="IP")
+    ap.add_argument("--plain-secret", action="store_true",
+                    help="also accept the replayable HELLO NAME SECRET from this robot "
+                         "(a robot language without HMAC-SHA256; trusted networks only)")
     args = ap.parse_args(argv)
     path = Path(args.robots).expanduser()
     try:
@@ -163,11 +202,16 @@ def main(argv: list[str] | None = None) -> int:
             if args.action == "add":
                 token = secrets.token_urlsafe(24)
                 entry["secret_sha256"] = hashlib.sha256(token.encode()).hexdigest()
+                if args.plain_secret:
+                    entry["plain_secret"] = True
             robots[args.name] = entry
             _robot(path, args.name, entry)
             if token:
-                print(f"robot {args.name}: its secret (shown once; the robot sends "
-                      f"HELLO {args.name} SECRET): {token}")
+                how = (f"sends HELLO {args.name} SECRET, replayable: trusted networks only"
+                       if args.plain_secret else "answers the part server's challenge "
+                       "with it")
+                print(f"robot {args.name}: its secret (shown once; the robot {how}): "
+                      f"{token}")
         _write(path, doc)
     except (FeederError, OSError, json.JSONDecodeError) as e:
         print(f"robots: {e}", file=sys.stderr)

@@ -130,7 +130,7 @@ def is_loopback(host: str) -> bool:
 
 
 # ---------------------------------------------------------------------------- connections
-#: id(InternalServer) -> its ConnGate (issue 28); consulted by the patched protocol factory
+#: id(InternalServer) -> its ConnGate; consulted by the patched protocol factory
 GATES: dict[int, Any] = {}
 ACTIVATION_S = 10.0        # a connection with no activated session this long is closed
 

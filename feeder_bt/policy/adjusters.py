@@ -98,7 +98,7 @@ class Adjuster:
         """The fastest speeds this adjuster can ever command, whatever the queue does.
 
         The loader checks each against the cell's conveyor limits, so every adjuster runs
-        under the same limits as a fixed setting (issue 16). ``incline_pct`` is the
+        under the same limits as a fixed setting. ``incline_pct`` is the
         scenario's, which adjusters of the horizontal belt keep."""
         if "max_mm_s" not in self.params:
             return []

@@ -1,4 +1,4 @@
-"""Smart feeding (issue 31): the next plate action from what the last frame showed.
+"""Smart feeding: the next plate action from what the last frame showed.
 
 The thesis's adjust sub-system retunes the presentation from what the locator saw; for a
 vibrating plate that means choosing the next action rather than a speed. The view is the

@@ -25,7 +25,7 @@ SCHEMA_VERSION = 1
 FLUSH_EVERY = 5000          # buffered events that force a flush
 FLUSH_WALL_S = 2.0          # wall seconds between flushes otherwise
 
-# Operator access events (issue 19), recorded by the operator UI: the kind, and the words
+# Operator access events, recorded by the operator UI: the kind, and the words
 # `feeder report` counts them under. ``user`` is who (``-`` for nobody, ``(unknown name)``
 # for a name that is not a user); ``ip`` where from; ``why`` the reason.
 ACCESS_KINDS = {

@@ -1,4 +1,4 @@
-"""The trees' history (issue 17): every status change of every node, and the blackboard,
+"""The trees' history: every status change of every node, and the blackboard,
 recorded compactly so that a shift can be rewound (``feeder replay``, the dashboard's
 timeline), as Groot2 does with BehaviorTree.CPP's transition log.
 
@@ -150,9 +150,9 @@ def summarise(value: Any, depth: int = 0) -> Any:
     return f"<{type(value).__name__}>"
 
 
-def board_now() -> dict[str, Any]:
-    """The process-wide blackboard, summarised."""
-    return {k: summarise(v) for k, v in sorted(py_trees.blackboard.Blackboard.storage.items())}
+def board_now(board: Any) -> dict[str, Any]:
+    """A cell's blackboard (``Cell.board``), summarised, by its plain keys."""
+    return {k: summarise(v) for k, v in sorted(board.items().items())}
 
 
 # ---------------------------------------------------------------------------- recording
@@ -266,7 +266,7 @@ class TreeTrace:
 
     def _sample_board(self, now: float) -> None:
         self._next_board = now + BOARD_EVERY_S
-        board = board_now()
+        board = board_now(self.cell.board)
         changed = {k: v for k, v in board.items() if self._board.get(k, ...) != v}
         changed.update({k: None for k in self._board if k not in board})
         if changed:

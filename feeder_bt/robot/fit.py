@@ -1,4 +1,4 @@
-"""A robot model fitted online from the robot's measured move times (issue 16).
+"""A robot model fitted online from the robot's measured move times.
 
 The pick policies price every pick with a robot model. The cell description's model is
 nominal: the arm in front of the cell may be slower (a payload, a controller's speed
@@ -98,7 +98,7 @@ class RobotFit:
         self.missed_s = 0.0
         self.first_pick_t: float | None = None
         # the fit's one-step prediction residual (predicted before each update against the
-        # measured move): how well the controller's Cartesian form fits the arm (issue 30)
+        # measured move): how well the controller's Cartesian form fits the arm
         self.res_n = 0
         self.res_sq = 0.0
         self.res_max = 0.0
@@ -147,7 +147,7 @@ class RobotFit:
         """``theta`` moved inside the bounds along the fit's own uncertainty: an estimate
         held at one bound moves the other as the data correlate them (clipping each alone
         leaves a pair that fits nothing: with a world whose offset wants to be below
-        ``C_BOUNDS``, the fit ran 0.2 s above every move, issue 30)."""
+        ``C_BOUNDS``, the fit ran 0.2 s above every move)."""
         k, c = float(theta[0]), float(theta[1])
         P = self.P
         cb = min(max(c, C_BOUNDS[0]), C_BOUNDS[1])

@@ -1,4 +1,4 @@
-"""Grip points and the gripper's footprint in the belt frame (issue 27).
+"""Grip points and the gripper's footprint in the belt frame.
 
 A part's ``pick`` (``scenario.model.PickSpec``) lists grips in the part's own frame and
 the gripper's footprint: a suction cup (a disc) and/or finger boxes, in the grip's frame.

@@ -1,4 +1,4 @@
-"""A two-link SCARA's move times from its joints: the plant's robot (issue 30).
+"""A two-link SCARA's move times from its joints: the plant's robot.
 
 The controller prices moves with a Cartesian trapezoid (``robot_model.RobotModel``, and the
 fit of it the pick policies learn, ``robot/fit.py``). A real SCARA does not move like that:

@@ -50,7 +50,7 @@ class SimPart:
     slide: tuple[float, float] = (0.0, 0.0)
     settle_t0: float = 0.0
     settle_end: float = -math.inf
-    passes: int = 0             # times it has fallen off the belt's end (wear, issue 30)
+    passes: int = 0             # times it has fallen off the belt's end (wear)
     slip_v: float = 0.0         # sliding on the belt: its speed less the belt's (slip.py)
 
     @property

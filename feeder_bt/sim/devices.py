@@ -53,7 +53,7 @@ class SimConveyor:
 
     def _refused(self, what: str, mm_s: float) -> Job | None:
         """A speed above the cell's ``max_mm_s`` fails the job: the simulated belt never
-        clamps silently, so every setting runs under the same limits (issue 16)."""
+        clamps silently, so every setting runs under the same limits."""
         from feeder_bt.hal.interfaces import speed_refused
         return speed_refused(self.name, what, mm_s, self.axis.max_speed, self.world.cell.path)
 
@@ -281,6 +281,15 @@ class SimHal(Hal):
     """The simulated cell behind the HAL interfaces."""
 
     world: World
+
+    @property
+    def truth(self) -> World:               # type: ignore[override]
+        """The world itself: its truth is what the report accounts against."""
+        return self.world
+
+    @truth.setter
+    def truth(self, value: object) -> None:
+        """The dataclass's default (None) is set at construction; the world stands in."""
 
     def step(self, now: float) -> None:
         self.world.step(now)

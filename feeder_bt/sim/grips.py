@@ -168,7 +168,7 @@ class RobotGrips:
     def _judge_footprint(self, part: SimPart, cx: float, cy: float, angle: float,
                          t: float) -> None:
         """A cup over a hole of the part grips nothing; a gripper whose footprint lands on
-        a neighbour does not reach the part (issue 27). Judged on the true outlines."""
+        a neighbour does not reach the part. Judged on the true outlines."""
         x, y = self.part_xy(part, t)
         placed = place_outline(part.outline, x, y, part.angle)
         for hole in rings(placed)[1:]:

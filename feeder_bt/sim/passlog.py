@@ -1,4 +1,4 @@
-"""What the selection-aware robot bounds need from a simulated run (issue 30): the belt's
+"""What the selection-aware robot bounds need from a simulated run: the belt's
 motion, every pass of a part along the horizontal belt, and where the robot picked.
 
 A pass starts when a part lands on the horizontal belt (off the incline, or dropped by the

@@ -1,4 +1,4 @@
-"""A simulated vibratory plate (issue 31): a bulk container, a backlit rectangular plate,
+"""A simulated vibratory plate: a bulk container, a backlit rectangular plate,
 and the actions an AnyFeeder-class feeder offers — dispense, feed forward/backward, flip,
 purge — each moving the parts by stated physics (docs/plate-feeders.md, "Physics").
 

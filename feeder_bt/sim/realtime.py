@@ -62,7 +62,7 @@ class Plant:
 
     def _build(self, scenario: Scenario) -> None:
         make = make_sim_hal
-        if self.cell.presentation == "plate":     # a vibratory-plate cell (issue 31)
+        if self.cell.presentation == "plate":     # a vibratory-plate cell
             from feeder_bt.sim.plate import make_plate_sim_hal as make
         self.hal: SimHal = make(scenario, self.cell, self.clock,  # type: ignore[arg-type]
                                 self.seed)

@@ -1,5 +1,5 @@
 """Parts sliding on the horizontal belt when it speeds up or brakes harder than friction
-can carry them (issue 30: belt control is not free).
+can carry them (belt control is not free).
 
 A part lying on the belt moves with it while the belt's acceleration ``a`` stays within
 what static friction can transmit, ``|a| <= mu_s g``. Past that it slides: kinetic friction

@@ -75,7 +75,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.h_len, self.h_width, self.i_len = hc.length_mm, hc.width_mm, ic.length_mm
         self.cpm = cell.encoder.counts_per_mm
         # the arm as it really moves: a SCARA (feeder_bt.robot.scara), sim_speed_factor times a
-        # Cobra 600; the trees see only the cell's Cartesian description (issues 16, 30)
+        # Cobra 600; the trees see only the cell's Cartesian description
         self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
         # every pass along the belt and every pick, for the report's robot bounds
         self.passlog = PassLog(clock.now(), 0.0)
@@ -106,7 +106,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         # supply (a supply plan, docs/supply.md): placed parts leave the cell instead of
         # going back to the hopper; the incline lifts ``lift`` times its nominal rate
         self.shipped: list[int] = []
-        # wear (issue 30): a part that has travelled the belt its type's max_passes times
+        # wear: a part that has travelled the belt its type's max_passes times
         # goes to scrap when it falls off the end, not back to the hopper
         self.scrapped: list[int] = []
         self.ship_placed = False

@@ -12,7 +12,7 @@ from feeder_bt.trees import plate
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
-    if plate.is_plate(ctx):          # smart feeding chooses plate actions (issue 31)
+    if plate.is_plate(ctx):          # smart feeding chooses plate actions
         return plate.build_adjust(ctx)
     return Sequence("adjust", memory=True, children=[
         Wait("period", ctx, ctx.scenario.adjust.period_s),

@@ -11,11 +11,13 @@ from py_trees.composites import Parallel, Selector, Sequence
 from py_trees.decorators import SuccessIsRunning
 
 from feeder_bt.behaviours.base import Ctx, ErrorIs, Wait
+from feeder_bt.behaviours.keys import RETRIEVE
 from feeder_bt.behaviours.locate import GrabGolden
 from feeder_bt.behaviours.plate import InitPlate, PurgePlate, init_plate_keys
 from feeder_bt.behaviours.present import StopConveyors
 from feeder_bt.behaviours.retrieve import MoveSafe, PhaseIs, Reconcile, Recover, SetRobotSpeed
 from feeder_bt.behaviours.setup import ClearWindow, SetSignal, SyncEncoders
+from feeder_bt.core.jobs import Activity
 from feeder_bt.trees import adjust, locate, plate, present, retrieve
 
 SETTLE_S = 0.25        # after the conveyors stop, before the encoders are tied together
@@ -26,17 +28,23 @@ class Loop(SuccessIsRunning):
     tick: with a plain success-is-running loop every cycle lost one tick between its last
     step and its first (20 ms a pick-and-place at 50 Hz, ~3 % of a lens cycle).
 
-    ``restarts`` counts those restarts over all loops: a cycle's end is news to the other
-    branches (new speeds on the blackboard), so the ticker must not skip the next tick."""
+    Each restart is counted on the cell's ``Activity`` (the one given, else the one
+    counting): a cycle's end is news to the other branches (new speeds on the blackboard),
+    so the ticker must not skip the next tick."""
 
-    restarts = 0
+    def __init__(self, name: str, child: py_trees.behaviour.Behaviour,
+                 activity: Activity | None = None) -> None:
+        super().__init__(name, child)
+        self.activity = activity
 
     def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
         if self.status != Status.RUNNING:
             self.initialise()
         yield from self.decorated.tick()
         if self.decorated.status == Status.SUCCESS:
-            Loop.restarts += 1
+            activity = self.activity or Activity.current()
+            if activity is not None:
+                activity.loop_restarts += 1
             yield from self.decorated.tick()      # once: a tick stays bounded
         new_status = self.update()
         if new_status != Status.RUNNING:
@@ -49,10 +57,10 @@ def build_feeding(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     """Four branches that never end: each absorbs its own failures (recovery fallbacks) and
     reports what it cannot handle on ``/faults/escalate``, so the Parallel never fails."""
     if plate.is_plate(ctx):
-        init_plate_keys()
+        init_plate_keys(ctx.board)
     branches = [present.build(ctx), locate.build(ctx), retrieve.build(ctx), adjust.build(ctx)]
     return Parallel("feeder", policy=ParallelPolicy.SuccessOnAll(synchronise=False),
-                    children=[Loop(f"{b.name} loop", b) for b in branches])
+                    children=[Loop(f"{b.name} loop", b, ctx.activity) for b in branches])
 
 
 def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
@@ -68,7 +76,7 @@ def build_setup(ctx: Ctx, robot: bool = True) -> py_trees.behaviour.Behaviour:
         steps.append(InitPlate("home the plate", ctx))
     if vision.backlight:
         steps.append(SetSignal("backlight on", ctx, "backlight", True))
-    if vision.golden_image:         # a plate is cleared by a purge (issue 31)
+    if vision.golden_image:         # a plate is cleared by a purge
         clear = (PurgePlate("clear the plate", ctx) if plate.is_plate(ctx)
                  else ClearWindow("clear the window", ctx))
         steps += [clear, GrabGolden("golden image", ctx)]
@@ -119,6 +127,6 @@ def _robot_to_safe(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     return Selector("robot to safe", memory=True, children=[
         MoveSafe("move to safe", ctx),
         Sequence("recover first", memory=True, children=[
-            ErrorIs("servo time-out?", ctx, "/retrieve/error", ("servo_timeout",)),
+            ErrorIs("servo time-out?", ctx, RETRIEVE.ERROR, ("servo_timeout",)),
             Recover("run recovery program", ctx),
             MoveSafe("move to safe", ctx)])])

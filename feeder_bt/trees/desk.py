@@ -24,7 +24,7 @@ def build_serving(ctx: Ctx, desk: Desk) -> py_trees.behaviour.Behaviour:
                 ServeRobots("serve robots", ctx, desk), adjust.build(ctx)]
     return Parallel("feeder (part server)",
                     policy=ParallelPolicy.SuccessOnAll(synchronise=False),
-                    children=[Loop(f"{b.name} loop", b) for b in branches])
+                    children=[Loop(f"{b.name} loop", b, ctx.activity) for b in branches])
 
 
 def build_serving_setup(ctx: Ctx) -> py_trees.behaviour.Behaviour:

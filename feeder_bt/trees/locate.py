@@ -9,6 +9,7 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 
 from feeder_bt.behaviours.base import AttemptsBelow, CountFault, Ctx, ErrorIs, Escalate, Retry
+from feeder_bt.behaviours.keys import LOCATE
 from feeder_bt.behaviours.locate import (
     AdvanceIfNothing,
     ClearForGolden,
@@ -24,7 +25,7 @@ from feeder_bt.trees import plate
 from feeder_bt.trees.branches import link_lost
 from feeder_bt.trees.leaves import leaf_class
 
-KEY = "/locate/error"
+KEY = LOCATE.ERROR
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
@@ -43,7 +44,7 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
             Grab("grab + latch", ctx),
             recipe("recipe", ctx),
             Enqueue("enqueue", ctx),
-            # a plate: the adjuster plans a plate action instead (issue 31)
+            # a plate: the adjuster plans a plate action instead
             AskPlate("plate action if nothing", ctx) if plate.is_plate(ctx)
             else AdvanceIfNothing("advance if nothing", ctx),
         ])

@@ -1,4 +1,4 @@
-"""The branches of a vibratory-plate cell (issue 31) that differ from a belt cell's.
+"""The branches of a vibratory-plate cell that differ from a belt cell's.
 
 *present* serves plate actions instead of belt advances and recovers the plate's drive
 faults: a servo error or error state is reset and the plate homed again, as the AnyFeeder
@@ -15,6 +15,7 @@ import py_trees
 from py_trees.composites import Selector, Sequence
 
 from feeder_bt.behaviours.base import Ctx, Escalate
+from feeder_bt.behaviours.keys import PRESENT
 from feeder_bt.behaviours.plate import (
     ChoosePlateAction,
     InitPlate,
@@ -24,7 +25,7 @@ from feeder_bt.behaviours.plate import (
 )
 from feeder_bt.trees.branches import link_lost, once_a_minute
 
-KEY = "/present/error"
+KEY = PRESENT.ERROR
 
 
 def is_plate(ctx: Ctx) -> bool:

@@ -11,15 +11,16 @@ from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
 from feeder_bt.behaviours.base import CountFault, Ctx, ErrorIs, Escalate, Retry, Wait
+from feeder_bt.behaviours.keys import PRESENT
 from feeder_bt.behaviours.present import RunConveyors, ServeAdvance, Shake, StopConveyors
 from feeder_bt.trees import plate
 from feeder_bt.trees.branches import link_lost, once_a_minute
 
-KEY = "/present/error"
+KEY = PRESENT.ERROR
 
 
 def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
-    if plate.is_plate(ctx):          # a vibratory plate serves plate actions (issue 31)
+    if plate.is_plate(ctx):          # a vibratory plate serves plate actions
         return plate.build_present(ctx)
     if ctx.scenario.present.mode == "continuous":
         work = RunConveyors("run conveyors", ctx)

@@ -15,6 +15,7 @@ from py_trees.composites import Selector, Sequence
 from py_trees.decorators import Inverter
 
 from feeder_bt.behaviours.base import CountFault, Ctx, ErrorIs, Escalate
+from feeder_bt.behaviours.keys import RETRIEVE
 from feeder_bt.behaviours.retrieve import (
     FailedPicksBelow,
     FollowRobotSpeed,
@@ -30,8 +31,12 @@ from feeder_bt.behaviours.retrieve import (
 from feeder_bt.trees.branches import link_lost
 from feeder_bt.trees.leaves import leaf_class
 
-KEY = "/retrieve/error"
+KEY = RETRIEVE.ERROR
 UNKNOWN_PART = "the gripper holds a part this run did not pick: remove it"
+# never recovered by software: a guard or e-stop that resets itself must not give the arm
+# its power back (errors.PowerOff)
+POWER_OFF = ("robot power off (an e-stop or a guard): no software recovery; release it, "
+             "turn arm power on at the controller, then reset the cell")
 
 
 def _failed_picks(ctx: Ctx) -> str:
@@ -83,6 +88,10 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
     ])
     missed = _failed_pick(ctx, "missed grab", "missed_grab", "missed")
     unreachable = _failed_pick(ctx, "out of reach", "envelope", "unreachable")
+    power = Sequence("power off", memory=True, children=[
+        ErrorIs("arm power off?", ctx, KEY, ("power_off",)),
+        CountFault("count power off", ctx, KEY),
+        Escalate("to a person", ctx, None, POWER_OFF)])
     servo = Sequence("servo recovery", memory=True, children=[
         ErrorIs("servo time-out?", ctx, KEY, ("servo_timeout",)),
         CountFault("count servo fault", ctx, KEY),
@@ -112,6 +121,6 @@ def build(ctx: Ctx) -> py_trees.behaviour.Behaviour:
         ErrorIs("unknown part?", ctx, KEY, ("unknown_part",)),
         Escalate("to the operator", ctx, None, UNKNOWN_PART)])
     return Selector("retrieve", memory=True, children=[
-        pick_and_place, missed, unreachable, servo, link, unknown,
+        pick_and_place, missed, unreachable, power, servo, link, unknown,
         Escalate("robot failed", ctx, KEY, "robot could not recover"),
     ])

@@ -19,8 +19,10 @@ from typing import Any
 
 from feeder_bt.core.errors import FeederError
 
-#: py_trees' blackboard is one per process: runs in one process (a Dask worker's threads)
-#: take turns
+#: runs in one process (a Dask worker's threads) take turns: each cell has its own
+#: blackboard and ticker news, but the run's progress goes to ``sys.stderr``, which
+#: ``redirect_stderr`` swaps for the whole process (two at once would leave a run's
+#: StringIO as the worker's stderr)
 _ONE_RUN_AT_A_TIME = threading.Lock()
 
 

@@ -42,7 +42,7 @@ class TuneConfig:
     cell: str | None = None
     supply: str | None = None
     sampler_seed: int = 0
-    # wear budget (issue 30): recirculations per placed part a setting may cost; a trial
+    # wear budget: recirculations per placed part a setting may cost; a trial
     # over it is infeasible (TPE's constraints), never the best
     max_recirc: float | None = None
     grid: bool = False                  # the fixed space as a grid (space.grid_space), not TPE

@@ -5,7 +5,7 @@ window, so no trial asks an axis for more than it can do: incline speeds are sam
 mm/s up to the incline's limit and turned into the percentages the scenario takes, divided
 by the highest horizontal speed they go with. Three spaces, each with the same budget, and
 each with the frame spacing and the pick policy free (a baseline gets every option ours
-gets but belt control, issue 30):
+gets but belt control):
 
 * ``ours``: adjuster (none, water_marks, supply_queue) and its parameters, belt and
   incline speeds;

@@ -1,4 +1,4 @@
-"""The operator UI (issue 6, thesis chapter 4): a web dashboard served by ``feeder run --ui``.
+"""The operator UI (thesis chapter 4): a web dashboard served by ``feeder run --ui``.
 
 Many logged-in users watch; one at a time holds control and operates the cell. The pieces:
 
@@ -7,7 +7,7 @@ Many logged-in users watch; one at a time holds control and operates the cell. T
 - ``control``: sessions, the control token and the failed-login limiter (web thread only);
 - ``guard``: judging login attempts so that guessing never locks the rightful user out;
 - ``access``: what every operator surface shares: settings, defensive body parsing, the
-  Host allow-list and forwarded headers, and the record of refusals (issue 19);
+  Host allow-list and forwarded headers, and the record of refusals;
 - ``bridge``: the only way between the web thread and the cell: commands queued to the tick
   thread, immutable status snapshots published back;
 - ``operate`` and ``status``: what the tick thread does with a command, and what it puts

@@ -1,5 +1,5 @@
-"""The dashboard's belt view (issue 17): the horizontal belt in plan, from the controller's
-own data — never the simulator's. On a plate cell (issue 31) the same view shows the plate
+"""The dashboard's belt view: the horizontal belt in plan, from the controller's
+own data — never the simulator's. On a plate cell the same view shows the plate
 (``geometry["plate"]``) and the parts queued on it, which do not move.
 
 Where the parts are is what the cell believes: each queued part's pose at its latch, moved
@@ -15,8 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import py_trees
 
+from feeder_bt.behaviours.keys import RETRIEVE
 from feeder_bt.control.cell import Cell
 from feeder_bt.core.parts import Part
 from feeder_bt.vision.pixels import Calibration
@@ -79,8 +79,8 @@ class BeltPanel:
             return p.x_at(count, enc.robot_bits, enc.counts_per_mm)
 
         out["parts"] = [self._part(p, at(p)) for p in ctx.queue.peek_all()[:MAX_PARTS]]
-        store = py_trees.blackboard.Blackboard.storage
-        part, phase = store.get("/retrieve/part"), store.get("/retrieve/phase")
+        board = self.cell.board
+        part, phase = board.get(RETRIEVE.PART), board.get(RETRIEVE.PHASE)
         if isinstance(part, Part) and phase in ("pick", "held", "place"):
             # "pick": still on the belt, the robot tracking it; "held"/"place": gripped
             out["picking"] = {**self._part(part, at(part)), "phase": phase}

@@ -1,4 +1,4 @@
-"""The dashboard's camera view (issue 17): the last frame with what the locator made of it.
+"""The dashboard's camera view: the last frame with what the locator made of it.
 
 Threading: the locate behaviour only hands a reference to each frame and its result to a
 ``LatestLook`` slot (``vision.latest``); nothing is drawn or encoded on the tick thread.
@@ -103,7 +103,7 @@ class CameraFeed:
 def frame_seq(name: str) -> int | None:
     """``SEQ.jpg`` to SEQ; None for anything else. Parsed by hand, bounded before the
     conversion: a route's ``{seq:int}`` converts any run of digits, and 4,301 of them
-    raise inside the router (a 500, issue 28)."""
+    raise inside the router (a 500)."""
     stem, dot, ext = name.partition(".")
     if ext != "jpg" or not dot or not 1 <= len(stem) <= 18 or not stem.isascii() \
             or not stem.isdigit():

@@ -4,13 +4,16 @@ The socket is bound in the caller's thread, so a bad address or a busy port is a
 error before the cell starts. uvicorn's own forwarded-header handling is off: only
 ``access.Gate`` decides whose ``X-Forwarded-*`` headers count (a named proxy's).
 
-Connections (issue 28): uvicorn caps only concurrency in all (``limit_concurrency``, which
-idle connections fill too) and closes a connection only after a response
+Connections: uvicorn caps only concurrency in all (``limit_concurrency``, which idle
+connections fill too) and closes a connection only after a response
 (``timeout_keep_alive``); a connection that never sends a request is never closed. So its
 HTTP and websocket protocol classes are replaced (``Config(http=..., ws=...)``) by
 subclasses that pass each connection through a ``conns.ConnGate`` (per-address and total
-caps, the oldest idle connection closed for a newcomer) and close one whose request has
-not arrived within ``header_s``; header size stays bounded by h11's
+caps, the oldest idle connection or idle websocket closed for a newcomer) and close one
+whose request has not arrived within ``header_s``. Each request and websocket is shown to
+``keeper`` (the dashboard's: is this the session that holds control?): a connection it
+vouches for goes into the gate's reserve and is never displaced, and one let in on trial
+(every capped connection busy) is answered 503 and closed unless it is vouched for; header size stays bounded by h11's
 ``h11_max_incomplete_event_size`` (16 KiB); the backlog is the system's ceiling. (uvicorn
 docs, "Settings" — ``limit_concurrency``, ``backlog``, ``timeout_keep_alive``,
 ``h11_max_incomplete_event_size`` — and "Server Behavior"; checked against uvicorn 0.54's
@@ -24,6 +27,7 @@ import ipaddress
 import socket
 import threading
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from feeder_bt.control.conns import ConnGate, ConnLimits, backlog, quiet_logger
@@ -31,6 +35,11 @@ from feeder_bt.core.errors import FeederError
 
 if TYPE_CHECKING:
     from feeder_bt.ui.server import UiApp
+
+
+#: the dashboard's: a browser opens ~6 connections and a websocket; the holder of
+#: control has 16 more outside the caps (her page, a script, a retry)
+UI_LIMITS = ConnLimits(total=512, per_address=32, reserve=16)
 
 
 def _bind(host: str, port: int) -> socket.socket:
@@ -53,10 +62,48 @@ def _bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def gated_protocols(gate: ConnGate) -> tuple[type, type | None]:
+#: given a request's ASGI scope, a callable saying whether its connection is still to be
+#: kept (the session that holds control still holds it), or None if it is nobody's
+Keeper = Callable[[dict[str, Any]], "Callable[[], bool] | None"]
+BUSY_BODY = b'{"ok":false,"error":"the controller is busy: try again"}'
+
+
+def _screened(app: Any, gate: ConnGate, keeper: Keeper | None,
+              transport: Callable[[], Any]) -> Any:
+    """``app`` behind the reserve's door: a request ``keeper`` vouches for puts its
+    connection in the gate's reserve; one on trial that it does not vouch for is
+    refused (503, or a websocket closed 1013) and its connection closed."""
+
+    async def screened(scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] in ("http", "websocket"):
+            t = transport()
+            kept = keeper(scope) if keeper is not None else None
+            if kept is not None:
+                gate.vouch(t, kept)
+            elif gate.on_trial(t):
+                gate.note("closed: a connection on trial was not the holder of control's")
+                if scope["type"] == "websocket":
+                    await send({"type": "websocket.close", "code": 1013})
+                else:
+                    await send({"type": "http.response.start", "status": 503,
+                                "headers": [(b"content-type", b"application/json"),
+                                            (b"retry-after", b"1"),
+                                            (b"connection", b"close")]})
+                    await send({"type": "http.response.body", "body": BUSY_BODY})
+                return
+            else:
+                gate.unkeep(t)
+        await app(scope, receive, send)
+
+    return screened
+
+
+def gated_protocols(gate: ConnGate, keeper: Keeper | None = None
+                    ) -> tuple[type, type | None]:
     """uvicorn's HTTP (h11) and websocket protocol classes, admitting each connection
-    through ``gate`` and closing one whose next request has not come within
-    ``gate.limits.header_s`` (after the connection is made, and after each response)."""
+    through ``gate``, closing one whose next request has not come within
+    ``gate.limits.header_s`` (after the connection is made, and after each response), and
+    showing each request to ``keeper`` (``_screened``)."""
     from uvicorn.protocols.http.h11_impl import H11Protocol
     from uvicorn.protocols.websockets.auto import AutoWebSocketsProtocol
 
@@ -64,6 +111,10 @@ def gated_protocols(gate: ConnGate) -> tuple[type, type | None]:
 
     class GatedHttp(H11Protocol):
         _feeder_in = False
+
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.app = _screened(self.app, gate, keeper, lambda: self.transport)
 
         def connection_made(self, transport: Any) -> None:  # type: ignore[override]
             if not gate.admit(transport, self._busy):
@@ -100,8 +151,13 @@ def gated_protocols(gate: ConnGate) -> tuple[type, type | None]:
     ws_class = None
     if AutoWebSocketsProtocol is not None:
         class GatedWs(AutoWebSocketsProtocol):  # type: ignore[misc, valid-type]
+            def __init__(self, *args: Any, **kwargs: Any) -> None:
+                super().__init__(*args, **kwargs)
+                self.app = _screened(self.app, gate, keeper, lambda: self.transport)
+
             def connection_made(self, transport: Any) -> None:  # type: ignore[override]
-                gate.replace(transport, lambda: True)   # an open websocket is busy
+                # an open websocket is idle: displaceable unless the keeper vouches for it
+                gate.replace(transport, lambda: False)
                 super().connection_made(transport)
 
             def connection_lost(self, exc: Exception | None) -> None:
@@ -112,10 +168,11 @@ def gated_protocols(gate: ConnGate) -> tuple[type, type | None]:
     return GatedHttp, ws_class
 
 
-def uvicorn_config(app: Any, gate: ConnGate, **extra: Any) -> Any:
+def uvicorn_config(app: Any, gate: ConnGate, keeper: Keeper | None = None,
+                   **extra: Any) -> Any:
     """The uvicorn settings every feeder web listener uses (dashboard, replay)."""
     import uvicorn
-    http, ws = gated_protocols(gate)
+    http, ws = gated_protocols(gate, keeper)
     return uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
                           proxy_headers=False, server_header=False, http=http,
                           **({"ws": ws} if ws is not None else {}),
@@ -138,7 +195,7 @@ class UiServer:
     def __init__(self, ui: UiApp, host: str, port: int,
                  limits: ConnLimits | None = None) -> None:
         self.ui, self.host, self.port = ui, host, port
-        self.gate = ConnGate("operator UI", limits or ConnLimits(total=512, per_address=32))
+        self.gate = ConnGate("operator UI", limits or UI_LIMITS)
         self._sock: socket.socket | None = None
         self._server: Any = None
         self._thread: threading.Thread | None = None
@@ -155,7 +212,8 @@ class UiServer:
 
         self._sock = _bind(self.host, self.port)
         self.port = self._sock.getsockname()[1]
-        config = uvicorn_config(self.ui.app, self.gate, timeout_graceful_shutdown=2,
+        config = uvicorn_config(self.ui.app, self.gate, self.ui.keeper,
+                                timeout_graceful_shutdown=2,
                                 ws_ping_interval=10.0, ws_ping_timeout=10.0,
                                 ws_max_size=64 * 1024)
         self._server = uvicorn.Server(config)

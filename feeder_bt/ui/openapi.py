@@ -1,5 +1,5 @@
 """The dashboard's HTTP API as an OpenAPI 3.1 description, served at ``/api/openapi.json``
-(issue 29). Built from the same constants the handlers use (the commands, the speed keys),
+. Built from the same constants the handlers use (the commands, the speed keys),
 so it cannot drift from them; tests/ui/test_openapi.py checks every route is described and
 that the login form posts the fields ``/api/login`` reads."""
 

@@ -2,7 +2,7 @@
 timeline, served read-only from the event log until Ctrl-C.
 
 No cell and no commands, but the blackboard and every node of a run are the cell's
-business: a viewer signs in with the dashboard's users file (``replay_login``; issue 28).
+business: a viewer signs in with the dashboard's users file (``replay_login``).
 Like the operator UI it listens on 127.0.0.1 by default, answers only to the Host names of
 the address it is bound to (a DNS-rebinding page cannot read the log), with the same
 security headers and connection limits. uvicorn runs on the main thread's loop, which is
@@ -106,7 +106,7 @@ def serve_replay(db: str | Path, run_id: int, bind: str,
 
 
 def protection_notice(host: str, users: Path) -> str:
-    """What protects this replay server, said at start-up (issue 28)."""
+    """What protects this replay server, said at start-up."""
     where = "this machine only" if is_loopback(host) else f"the network ({host})"
     return (f"feeder replay: reachable from {where}; every page but the login needs a "
             f"session from the users file {users}; Host names are checked, connections "

@@ -1,4 +1,4 @@
-"""``feeder replay --ui`` signs in with the dashboard's users file (issue 28): the
+"""``feeder replay --ui`` signs in with the dashboard's users file: the
 blackboard and every node of a past run are the cell's business, and the Host check stops
 only browsers, not scripts.
 

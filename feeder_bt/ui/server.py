@@ -7,7 +7,7 @@ publish. Each websocket client has a sender task that always sends the *latest* 
 (updates published while it was busy are coalesced), and a client that cannot take one
 within ``SEND_TIMEOUT_S`` is dropped; the cell never waits on any of this.
 
-Security (docs/operator-ui.md, issues 6 and 19): a request with a Host that is not ours is
+Security (docs/operator-ui.md): a request with a Host that is not ours is
 refused before anything else (``access.Gate``); passwords are checked against the users
 file's scrypt hashes off the loop, and failed logins are slowed per address and browser
 (``guard``) without locking the rightful user out; a session lives in an HTTP-only,
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import secrets
 import sys
 import time
 from collections.abc import Awaitable, Callable
@@ -67,7 +68,7 @@ SEND_TIMEOUT_S = 5.0          # a websocket client slower than this is dropped
 MAX_BODY = 64 * 1024          # bytes: every request the page makes is a few hundred
 MAX_CHECKS = 4                # password checks at once (16 MiB and ~50 ms of a core each)
 STRANGER_CHECKS = 2           # ... of which strangers may hold at most this many: a known
-                              # browser or address always finds a free one (issue 28)
+                              # browser or address always finds a free one
 STATIC = Path(__file__).parent / "static"
 
 class _Client:
@@ -192,6 +193,20 @@ class UiApp:
         if gone is not None:
             self.record("control_released", gone.user,
                         why=f"no page open for {self.control.grace_s:g} s")
+
+    def keeper(self, scope: dict[str, Any]) -> Callable[[], bool] | None:
+        """For the connection gate: if this request or websocket is the session that
+        holds control's, the test that it still does (its connection is then kept in
+        the gate's reserve, never displaced by others' connections); else None. Runs on
+        the loop before the app, so it must be cheap: a cookie and a comparison."""
+        holder = self.control.holder
+        if holder is None:
+            return None
+        token = HTTPConnection(scope).cookies.get(COOKIE) or ""
+        if not secrets.compare_digest(token.encode(), holder.token.encode()):
+            return None
+        return lambda: (self.control.holder is not None
+                        and self.control.holder.token == token)
 
     def session_of(self, conn: HTTPConnection) -> Session | None:
         """The caller's live session (this request counts as use), or None."""

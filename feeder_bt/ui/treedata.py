@@ -1,4 +1,4 @@
-"""The dashboard's tree view (issue 17): the trees' history as JSON for ``static/tree.js``.
+"""The dashboard's tree view: the trees' history as JSON for ``static/tree.js``.
 
 Two routes, the same for a running cell (``feeder run --ui``: the recorder's in-memory
 view, published by the tick thread) and for a past run (``feeder replay --ui``: the event

@@ -1,4 +1,4 @@
-"""Gripper clearance (issue 27): which grip of a located part the robot can use.
+"""Gripper clearance: which grip of a located part the robot can use.
 
 A part whose ``pick`` (``scenario.model.PickSpec``) lists grips and a footprint (a cup,
 fingers) is offered at the first of its grips whose footprint, grown by

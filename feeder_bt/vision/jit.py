@@ -1,7 +1,6 @@
 """The compiled kernels (``vision.kernels``), imported on first use: numba's import costs
-about 0.3 s, which no command that never measures a blob should pay (``feeder --help``,
-``feeder check`` of a cell). ``Locator`` calls ``warm`` when it is built (``feeder check``
-of a scenario builds one to measure the drawn outlines of its classes)."""
+about 0.3 s, which no command that never locates a part should pay (``feeder --help``,
+``feeder check``). ``Locator`` calls ``warm`` when it is built."""
 
 from __future__ import annotations
 
@@ -21,10 +20,6 @@ def kernels() -> ModuleType:
     return _mod
 
 
-# a load from the cache takes well under a second, a few seconds on a busy machine (where
-# `feeder check` of a scenario, which loads them too, must print nothing more); a compile
-# 13-40 s
-NOTICE_AFTER_S = 5.0
 NOTICE = ("feeder: compiling the locator's kernels (numba), once after installing or "
           "upgrading: 20-40 s; later runs load them from the cache")
 
@@ -32,13 +27,22 @@ NOTICE = ("feeder: compiling the locator's kernels (numba), once after installin
 def warm() -> None:
     """Import the kernels and compile them (or load them from numba's cache).
 
-    Loading takes well under a second; compiling (a fresh install) 13-40 s, with nothing
-    else on the screen yet: past ``NOTICE_AFTER_S`` a line on stderr says why."""
-    timer = threading.Timer(NOTICE_AFTER_S, lambda: print(NOTICE, file=sys.stderr,
-                                                          flush=True))
-    timer.daemon = True
-    timer.start()
-    try:
+    Loading takes about a second; compiling (a fresh install) 13-40 s, with nothing else on
+    the screen yet: a line on stderr says why as soon as numba starts compiling, and only
+    then (numba's ``numba:compile`` event fires for a compile, never for a cache load, so a
+    slow load on a busy machine says nothing)."""
+    from numba.core import event
+
+    said = threading.Event()
+
+    class _Notice(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            if not said.is_set():
+                said.set()
+                print(NOTICE, file=sys.stderr, flush=True)
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    with event.install_listener("numba:compile", _Notice()):
         kernels().warm()
-    finally:
-        timer.cancel()

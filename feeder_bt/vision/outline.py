@@ -1,5 +1,5 @@
 """``orientation: outline``: a part's angle over 360° and its face, for any outline
-(issue 27), by matching the part's outline from the scenario against the blob's.
+, by matching the part's outline from the scenario against the blob's.
 
 Measured, not guessed: the hypotheses are the part's outline face up and face down
 (unless ``mirror_symmetric``), each turned so that its principal axis lies along the

@@ -1,4 +1,4 @@
-"""Splitting touching parts (issue 27; ``vision.split_touching``, off by default).
+"""Splitting touching parts (``vision.split_touching``, off by default).
 
 A blob that fits no class and is big enough to be two or more parts is cut by the
 distance transform: the blob's own mask (its bounding box only), the distance of each

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import summary
 from feeder_bt.config.loader import load_cell
 from feeder_bt.policy.supply_bound import transport_lag_s
 
@@ -57,7 +57,7 @@ def test_the_split_adds_up_to_the_feeding_time(runs):
 
 def test_the_waits_agree_with_the_worlds_truth(runs):
     """The controller prices each wait with its learnt model of the arm, which is short on
-    the SCARA's moves to the reach's edge (issue 30): so the estimate reads a little high,
+    the SCARA's moves to the reach's edge: so the estimate reads a little high,
     never low, and within a quarter of the truth (plus 0.2 points of feeding)."""
     for r in runs.values():
         truth = 100.0 * r["world"]["pick_waited_s"] / r["feed_seconds"]

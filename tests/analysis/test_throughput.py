@@ -1,4 +1,4 @@
-"""Issue 5: the new adjuster and pick policy, the robot bound, the original CWRU feeder."""
+"""The new adjuster and pick policy, the robot bound, the original CWRU feeder."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""A drive fault of the plate in the middle of a run (issue 31), in virtual time: the
+"""A drive fault of the plate in the middle of a run, in virtual time: the
 present tree resets and homes the plate and feeding goes on; a second fault within a
 minute goes to the operator (FAULT) with the manual's words."""
 

@@ -1,4 +1,4 @@
-"""Issue 26: camera geometry as good as OpenCV's on real photos; a full lens model in the
+"""Camera geometry as good as OpenCV's on real photos; a full lens model in the
 locate path; targets found right or refused.
 
 The real photos are OpenCV's own 9x6 chessboard samples (tests/data/README.md). Plain

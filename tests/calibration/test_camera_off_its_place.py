@@ -1,4 +1,4 @@
-"""Issue 7's end-to-end check: a simulated camera that is not where the cell file says
+"""The end-to-end check: a simulated camera that is not where the cell file says
 misses parts; `feeder calibrate camera` recovers it from pixels; feeding with the written
 calibration file is as good as with a perfectly calibrated cell."""
 

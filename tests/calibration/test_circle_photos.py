@@ -1,4 +1,4 @@
-"""Issue 26, "What must be shown" 1, circle grids: on real photos of a circle grid the
+"""On real photos of a circle grid the
 project uses at least all but one of the views plain OpenCV uses, with a reprojection rms
 at most 1.5 times OpenCV's and a k1 of the same sign.
 

@@ -1,5 +1,5 @@
-"""Belt and tool calibration through the Galil and V+ drivers, against the emulators
-(issue 14): the same procedures as on the simulated cell, the belt moved by the Galil
+"""Belt and tool calibration through the Galil and V+ drivers, against the emulators:
+the same procedures as on the simulated cell, the belt moved by the Galil
 driver, the pose and belt count read from the V+ position server. Real time (~20 s)."""
 
 from __future__ import annotations

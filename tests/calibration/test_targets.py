@@ -1,4 +1,4 @@
-"""Any calibration target (issue 14): chessboards of any size, symmetric and asymmetric
+"""Any calibration target: chessboards of any size, symmetric and asymmetric
 circle grids and ChArUco boards, rendered by the simulated camera through a *truth*
 calibration the procedure is not told; first calibrations without a usable prior; lens
 distortion from several views; the cell's ``camera.target``."""

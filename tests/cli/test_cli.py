@@ -199,7 +199,7 @@ def test_the_dot_graph_is_named_after_the_scenario(capsys):
 
 
 def test_the_summary_fits_80_columns_and_says_interrupted():
-    from feeder_bt.cli.main import summary
+    from feeder_bt.analysis.summary import summary
     report = {"scenario": "lenses_and_squares", "state": "STOPPED", "interrupted": True,
               "feed_seconds": 3600.0, "wall_seconds": 3600.4, "parts_per_minute": 104.567,
               "parts": {"retrieved": {"lens": 3000, "square": 3274}, "located": 7000,

@@ -17,9 +17,11 @@ from tests.support.commission_person import (
     ROOT,
     Emulator,
     Person,
+    PlateEmulator,
     commission,
     free_block,
     write_cell,
+    write_plate_cell,
 )
 
 
@@ -184,6 +186,37 @@ def test_commission_adept_refuses_a_frame_that_does_not_fit(tmp_path):
     assert not fit["ok"] and fit["rms_mm"] > 1.0 and fit["written"] is None
     assert not frame.exists()
     assert not any(k.startswith("adept.corner") for k in steps)
+
+
+def test_commission_plate_every_step_against_an_echoing_feeder(tmp_path):
+    """``feeder commission plate`` against ``feeder emulate plate --echo`` (motor 2
+    reporting 0.2 s after motor 1), the person watching the plate (``look``): the echo
+    is found, every action runs and is confirmed, the parameters are read back."""
+    port = free_block(1)
+    cell = write_plate_cell(tmp_path, port)
+    emu = PlateEmulator(cell, port, "--echo", "--motor-gap", "0.2")
+    try:
+        report = tmp_path / "plate.json"
+        person = Person(emu)
+        code, out = commission("plate", cell, report, person)
+    finally:
+        emu.stop()
+    steps = _steps(report)
+    assert code == 0 and json.loads(report.read_text())["ok"], out
+    assert list(steps) == ["plate.connect", "plate.init", "plate.parameters",
+                           "plate.dispense", "plate.feed_forward", "plate.feed_backward",
+                           "plate.flip", "plate.flip_forward", "plate.flip_backward",
+                           "plate.heavy_dispense", "plate.purge", "plate.reset",
+                           "plate.stop"], out
+    assert steps["plate.connect"]["echo"] is True
+    assert steps["plate.init"]["command"] == "x=16" and steps["plate.reset"]["command"] == "x=30"
+    assert sorted(steps["plate.dispense"]["replies"]) == ["m10", "m11", "m20", "m21"]
+    written = steps["plate.parameters"]["written"]
+    assert written["ab[17]"]["value"] == 5 and written["ab[23]"]["value"] == 3
+    assert written["ab[8]"] == {"what": "heavy_dispense repetitions", "value": 2,
+                                "answer": []}
+    assert all(s["seen"] for k, s in steps.items() if "seen" in s)
+    assert [a for a, _ in person.actions].count("look") == 10
 
 
 def test_the_emulator_serves_on_after_its_standard_input_ends(cell_and_emulator):

@@ -1,4 +1,4 @@
-"""A newcomer's first commands (issue 29): a missing file names the nearest one, Ctrl-C while
+"""A newcomer's first commands: a missing file names the nearest one, Ctrl-C while
 the first imports run ends in one line, the tree glyphs have a legend, and the README's tour
 writes only into the ignored ``out/``."""
 
@@ -114,3 +114,26 @@ def test_the_live_view_shows_the_legend_when_there_is_room():
     assert any(s.startswith(LEGEND[0]) and STATUS_LEGEND in s for s in tall)
     short = view.lines(80, 12)                  # no room: the trees keep every row
     assert not any(LEGEND[0] in s for s in short)
+
+
+@pytest.mark.parametrize("argv", [["calibrate", "camera"], ["calibrate", "belt"],
+                                  ["commission", "galil"], ["commission", "adept"]])
+def test_a_scenario_where_a_cell_belongs_is_one_line(argv, monkeypatch, capsys):
+    monkeypatch.chdir(ROOT)
+    assert cli.main([*argv, "scenarios/lenses.yaml"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["feeder: scenarios/lenses.yaml: this is a scenario, not a cell description: "
+                   "give the cell description it runs on (its `cell:` key names it)"]
+
+
+def test_a_render_into_a_used_folder_replaces_the_earlier_render_only(tmp_path, capsys,
+                                                                        monkeypatch):
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "frames"
+    assert cli.main(["render", "scenarios/squares.yaml", "--out", str(out), "--frames", "3",
+                     "--truth"]) == 0
+    (out / "notes.txt").write_text("mine\n")
+    capsys.readouterr()
+    assert cli.main(["render", "scenarios/lenses.yaml", "--out", str(out), "--frames", "1"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["frame_000.png", "golden.png", "notes.txt"]
+    assert "removed 7 file(s) of an earlier render" in capsys.readouterr().out

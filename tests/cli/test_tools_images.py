@@ -1,5 +1,5 @@
 """`feeder check --images`, `feeder locate`'s "why no part" and `feeder recipe suggest
---clusters` on rendered frames of the washer and front-lit bracket scenarios (issue 14)."""
+--clusters` on rendered frames of the washer and front-lit bracket scenarios."""
 
 from __future__ import annotations
 

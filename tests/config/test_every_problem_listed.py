@@ -1,4 +1,4 @@
-"""Every problem of a file is listed, not only the first (issue 17): each on its own line
+"""Every problem of a file is listed, not only the first: each on its own line
 ``FILE:LINE: dotted.key: what``, in file order, for scenarios (with their cell), cells and
 fault plans; ``feeder check`` prints them all and a count, ``feeder run`` prints them all
 and exits 2; at most ``MAX_PROBLEMS`` are shown, then how many more."""
@@ -119,8 +119,10 @@ def test_a_cell_lists_every_problem(tmp_path):
     p.write_text(edited(CELL.read_text(), ("hal: sim", "hal: simm"),
                         ("inner_reach_mm: 160", "inner_reach_mm: 7000"),
                         ("conveyor_bits: 32", "conveyor_bits: no")))
-    # the cell is not whole (its encoder is broken): the cross-key inner reach waits
-    assert [e.key for e in problems(load_cell, p)] == ["hal", "encoder.conveyor_bits"]
+    # a bad number or word stands in by its default, so the cross-key inner reach is
+    # judged too; checks across the broken section (the encoder) wait
+    assert [e.key for e in problems(load_cell, p)] == ["hal", "encoder.conveyor_bits",
+                                                       "robot.inner_reach_mm"]
     # the cross-key check (inner reach) runs once the cell is whole
     p.write_text(edited(CELL.read_text(), ("hal: sim", "hal: sim\nspare: 1"),
                         ("inner_reach_mm: 160", "inner_reach_mm: 7000")))
@@ -201,3 +203,15 @@ def test_check_says_the_kind_on_the_files_own_line(tmp_path, capsys):
     first, second = capsys.readouterr().err.splitlines()
     assert first.startswith(f"{p}:") and first.endswith("(read as a scenario)")
     assert second.startswith(f"{cell}:") and "(read as" not in second
+
+
+def test_a_word_for_a_number_does_not_hide_the_checks_across_keys(tmp_path):
+    """``tick_hz: "fifty"`` is listed, its default stands in, and the probabilities that do
+    not sum to 1 and the speed above the belt's limit are listed with it."""
+    p = scenario(tmp_path, ("tick_hz: 200", 'tick_hz: "fifty"'),
+                 ("probability: 0.15", "probability: 0.2"),
+                 ("horizontal_mm_s: 150", "horizontal_mm_s: 450"))
+    got = problems(load_scenario, p)
+    assert [e.key for e in got] == ["tick_hz", "parts.lens.poses", "present.horizontal_mm_s"]
+    assert "expected a number, got string 'fifty'" in got[0].what
+    assert "sum to 1, got 1.05" in got[1].what and "450 mm/s" in got[2].what

@@ -1,4 +1,4 @@
-"""Issue 27: parts as they are — the part model against the recipe and the cell."""
+"""Parts as they are — the part model against the recipe and the cell."""
 
 from __future__ import annotations
 
@@ -54,11 +54,11 @@ def _run(path: Path, seconds: float = 150.0) -> dict:
 
 def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_are(
         tmp_path, monkeypatch):
-    """Issue 27, shown 1: the chain-link plate (180° symmetric) placed turned to 0 by its
-    long axis: with ``symmetry: 2`` none misoriented; without, about half, and the
-    summary line says so (``feeder check`` refuses that file: its check is turned off
-    here to show what it spares)."""
-    from feeder_bt.cli.main import summary
+    """The chain-link plate (180° symmetric) placed turned to 0 by its long axis: with
+    ``symmetry: 2`` none misoriented; without, about half, and the summary line says so
+    (``feeder check`` refuses that file: its check is turned off here to show what it
+    spares)."""
+    from feeder_bt.analysis.summary import summary
     monkeypatch.setattr("feeder_bt.config.checks.check_orientation", lambda sc, ctx: None)
     report = _run(ROOT / "scenarios" / "chain_links.yaml")
     placed = report["parts"]["retrieved"]["link"]
@@ -271,7 +271,7 @@ def _locate_layout(sc, cell, vision, outlines, seed):
 
 
 def test_face_down_l_brackets_over_360_are_located_with_their_face_and_angle():
-    """Issue 27, shown 2: light L-brackets, half face-down, turned over 360°: every one
+    """Light L-brackets, half face-down, turned over 360°: every one
     located with the right face (``mirrored``) and its angle within 2°."""
     import numpy as np
 
@@ -360,7 +360,7 @@ def _touching_pairs(name: str, part: str, pose: str, split: bool, frames: int = 
 
 
 def test_splitting_touching_parts_offers_more_and_none_wrong():
-    """Issue 27: with ``split_touching`` touching lenses and washers are cut apart and
+    """With ``split_touching`` touching lenses and washers are cut apart and
     offered, each within 2 mm of a true part; off (the default) they are rejected."""
     total, ok, wrong = _touching_pairs("lenses", "lens", "flat", split=False)
     assert (ok, wrong) == (0, 0)

@@ -1,4 +1,4 @@
-"""Supply plans (issue 16): totes and shipping, mix drift, friction, the operator's speed
+"""Supply plans: totes and shipping, mix drift, friction, the operator's speed
 override; accounting by identity with parts arriving and leaving; and the supply bound
 the controller counts, checked against the simulated world's truth. Seeded, virtual time."""
 
@@ -410,7 +410,7 @@ def test_the_supply_bound_matches_the_worlds_truth(plain):
 
 
 def test_the_summary_names_the_ceiling_in_80_columns(plain):
-    from feeder_bt.cli.main import summary
+    from feeder_bt.analysis.summary import summary
     r = plain[0]
     lines = summary(r).splitlines()
     i = next(i for i, s in enumerate(lines) if s.startswith("  ceiling "))

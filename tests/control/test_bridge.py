@@ -1,4 +1,4 @@
-"""Issue 6, without a browser or a network: from the tick thread to the browsers. The
+"""From the tick thread to the browsers. The
 command bridge (commands run only on the tick thread, snapshots published at most at its
 rate) and the websocket sender (coalescing, slow and stuck clients, ended sessions).
 

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from tests.support.treeutil import DT, bb_get, bb_set, fail, frame, pending, scenario
+from tests.support.treeutil import DT, fail, frame, pending, scenario
 
 # Cell builds a Locator from the scenario; until feeder_bt/vision/locator.py lands, skip
 # (loudly) rather than fail at import.
 pytest.importorskip("feeder_bt.vision.locator",
                     reason="feeder_bt.vision.locator.Locator not written yet")
 
+from feeder_bt.behaviours.keys import FAULTS  # noqa: E402
 from feeder_bt.control.cell import Cell, CellCommandError, CellState  # noqa: E402
 from feeder_bt.core.clock import SimClock  # noqa: E402
 from feeder_bt.core.errors import ConveyorFault, HalError, ServoTimeout  # noqa: E402
@@ -190,7 +191,7 @@ def test_start_without_scenario_is_refused():
 def test_escalation_on_blackboard_drives_cell_to_fault(rig):
     rig.start()
     rig.tick(2)
-    bb_set("/faults/escalate", "operator test")
+    rig.cell.board.set(FAULTS.ESCALATE, "operator test")
     rig.tick()
     assert rig.cell.state is CellState.FAULTING
     assert rig.cell.fault_reason == "operator test"
@@ -202,7 +203,7 @@ def test_escalation_on_blackboard_drives_cell_to_fault(rig):
     assert rig.cell.state is CellState.STOPPED
     assert rig.cell.fault_reason is None
     rig.start()                                   # and it can run again
-    assert bb_get("/faults/escalate") is None
+    assert rig.cell.board.get(FAULTS.ESCALATE) is None
 
 
 def test_conveyor_that_cannot_stop_faults_the_cell(rig):

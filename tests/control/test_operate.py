@@ -1,4 +1,4 @@
-"""Issue 6, without a browser or a network: operating a real simulated cell. The operator's
+"""Operating a real simulated cell. The operator's
 commands and their limits, the dashboard's snapshot, the report's feed time, and
 `feeder run --ui`'s options (with docs/operator-ui.md's commands).
 
@@ -85,18 +85,18 @@ def test_limits_come_from_the_cell():
     for args, needle in [
         ({"horizontal_mm_s": 401}, "above the horizontal conveyor's max_mm_s 400"),
         ({"horizontal_mm_s": 0}, "must be at least 1 mm/s"),
-        ({"horizontal_mm_s": 1e-300}, "must be at least 1 mm/s"),        # issue 28
+        ({"horizontal_mm_s": 1e-300}, "must be at least 1 mm/s"),
         ({"horizontal_mm_s": "fast"}, "must be a number"),
         ({"horizontal_mm_s": True}, "must be a number"),
         ({"horizontal_mm_s": float("nan")}, "finite"),
-        ({"horizontal_mm_s": int("9" * 401)}, "finite"),        # issue 19: not a 500
+        ({"horizontal_mm_s": int("9" * 401)}, "finite"),        # not a 500
         ({"horizontal_mm_s": "9" * 401}, "at most 32 characters"),
         ({"horizontal_mm_s": "1e999"}, "finite"),
         ({"incline_pct": 201}, "1-200 %"),
         ({"incline_pct": -1}, "1-200 %"),
         ({"incline_pct": 1e-300}, "1-200 %"),
         ({"robot_speed_pct": 0}, "robot speed"),
-        ({"robot_speed_pct": 1e-300}, "robot speed must be 1-200 %"),   # issue 28
+        ({"robot_speed_pct": 1e-300}, "robot speed must be 1-200 %"),
         ({"robot_speed_pct": "\u0661\u0660\u0660"}, "ASCII digits"),   # Arabic 100
         ({"horizontal_mm_s": "\uff11\uff10\uff10"}, "ASCII digits"),   # full-width 100
         ({"robot_speed_pct": 250}, "robot speed"),

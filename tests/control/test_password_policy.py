@@ -1,4 +1,4 @@
-"""Issue 28: a password policy that refuses common and user-derived passwords, with zxcvbn
+"""A password policy that refuses common and user-derived passwords, with zxcvbn
 and (where it is not installed) with the bundled word list."""
 
 from __future__ import annotations

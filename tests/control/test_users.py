@@ -1,4 +1,4 @@
-"""Issue 6, without a browser or a network: who may log in and who may command. The users
+"""Who may log in and who may command. The users
 file and `feeder users`, sessions, the control token, the failed-login limiter.
 
 Time is stepped (fake clocks) wherever the code lets it be."""

@@ -1,4 +1,4 @@
-"""The in-run re-check of the two belt counters (issue 15, finding 11): ``DriftWatch`` on
+"""The in-run re-check of the two belt counters: ``DriftWatch`` on
 cached reads of different ages, and a whole run whose robot counter slips on purpose."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""One meaning per word (issue 29): a *fault* stops or degrades the cell, a *miss* is a grab or
+"""One meaning per word: a *fault* stops or degrades the cell, a *miss* is a grab or
 pick the trees retry, an *alarm* is a fault that stopped the cell until the reset. The words
 are defined once (docs/faults.md, as feeder_bt/core/vocabulary.py says), and no doc, CLI or UI
 string uses one in another's meaning; the report, its plot and replay keep them apart."""
@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.cli.replay_cmd import faults as replay_faults
 from feeder_bt.core import vocabulary
 from feeder_bt.records.runs_db import series

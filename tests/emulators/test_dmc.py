@@ -108,24 +108,26 @@ def test_expression_errors_have_galil_codes(interp, expr, code):
     assert err.value.code == code
 
 
-def test_variables_and_axis_designators(interp):
+def test_variables(interp):
     interp.assign("STEP", "20*5")
     assert interp.evaluate("STEP+1") == 101
-    interp.set_axis_var("a", "1")
-    assert interp.evaluate("~a") == 1
-    interp.fake.operands["TPB"] = 123.0
-    assert interp.evaluate("_TP~a") == 123.0
-    interp.set_axis_var("b", '"A"')
-    assert interp.evaluate("_TP~b") == 7.0
-    with pytest.raises(DmcError):
-        interp.set_axis_var("c", "9")
     with pytest.raises(DmcError) as err:
         interp.assign("TOOLONGNAME", "1")
     assert err.value.code == 9
 
 
+@pytest.mark.parametrize("line", ["DNOW=_TP~a", "~a=1", "ST ~b", "JP #X,~b>=7", "MG ~a"])
+def test_variable_axis_designators_are_refused_at_download(line):
+    """Not confirmed on the DMC-21x3: a program relying on one fails at DL, not on a card."""
+    with pytest.raises(DmcError, match="variable axis designator"):
+        Program.parse(["#X", line, "EN"])
+    with pytest.raises(DmcError):
+        tokenize("_TP~a")
+    Program.parse(["#X", 'MG "~a is text"', "EN"])           # inside a string it is text
+
+
 def test_tokens():
-    kinds = [t.kind for t in tokenize('_TP~a>=DSTEP "s" @IN[1] $1F .5')]
+    kinds = [t.kind for t in tokenize('_TPB>=DSTEP "s" @IN[1] $1F .5')]
     assert kinds == ["opnd", "cmp", "name", "str", "func", "punct", "num", "punct", "num",
                      "num"]
     with pytest.raises(DmcError):
@@ -264,7 +266,7 @@ def test_shipped_programs_run(interp):
     interp.load(Program.parse([pl.text for pl in lines]))
     interp.assign("DSTEP", "100")
     interp.assign("INBANKS", "2")                     # a 16-input card: _TI1 is read
-    interp.set_axis_var("a", "1")
+    interp.assign("DAXIS", "1")                       # the latch axis: B
     host = interp.fake
     interp.execute("#INMON", 0)
     interp.execute("#DIST", 1)
@@ -280,6 +282,34 @@ def test_shipped_programs_run(interp):
     assert wait_until(lambda: "D 0000000120" in host.lines())
     assert host.errors == []
     assert interp.running() == [0, 1]
+
+
+@pytest.mark.parametrize(("daxis", "axis"), list(enumerate("ABCDEFGH")))
+def test_the_notifier_watches_the_axis_daxis_names(interp, daxis, axis):
+    lines = read_programs(PROGRAMS_DIR, sorted(p.name for p in PROGRAMS_DIR.glob("*.dmc")))
+    interp.load(Program.parse([pl.text for pl in lines]))
+    interp.assign("DSTEP", "100")
+    interp.assign("DAXIS", str(daxis))
+    host = interp.fake
+    host.operands.update({f"TP{a}": 0.0 for a in "ABCDEFGH"})
+    interp.execute("#DIST", 1)
+    assert wait_until(lambda: "DLAST" in interp.variables)     # its start count taken
+    host.operands[f"TP{axis}"] = 300.0
+    assert wait_until(lambda: "D 0000000300" in host.lines())
+    assert host.errors == []
+
+
+@pytest.mark.parametrize("wdaxes", [1, 2, 3, 0b10100000, 255])
+def test_the_watchdog_stops_exactly_our_axes_by_name(interp, wdaxes):
+    """#WDSTOP: ST of each axis in WDAXES, named by its letter, never a bare ST."""
+    lines = read_programs(PROGRAMS_DIR, sorted(p.name for p in PROGRAMS_DIR.glob("*.dmc")))
+    interp.load(Program.parse([pl.text for pl in lines]))
+    interp.assign("WDAXES", str(wdaxes))
+    interp.execute("#WDSTOP", 2)
+    want = [f"ST {a}" for k, a in enumerate("ABCDEFGH") if wdaxes & (1 << k)]
+    assert wait_until(lambda: not interp.running())
+    assert [c for c, _ in interp.fake.commands] == want
+    assert interp.fake.errors == []
 
 
 def test_automatic_subroutines_interrupt_thread_0_and_return(interp):

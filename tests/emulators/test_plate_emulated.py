@@ -44,3 +44,30 @@ def test_a_servo_error_in_an_emulated_run_is_reset_and_feeding_goes_on(monkeypat
     assert r["faults"].get("plate") == 1 and r["recoveries"].get("plate") == 1
     assert r["parts"]["lost"] == 0 and r["parts"]["duplicated"] == 0
     assert r["parts"]["retrieved"]["lens"] >= 5
+
+
+@pytest.mark.soak          # real time: 40 s of wall clock through the TCP drivers
+def test_a_plate_that_echoes_reports_its_motors_apart_and_a_late_no_sync_feeds(monkeypatch):
+    """The AnyFeeder as real feeders speak: each command echoed, motor 2 reporting 0.4 s
+    after motor 1, and in the fourth action motor 2 never starting (``m28`` after motor
+    1's ``m10``). The driver reports the ``m28``, the present tree resets and homes the
+    plate, nothing is written while a motor is busy, and the cell feeds with lost 0."""
+    from feeder_bt.app import run as run_mod
+    from feeder_bt.app.factory import start_emulated
+
+    emulators = []
+
+    def make_hal(kind, scenario, cell, seed):
+        hal, clock = start_emulated(scenario, cell, seed, plate_options={
+            "echo": True, "motor_gap_s": 0.4, "late_error_at": 4})
+        emulators.append(hal.extras["plate_emulator"])
+        return hal, clock
+    monkeypatch.setattr(run_mod, "make_hal", make_hal)
+    r = run_job(RunOptions(scenario="scenarios/plate_lenses.yaml", hal="emulated",
+                           duration=40.0, seed=1, view="none", db=None))
+    emu = emulators[0]
+    assert emu.overlaps == 0 and len(emu.done) >= 5
+    assert r["state"] == "STOPPED" and r["fault"] is None
+    assert r["faults"].get("plate") == 1 and r["recoveries"].get("plate") == 1
+    assert r["parts"]["lost"] == 0 and r["parts"]["duplicated"] == 0
+    assert r["parts"]["retrieved"]["lens"] >= 3

@@ -1,4 +1,4 @@
-"""The V+ checker refuses what V+ LOAD refuses (one test per rule, each finding of issue 15
+"""The V+ checker refuses what V+ LOAD refuses (one test per rule, each finding of the V+ audit
 item 1 among them), accepts every shipped program, and the emulator will not serve a
 program it refuses."""
 
@@ -36,7 +36,7 @@ def test_every_shipped_program_is_accepted():
 
 # ---------------------------------------------------------------------------- reserved words
 @pytest.mark.parametrize("source,line", [
-    # issue 15 item 1: a_server.v2:155,170 (value), motion_server.v2:132 (latch, id),
+    # the audit's item 1: a_server.v2:155,170 (value), motion_server.v2:132 (latch, id),
     # io_notify.v2:12 (last[]), status
     (prog("    x = 1", params="$args, value, ok"), 1),
     (prog("    value = VAL($word)"), 2),

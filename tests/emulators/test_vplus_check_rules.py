@@ -1,5 +1,5 @@
 """Each rule of the V+ checker, on a copy of the shipped programs with exactly one thing
-broken (issue 25 item 2): the checker refuses it with that rule and line, and accepts the
+broken: the checker refuses it with that rule and line, and accepts the
 shipped programs as they are. Edits find their place by program and statement, not by
 line number, so the shipped programs may change around them."""
 
@@ -101,7 +101,7 @@ def test_the_shipped_programs_pass(cp):
 # ---------------------------------------------------------------------------- names
 @pytest.mark.parametrize("name", ["rz", "rx", "ry", "$rz", "frame", "inverse", "pi"])
 def test_a_keyword_as_variable_is_refused(cp, name):
-    # issue 25 item 2: `rz` declared and used as a variable (motion_server.v2:291,335)
+    # the audit's item 2: `rz` declared and used as a variable (motion_server.v2:291,335)
     line = cp.replace(MS, "do.place", lambda c: c.startswith("AUTO"), "AUTO ",
                       f"AUTO {name}, ")
     assert_only(cp, MS, line, "reserved")
@@ -163,7 +163,7 @@ def remove_the_wait(cp: Copy, program: str, signal: int) -> None:
 
 @pytest.mark.parametrize("program", ["do.place", "do.pick"])
 def test_a_removed_break_before_the_vacuum_is_refused(cp, program):
-    # issue 25 item 2: a BREAK deleted from do.place
+    # the audit's item 2: a BREAK deleted from do.place
     signal = cp.find(MS, program, lambda c: c.startswith("SIGNAL"))
     remove_the_wait(cp, program, signal)
     line = cp.find(MS, program, lambda c: c.startswith("SIGNAL")) + 1
@@ -314,7 +314,7 @@ def test_an_unknown_instruction_is_refused(cp, old, new):
 
 
 def test_constructs_the_servers_use_are_accepted(cp):
-    # what the rewritten programs (issue 25 items 1 and 3) use: frames, INVERSE, traps
+    # what the rewritten programs (the audit's items 1 and 3) use: frames, INVERSE, traps
     cp.write("frames.v2", [
         ".PROGRAM f.demo()", "    AUTO c[6]",
         "    SET cell.frame = TRANS(100, -200, 0, 0, 0, 90)",

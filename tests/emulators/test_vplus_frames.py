@@ -16,7 +16,7 @@ import pytest
 
 from feeder_bt.config import load_scenario
 from feeder_bt.core.clock import RealClock
-from feeder_bt.core.errors import EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import EnvelopeError, MissedGrab, PowerOff
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.vplus.check import VPLUS_DIR
 from feeder_bt.hal.adept import AdeptController, VplusError
@@ -262,7 +262,7 @@ def test_the_estop_polarity_comes_from_the_cell_file(active_low):
         assert wait_job(ctrl.robot.move_to(Pose(1300.0, 100.0, 0.0, 0.0))).ok
         plant.set_signal("estop", True)                       # pressed
         job = wait_job(ctrl.robot.move_safe())
-        assert isinstance(job.error, ServoTimeout) and job.error.code == -9007
+        assert isinstance(job.error, PowerOff) and job.error.code == -9007
         plant.set_signal("estop", False)                      # released, power back on
         assert emu.operator_reset()
         assert wait_job(ctrl.robot.recover()).ok

@@ -13,7 +13,7 @@ import pytest
 
 from feeder_bt.config import load_scenario
 from feeder_bt.core.clock import RealClock
-from feeder_bt.core.errors import CommsLost, EnvelopeError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import CommsLost, EnvelopeError, MissedGrab, PowerOff, ServoTimeout
 from feeder_bt.core.jobs import Job, JobState
 from feeder_bt.emulators.adept import AdeptEmulator, serve
 from feeder_bt.emulators.faults import FaultPlan
@@ -224,16 +224,17 @@ def test_servo_timeout_needs_recover_then_picking_works(rig):
     job = wait_job(ctrl.robot.pick(PickTarget(4, 900.0, 300.0, 0.0, latch)))
     assert isinstance(job.error, ServoTimeout) and job.error.code == -1007
     assert "*Motor stalled*" in str(job.error)
-    # REACTE turned power off: every motion fails until RECOVER
+    # REACTE turned power off: every motion fails until RECOVER (-604: power is off,
+    # which the trees leave to a person unless a servo fault came first)
     job = wait_job(ctrl.robot.move_safe())
-    assert isinstance(job.error, ServoTimeout) and job.error.code == -604
+    assert isinstance(job.error, PowerOff) and job.error.code == -604
     # the cell description does not allow RECOVER to turn power on (the default): the
     # fault is cleared, power stays off until the operator's reset
     assert ctrl.robot.recover_power_on is False
     job = wait_job(ctrl.robot.recover())
-    assert isinstance(job.error, ServoTimeout) and job.error.code == -604
+    assert isinstance(job.error, PowerOff) and job.error.code == -604
     assert ("motion", "RECOVER 0") in emu.requests and emu.power is False
-    assert isinstance(wait_job(ctrl.robot.move_safe()).error, ServoTimeout)
+    assert isinstance(wait_job(ctrl.robot.move_safe()).error, PowerOff)
     assert emu.operator_reset()
     job = wait_job(ctrl.robot.recover())
     assert job.ok, job.error

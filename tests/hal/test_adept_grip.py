@@ -1,4 +1,4 @@
-"""Issue 27: the grip's turn (``PickTarget.grip_deg``) reaches the robot.
+"""The grip's turn (``PickTarget.grip_deg``) reaches the robot.
 
 The real driver against the shipped V+ programs run by the emulator, over TCP: PICK carries
 ``grip``, the tool closes turned by the part's angle plus the grip, PLACE turns the tool by

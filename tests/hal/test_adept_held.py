@@ -1,4 +1,4 @@
-"""Recovery that knows what it holds (issue 13), robot link: the real driver against the V+
+"""Recovery that knows what it holds, robot link: the real driver against the V+
 emulator, the link cut at each phase of a pick-and-place; after the reconnection
 ``held()`` tells the truth. Also STOP on a timed-out motion, the e-stop input, CR/LF in
 requests and the belt channel's direction."""
@@ -12,7 +12,7 @@ import pytest
 
 from feeder_bt.config import load_scenario
 from feeder_bt.core.clock import RealClock
-from feeder_bt.core.errors import CommsLost, ServoTimeout
+from feeder_bt.core.errors import CommsLost, PowerOff
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.faults import FaultPlan
 from feeder_bt.hal.adept import AdeptController
@@ -163,16 +163,42 @@ def test_the_e_stop_input_refuses_motion_until_the_operator_resets(rig):
     plant.set_signal("estop", True)
     try:
         job = wait_job(ctrl.robot.move_safe())
-        assert isinstance(job.error, ServoTimeout) and job.error.code == -9007
+        assert isinstance(job.error, PowerOff) and job.error.code == -9007
         job = wait_job(ctrl.robot.recover())
-        assert isinstance(job.error, ServoTimeout) and job.error.code == -9007
+        assert isinstance(job.error, PowerOff) and job.error.code == -9007
         assert not emu.operator_reset()                       # not while it is pressed
     finally:
         plant.set_signal("estop", False)
     job = wait_job(ctrl.robot.move_safe())                    # released: power is still off
-    assert isinstance(job.error, ServoTimeout) and job.error.code == -604
+    assert isinstance(job.error, PowerOff) and job.error.code == -604
     assert emu.operator_reset()
     assert wait_job(ctrl.robot.move_safe()).ok
+
+
+def test_a_stop_that_resets_itself_never_gets_arm_power_back_from_software(rig):
+    """A guard door or light curtain on the e-stop input that resets itself: even a cell
+    file that lets RECOVER turn power on (recover_power_on) gets -604, power stays off, and
+    only a person at the controller brings it back; both codes are PowerOff, never the
+    ServoTimeout whose recovery subtree would send RECOVER."""
+    plant, emu, ctrl, faults, scenario = rig
+    ctrl.robot.recover_power_on = True
+    try:
+        for _ in range(2):                                    # pressed and reset, twice
+            plant.set_signal("estop", True)
+            assert emu.estop_active()                         # the e-stop chain drops power
+            job = wait_job(ctrl.robot.move_safe())
+            assert isinstance(job.error, PowerOff) and job.error.code == -9007
+            plant.set_signal("estop", False)                  # it resets itself
+            job = wait_job(ctrl.robot.move_safe())
+            assert isinstance(job.error, PowerOff) and job.error.code == -604
+            job = wait_job(ctrl.robot.recover())              # RECOVER 1
+            assert ("motion", "RECOVER 1") in emu.requests
+            assert isinstance(job.error, PowerOff) and job.error.code == -604
+            assert emu.power is False                         # no ENABLE POWER ran
+            assert emu.operator_reset()                       # the person
+            assert wait_job(ctrl.robot.move_safe()).ok
+    finally:
+        ctrl.robot.recover_power_on = False
 
 
 # ---------------------------------------------------------------------------- lines, belt

@@ -10,7 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from feeder_bt.core.errors import CommsLost, EnvelopeError, HalError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import (
+    CommsLost,
+    EnvelopeError,
+    HalError,
+    MissedGrab,
+    PowerOff,
+    ServoTimeout,
+)
 from feeder_bt.hal.adept import protocol as P
 from feeder_bt.hal.adept.client import Backoff, LineSocket, ServerClient
 from feeder_bt.hal.adept.protocol import ProtocolError, VplusError
@@ -64,7 +71,9 @@ def test_ok_replies_decode():
 @pytest.mark.parametrize("line,cls", [
     ("ERR -1007 *Motor stalled*", ServoTimeout),
     ("ERR -1003 *Time-out nulling errors*", ServoTimeout),
-    ("ERR -604 *Robot power off*", ServoTimeout),
+    # power lost to an e-stop or a guard: a person's, never a software recovery's
+    ("ERR -604 *Robot power off*", PowerOff),
+    ("ERR -9007 *E-stop input active*", PowerOff),
     ("ERR -1006 *Soft envelope error*", ServoTimeout),
     ("ERR -610 *Location out of range*", EnvelopeError),
     ("ERR -9004 *Outside belt window*", EnvelopeError),

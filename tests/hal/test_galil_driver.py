@@ -59,7 +59,7 @@ def test_connect_downloads_and_starts_the_programs():
         # ER 5 mm at 20 counts/mm, TL 5 V with no peak above it, OE 1, limit switches and
         # latch active low, inputs 5-8 general, the abort input leaves our programs running
         assert cmds[12:dl] == ["ER 100,100", "TL 5,5", "TK 0,0", "OE 1,1", "CN -1,-1,-1,0,1"]
-        assert {"DSTEP=100", "~a=1", f"WDMS={r.cell.galil.watchdog_s * 1000:.0f}", "WDAXES=3", "INBANKS=1", "ERSEEN=0",
+        assert {"DSTEP=100", "DAXIS=1", f"WDMS={r.cell.galil.watchdog_s * 1000:.0f}", "WDAXES=3", "INBANKS=1", "ERSEEN=0",
                 "XQ #INMON,0", "XQ #DIST,1", "XQ #WDOG,2"} <= set(cmds)
         assert not any(c.startswith("SH") for c in cmds)     # no SH without the person
         assert "MG _TI1" not in cmds                          # an 8-input card

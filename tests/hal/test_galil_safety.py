@@ -1,4 +1,4 @@
-"""Issue 15, Galil half: the driver against an emulator as strict as the controller.
+"""The driver against an emulator as strict as the controller.
 
 Amplifiers that an off-on-error or the e-stop turned off stay off across reconnects until an
 operator's reset; many cable pulls never exhaust the card's Ethernet handles; a dead program

@@ -1,4 +1,4 @@
-"""Issue 25, Galil side: stops and faults that stop. Against the emulator, which runs the
+"""Stops and faults that stop. Against the emulator, which runs the
 shipped monitor.dmc: a card thread that cannot be restarted, or an input monitor that no
 longer counts its heartbeat, FAULTs the cell and stops the belts within 2 s; no ``SH``
 without a person; a reversed encoder trips a small error limit, not the card's default

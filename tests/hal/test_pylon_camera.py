@@ -214,3 +214,21 @@ def test_gige_transport_settings_reach_the_camera(scene):
         assert src.cam.Gain.Value == pytest.approx(6.0, abs=0.01)
     finally:
         src.close()
+
+
+def test_a_line_triggers_edge_and_delay_reach_the_camera(scene):
+    """The emulator has both ExposureTime and ExposureTimeAbs: the SFNC 2 name is taken."""
+    src = open_cam(scene, trigger="Line1", trigger_activation="FallingEdge",
+                   trigger_delay_us=100.0)
+    try:
+        assert src.cam.TriggerActivation.Value == "FallingEdge"
+        assert src.cam.TriggerDelay.Value == pytest.approx(100.0)
+        assert src.feature("ExposureTime") == "ExposureTime"
+        assert src.feature("Gain") == "Gain"
+        assert src.exposure_us() == pytest.approx(2000.0)
+    finally:
+        src.close()
+    # the emulator has no line debouncer under either name: one line naming both
+    with pytest.raises(ConfigError, match="the camera has no writable LineDebouncerTime "
+                                          "nor LineDebouncerTimeAbs"):
+        open_cam(scene, trigger="Line1", line_debouncer_us=10.0)

@@ -71,3 +71,28 @@ def test_without_pypylon_a_pylon_camera_says_how_to_install_it(monkeypatch):
     with pytest.raises(ConfigError, match=r"camera.source: pylon: pypylon is not installed "
                                           r".*pip install -e '.\[pylon\]'"):
         open_source("pylon:", CameraSpec())
+
+
+def test_the_line_trigger_keys_are_checked(tmp_path):
+    p = cell_with(tmp_path, "  pylon: {trigger: Line1, trigger_activation: AnyEdge, "
+                            "line_debouncer_us: -1, trigger_delay_us: 2.0e7}\n")
+    with pytest.raises(ConfigError) as e:
+        load_cell(p)
+    lines = e.value.lines()
+    assert any("camera.pylon.trigger_activation" in ln and "RisingEdge" in ln
+               and "FallingEdge" in ln for ln in lines)
+    assert any("camera.pylon.line_debouncer_us" in ln and "[0, 1000000]" in ln for ln in lines)
+    assert any("camera.pylon.trigger_delay_us" in ln and "[0, 10000000]" in ln for ln in lines)
+    p = cell_with(tmp_path, "  pylon: {trigger: Software, line_debouncer_us: 10, "
+                            "trigger_delay_us: 100}\n")
+    with pytest.raises(ConfigError) as e:
+        load_cell(p)
+    lines = e.value.lines()
+    assert any("camera.pylon.line_debouncer_us: filters the trigger line: set "
+               "camera.pylon.trigger to Line1" in ln for ln in lines)
+    assert any("camera.pylon.trigger_delay_us: delays a line trigger" in ln for ln in lines)
+    p = cell_with(tmp_path, "  pylon: {trigger: Line1, trigger_activation: FallingEdge, "
+                            "line_debouncer_us: 10, trigger_delay_us: 100}\n")
+    cam = load_cell(p).camera.pylon
+    assert (cam.trigger_activation, cam.line_debouncer_us, cam.trigger_delay_us) == \
+        ("FallingEdge", 10, 100)

@@ -1,4 +1,4 @@
-"""The cell as an OPC UA server (issue 18): an asyncua client reads it and commands it
+"""The cell as an OPC UA server: an asyncua client reads it and commands it
 under the dashboard's rules. The simulated cell runs in real time on a thread here (the
 server answers clients in real time); the tests wait for states, never assert durations."""
 
@@ -319,7 +319,7 @@ def test_a_user_removed_while_logged_in_can_no_longer_command(live):
 
 
 def test_guesses_from_elsewhere_do_not_keep_the_rightful_user_out(tmp_path):
-    """Issue 19's rule on the OPC UA surface: lock-outs count per address and per
+    """The rule on the OPC UA surface: lock-outs count per address and per
     name-and-address, so a guesser elsewhere slows itself, not alice; every failure and
     lock-out is recorded."""
     from feeder_bt.plant.ua_security import PEER, UaUsers

@@ -1,4 +1,4 @@
-"""The part server (issue 18): robots pull parts from the cell over a line protocol.
+"""The part server: robots pull parts from the cell over a line protocol.
 
 Most tests run the simulated robot program lock-step with virtual time (``LoopLink``), so
 they are deterministic; one test talks over real TCP on loopback and asserts only what was

@@ -1,4 +1,4 @@
-"""Many cells (issue 18): two simulated cells in two processes, each serving OPC UA, both
+"""Many cells: two simulated cells in two processes, each serving OPC UA, both
 supervised from one client — counts read from both, one stopped, the other feeding on."""
 
 from __future__ import annotations

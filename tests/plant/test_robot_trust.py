@@ -1,5 +1,5 @@
-"""Issue 28: robots must be trusted. A robot proves who it is (a secret from the robots
-file, or its address); at most N parts are outstanding per robot; a robot that takes parts
+"""Robots must be trusted. A robot proves who it is (challenge and response keyed by the
+secret in the robots file, never the secret itself; or its address); at most N parts are outstanding per robot; a robot that takes parts
 and never reports them is cut off with a fault for the operator; on the simulated cell a
 PLACED the world did not see is a mismatch, counted and shown; ``--fast`` with
 ``--no-sim-robot`` is refused with the reason."""
@@ -14,7 +14,7 @@ import pytest
 from feeder_bt.app.run import RunOptions, run_job
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.errors import FeederError
-from feeder_bt.core.part_protocol import parse_offer
+from feeder_bt.core.part_protocol import parse_offer, prove, secret_key
 from feeder_bt.plant.adapters import _world_check
 from feeder_bt.plant.client import LoopLink, PartClient, PartServerError, TcpLink
 from feeder_bt.plant.options import PlantOptions
@@ -26,19 +26,45 @@ from tests.plant.test_part_server import Serving, Talk, _serving_with_parts
 LENSES = "scenarios/lenses.yaml"
 
 
-def _robots_file(tmp_path, capsys) -> tuple[str, str]:
+def _robots_file(tmp_path, capsys) -> tuple[str, str, str]:
     path = tmp_path / "robots.json"
     assert robots_main(["add", "cobra1", "--robots", str(path)]) == 0
     secret = capsys.readouterr().out.strip().rsplit(" ", 1)[1]
     assert robots_main(["allow", "cell2", "--robots", str(path), "--address",
                         "127.0.0.5"]) == 0
+    assert robots_main(["add", "ur5", "--robots", str(path), "--plain-secret"]) == 0
+    plain = capsys.readouterr().out.strip().rsplit(" ", 1)[1]
     assert (path.stat().st_mode & 0o077) == 0
-    assert secret not in path.read_text()                  # only its hash is kept
-    return str(path), secret
+    text = path.read_text()
+    assert secret not in text and plain not in text        # only their hashes are kept
+    assert json.loads(text)["robots"]["ur5"]["plain_secret"] is True
+    assert "plain_secret" not in json.loads(text)["robots"]["cobra1"]   # off by default
+    return str(path), secret, plain
+
+
+class Line:
+    """A robot's connection by hand: each line sent is kept, as a listener would see it."""
+
+    def __init__(self, host: str, port: int, source: str = "127.0.0.1") -> None:
+        import socket
+        self.sock = socket.create_connection((host, port), timeout=20,
+                                             source_address=(source, 0))
+        self.f = self.sock.makefile("rwb")
+        self.sent: list[str] = []
+
+    def ask(self, line: str) -> str:
+        self.sent.append(line)
+        self.f.write(line.encode() + b"\n")
+        self.f.flush()
+        return self.f.readline().decode().rstrip("\n")
+
+    def close(self) -> None:
+        self.f.close()
+        self.sock.close()
 
 
 def test_robots_prove_who_they_are(tmp_path, capsys):
-    path, secret = _robots_file(tmp_path, capsys)
+    path, secret, plain = _robots_file(tmp_path, capsys)
     s = _serving_with_parts(2)
     server = PartServer(s.desk, "127.0.0.1", 0, RobotTrust.load(path))
     host, port = server.start().split(":")
@@ -49,35 +75,82 @@ def test_robots_prove_who_they_are(tmp_path, capsys):
     try:
         with PartClient.connect(host, int(port)) as stranger:
             assert stranger.help().startswith("PART")          # HELP is free
-            with pytest.raises(PartServerError, match="HELLO NAME SECRET first"):
+            with pytest.raises(PartServerError, match="HELLO NAME first"):
                 stranger.part()
             with pytest.raises(PartServerError, match="wrong secret"):
                 stranger.request("HELLO cobra1 not-the-secret")
-            with pytest.raises(PartServerError, match="HELLO NAME SECRET first"):
+            with pytest.raises(PartServerError, match="wrong proof"):
+                stranger.hello("cobra1", "not-the-secret")      # a wrong response
+            with pytest.raises(PartServerError, match="HELLO NAME first"):
                 stranger.status()
-        link = TcpLink(host, int(port))
-        link.send(f"HELLO cobra1 {secret}")
-        assert link.receive(timeout=20) == "OK HELLO cobra1"
-        robot = PartClient(link)
+        # the right response is accepted: the reference client answers the challenge
+        robot = PartClient(TcpLink(host, int(port)))
+        robot.hello("cobra1", secret)
         offer = robot.part(wait=10.0)
         assert offer is not None
         robot.release(offer.id)
         robot.close()
         # cell2 is known by its address alone: from 127.0.0.5 it needs no secret
-        import socket
-        sock = socket.create_connection((host, int(port)), timeout=20,
-                                        source_address=("127.0.0.5", 0))
-        f = sock.makefile("rwb")
-        f.write(b"STATUS\n")
-        f.flush()
-        assert f.readline().startswith(b"OK STATUS state=RUNNING")
-        sock.close()
+        cell2 = Line(host, int(port), "127.0.0.5")
+        assert cell2.ask("STATUS").startswith("OK STATUS state=RUNNING")
+        cell2.close()
     finally:
         done.set()
         thread.join()
         server.close()
         s.close()
-    assert server.server.refused_hellos == 1
+    assert server.server.refused_hellos == 2
+
+
+def test_a_captured_hello_replayed_on_another_connection_is_refused(tmp_path, capsys):
+    """What crosses the network for one connection is worth nothing on another: the exact
+    lines of a successful HELLO, sent again from another address, get a new challenge and
+    a refusal; the old plain ``HELLO NAME SECRET`` is refused unless the robots file opts
+    that robot in; a PROOF without a challenge, or a second try at one, is refused."""
+    path, secret, plain = _robots_file(tmp_path, capsys)
+    s = _serving_with_parts(2)
+    server = PartServer(s.desk, "127.0.0.1", 0, RobotTrust.load(path))
+    host, port = server.start().split(":")
+    done = threading.Event()
+    thread = threading.Thread(target=lambda: Ticker(s.cell, fast=False).run(
+        until=s.clock.now() + 60.0, stop=done.is_set, every=s.desk.serve_idle))
+    thread.start()
+    try:
+        real = Line(host, int(port), "127.0.0.21")
+        challenge = real.ask("HELLO cobra1")
+        assert challenge.startswith("OK CHALLENGE ") and len(challenge.split()[2]) == 32
+        nonce = challenge.split()[2]
+        assert real.ask(f"PROOF {prove(secret_key(secret), nonce)}") == "OK HELLO cobra1"
+        assert real.ask("STATUS").startswith("OK STATUS")
+        captured = list(real.sent[:2])
+        thief = Line(host, int(port), "127.0.0.66")
+        again = thief.ask(captured[0])
+        assert again.startswith("OK CHALLENGE ") and again != challenge   # a fresh nonce
+        assert thief.ask(captured[1]).startswith("ERR HELLO: unknown robot, wrong proof")
+        assert thief.ask("PART").startswith("ERR who are you?")
+        # one try per challenge: the right answer to a used challenge is refused too
+        assert thief.ask(f"PROOF {prove(secret_key(secret), again.split()[2])}") \
+            .startswith("ERR PROOF: no challenge")
+        # the old plain form, as the finding captured it: refused without the opt-in
+        assert thief.ask(f"HELLO cobra1 {secret}").startswith("ERR HELLO:")
+        assert thief.ask("PART").startswith("ERR who are you?")
+        thief.close()
+        real.close()
+        # ... and accepted for a robot the file opts in (ur5: a language without HMAC)
+        ur5 = Line(host, int(port))
+        assert ur5.ask(f"HELLO ur5 {plain}") == "OK HELLO ur5"
+        ur5.close()
+        # the challenge is keyed by the hash the file keeps: a client given only the
+        # secret computes the same key
+        key = bytes.fromhex(json.loads(open(path).read())["robots"]["cobra1"]
+                            ["secret_sha256"])
+        assert key == secret_key(secret)
+    finally:
+        done.set()
+        thread.join()
+        server.close()
+        s.close()
+    assert server.server.refused_hellos == 3
 
 
 def test_a_bad_robots_file_is_one_line(tmp_path):
@@ -146,7 +219,7 @@ def test_a_placed_the_world_did_not_see_is_a_mismatch():
 
 
 def test_the_report_shows_mismatches_and_the_honest_sim_robot_has_none(capsys):
-    from feeder_bt.cli.main import summary
+    from feeder_bt.analysis.summary import summary
     r = run_job(RunOptions(scenario=LENSES, duration=60.0, fast=True, seed=2, view="none",
                            db=None, plant=PlantOptions(part_server="127.0.0.1:0")))
     ps = r["part_server"]

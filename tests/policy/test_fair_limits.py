@@ -1,4 +1,4 @@
-"""Fair limits (issue 16): every adjuster and every fixed setting runs under the cell's
+"""Fair limits: every adjuster and every fixed setting runs under the cell's
 conveyor limits. An adjuster parameter that could drive a belt faster is refused at load,
 like a fixed speed; the simulated belt refuses a speed above its ``max_mm_s`` instead of
 clamping it."""

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import summary
 from feeder_bt.policy.supply_bound import ceiling, inflow_bound_parts
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -34,7 +34,7 @@ def test_the_bound_by_hand():
     assert inflow_bound_parts(10, [(30.0, 100)], R, 60.0) == pytest.approx(10 + R / 2 + 1)
     # a tote 0.1 s before the end comes too late to be placed
     assert inflow_bound_parts(5, [(59.9, 5)], R, 60.0) == pytest.approx(5 + R * 0.1 / 60 + 1)
-    # the ride to the robot (issue 30): a tote at 30 s reaches it at 35 s, and the parts
+    # the ride to the robot: a tote at 30 s reaches it at 35 s, and the parts
     # in the hopper at the start are not placed before 5 s either
     assert inflow_bound_parts(10, [(30.0, 100)], R, 60.0, 5.0) == pytest.approx(
         10 + R * 25 / 60 + 1)
@@ -71,7 +71,7 @@ def test_a_run_stays_under_its_inflow_bound_which_is_its_ceiling(tight):
     assert bound == 60                                   # everything that came
     assert r["inflow_bound_ppm"] == pytest.approx(bound * 60 / r["feed_seconds"], abs=1e-3)
     # the ceiling: the inflow bound, or the nearest-first replay of the parts that came
-    # (issue 30), which cannot place more than came either
+    #, which cannot place more than came either
     assert r["robot_bound_selection_parts"] <= bound
     assert r["ceiling"] in ("inflow", "selection")
     assert r["ceiling_ppm"] == min(r["inflow_bound_ppm"], r["robot_bound_selection_ppm"])
@@ -136,5 +136,5 @@ def test_robot_busy_tells_a_starved_robot_from_a_saturated_one(tight, tmp_path):
     # 85, not 90 as with the Cartesian world: the SCARA's far-side moves are slower than
     # the controller's model says, and grabs that reach the belt's end after the part fell
     # off are misses, whose time is not counted busy but is `robot_time.missed_pct`
-    # (issue 30, docs/performance.md, tests/analysis/test_robot_time.py)
+    # (docs/performance.md, tests/analysis/test_robot_time.py)
     assert tight["robot_busy_pct"] < 75 < 85 < full["robot_busy_pct"]

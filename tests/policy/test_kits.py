@@ -1,4 +1,4 @@
-"""Kits (issue 30, thesis 8.2.1.5): the retrieve tree takes the part types the kit being
+"""Kits (thesis 8.2.1.5): the retrieve tree takes the part types the kit being
 built still lacks; a kit advances when a part is placed, never when one is only chosen;
 the report counts kits and bounds them."""
 
@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.policy.kits import KitTracker, kit_bounds
 
 ROOT = Path(__file__).resolve().parents[2]

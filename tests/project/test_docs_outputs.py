@@ -1,4 +1,4 @@
-"""Docs that cannot go stale (issue 29): every command output quoted in docs/ under an
+"""Docs that cannot go stale: every command output quoted in docs/ under an
 ``<!-- output: ... -->`` marker, and every figure under ``<!-- figure: ... -->``, is what
 the commands print now (`python docs/build.py` rewrites them; `--check` is this test)."""
 
@@ -22,7 +22,7 @@ def test_the_docs_quote_what_they_must():
     assert "recipe suggest scenarios/hex_nuts.yaml" in cmds          # the stale ones of #29
     assert "locate scenarios/brackets_dark.yaml" in cmds
     assert "--faults faults/shift.yaml" in cmds
-    assert "--target acircles --board 7x13" in cmds           # issue 26: real circle grids
+    assert "--target acircles --board 7x13" in cmds           # real circle grids
     assert [png for _, _, png in build.figures()] == ["report-example.png"]
 
 
@@ -36,7 +36,7 @@ def test_every_quoted_output_and_figure_is_current():
 def test_an_edited_quote_fails_and_the_wall_clock_does_not(tmp_path):
     doc = tmp_path / "adding-a-part.md"
     text = (ROOT / "docs/adding-a-part.md").read_text()
-    for old, new, stale in [("finds 4 part(s)", "finds 6 part(s)", True),    # issue 29's
+    for old, new, stale in [("finds 4 part(s)", "finds 6 part(s)", True),    # the docs'
                             (" rejected, ", " rejected, 12.5 ms;", True),
                             (" ms\n", " ms\n", False)]:
         assert old in text
@@ -72,3 +72,34 @@ def test_the_shift_table_quotes_the_committed_benchmark():
         assert float(ratio) == round(100 * f["parts_per_minute"] / c["parts_per_minute"], 1)
         assert int(code) == f["exit_code"] and int(lost) == f["lost"]
         assert int(dup) == f["duplicated"] and abs(int(end) - f["sim_seconds"]) < 1
+
+
+def test_the_flood_figures_quote_the_committed_benchmark():
+    """The flood figures in the docs are benchmarks/results/flood.json's
+    (`python benchmarks/flood.py`, minutes of real time: not rerun here)."""
+    import json
+    import re
+
+    got = json.loads((ROOT / "benchmarks/results/flood.json").read_text())
+    ui_doc = (ROOT / "docs/operator-ui.md").read_text()
+    ui = got["ui"]
+    assert (f"alice's `/api/me` answered in {ui['me_s']:.2f} s and her Stop in "
+            f"{ui['stop_s']:.2f} s") in " ".join(ui_doc.split())
+    for key, where in (("holder", "from her own address"),
+                       ("holder_via_proxy", "through the proxy's one address")):
+        h = got[key]
+        m = re.search(re.escape(where) + r": (\d+) of (\d+) `/api/me` and (\d+) of (\d+) "
+                      r"Stops answered, (\d+) within 1 s \(median (\d+) ms, slowest (\d+) ms\)",
+                      " ".join(ui_doc.split()))
+        assert m, where
+        assert [int(x) for x in m.groups()] == [
+            h["me_answered"], h["rounds"], h["stop_answered"], h["rounds"],
+            h["stop_within_1s"], round(1000 * h["stop_median_s"]),
+            round(1000 * h["stop_max_s"])], where
+    ps = got["part_server"]
+    assert (f"a new robot had its first answer in {round(1000 * ps['first_answer_s'])} ms "
+            f"and a part in {round(1000 * ps['part_s'])} ms") in \
+        " ".join((ROOT / "docs/part-server.md").read_text().split())
+    ua = got["opcua"]
+    assert (f"logged in and read `State` in {ua['connect_login_read_s']:.2f} s") in \
+        " ".join((ROOT / "docs/plant.md").read_text().split())

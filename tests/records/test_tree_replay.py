@@ -1,4 +1,4 @@
-"""Issue 17: the trees' history in the event log, and `feeder replay`. A fast fault run
+"""The trees' history in the event log, and `feeder replay`. A fast fault run
 (virtual time, fixed seeds, a scripted e-stop) records, besides the log, what the trees
 really were after every tick; the replay at any time, and one second before the fault,
 must match it node for node. The log must stay compact."""

@@ -1,4 +1,4 @@
-"""Policies that learn the robot (issue 16): the pick policies price with a robot model
+"""Policies that learn the robot: the pick policies price with a robot model
 fitted online from measured move times, which converges to the simulated arm's truth when
 that arm is slower or faster than the cell description says."""
 
@@ -110,7 +110,7 @@ def _learnt(tmp_path: Path, factor: float) -> tuple[dict, float]:
 def test_a_simulated_run_learns_the_arm(tmp_path, factor):
     """The simulated arm (a SCARA, feeder_bt.robot.scara) moves ``factor`` times as fast as the
     cell's; the learner fits its Cartesian model to it. The world is no longer of the
-    model's form (issue 30), so the fit is compared with the same run at factor 1: after
+    model's form, so the fit is compared with the same run at factor 1: after
     a simulated minute the time scale follows the arm within 6 %, and the fitted corner
     bound is within 10 % of the world's (the fit extrapolates to the corner from where
     parts were picked)."""

@@ -1,4 +1,4 @@
-"""The world's arm moves like a SCARA (feeder_bt/robot/scara.py, issue 30): times against
+"""The world's arm moves like a SCARA (feeder_bt/robot/scara.py): times against
 hand-computed joint profiles, and the selection-aware robot bounds over a run's record."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from feeder_bt.analysis.robot_bounds import Pricing, mean_bound, selection_bound
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import summary
 from feeder_bt.config import load_cell, load_scenario
 from feeder_bt.robot.model import RobotModel
 from feeder_bt.robot.scara import RAMP_S, ScaraModel, ScaraSpec, world_arm

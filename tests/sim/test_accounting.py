@@ -1,4 +1,4 @@
-"""Accounting by identity (issue 13): every simulated part is in exactly one place, and a
+"""Accounting by identity: every simulated part is in exactly one place, and a
 part that goes missing, is duplicated or is placed at another type's station is counted
 and named. Each test breaks the world on purpose and sees the break counted."""
 

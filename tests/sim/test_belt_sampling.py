@@ -1,5 +1,5 @@
 """The robot controller samples its belt channel once a trajectory cycle and holds it
-(``encoder.robot_sample_s``, 16 ms by default; issue 25): the drift check allows for the
+(``encoder.robot_sample_s``, 16 ms by default): the drift check allows for the
 sample's age, the simulated world holds the sample, and the arm's tracking carries it
 forward by the averaged belt speed."""
 

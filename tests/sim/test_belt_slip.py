@@ -1,4 +1,4 @@
-"""Belt physics that charge for control (issue 30): parts slide on the belt when it speeds
+"""Belt physics that charge for control: parts slide on the belt when it speeds
 up or brakes harder than friction carries them, and clumping rises with the belt's loading
 where parts land. Seeded, on virtual time; the slides are checked against hand sums."""
 

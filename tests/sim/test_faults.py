@@ -77,7 +77,7 @@ class Rig:
             except FeederError:
                 continue
             # as the controller's too_far rule: not a part the belt carries off its end
-            # before the grip (the world's SCARA takes longer to the far side, issue 30)
+            # before the grip (the world's SCARA takes longer to the far side)
             if w.commanded_xy(t, t_grip)[0] > w.scenario.retrieve.too_far_mm:
                 continue
             return t

@@ -1,4 +1,4 @@
-"""The simulated cell's imperfections (issue 16): each is there by default, each can make
+"""The simulated cell's imperfections: each is there by default, each can make
 something fail, and ``sim: {ideal: true}`` turns them off. Seeded and on virtual time."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The simulated vibratory plate (issue 31): its physics, its accounting, its refusals,
+"""The simulated vibratory plate: its physics, its accounting, its refusals,
 smart feeding's choices, and a whole run on the plate cell — virtual time, fixed seeds."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Wear (issue 30): a part type may travel the belt at most ``max_passes`` times; one that
+"""Wear: a part type may travel the belt at most ``max_passes`` times; one that
 falls off the end on its last pass goes to scrap, counted and never lost, and every report
 says how many passes each placed part cost."""
 
@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from feeder_bt.analysis.summary import summary
 from feeder_bt.app.run import RunOptions, run_job
-from feeder_bt.cli.main import main, summary
+from feeder_bt.cli.main import main
 from feeder_bt.config.loader import load_scenario
 from feeder_bt.core.errors import ConfigError
 

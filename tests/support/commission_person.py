@@ -130,6 +130,32 @@ def write_cell(tmp_path: Path, port: int) -> Path:
     return path
 
 
+def write_plate_cell(tmp_path: Path, port: int) -> Path:
+    """cells/sim_plate.yaml wired to ``feeder emulate plate`` on ``port``, with speeds and
+    a repetition to write after init (what ``plate.parameters`` reads back)."""
+    data = yaml.safe_load((ROOT / "cells" / "sim_plate.yaml").read_text())
+    data["plate"].update(url=f"socket://127.0.0.1:{port}", timeout_s=20.0,
+                         speeds={"feed_forward": 5, "purge": 3},
+                         repetitions={"heavy_dispense": 2})
+    path = tmp_path / "plate.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+class PlateEmulator(Proc):
+    """``feeder emulate plate`` in its own process; ``look`` on its standard input."""
+
+    def __init__(self, cell: Path, port: int, *extra: str) -> None:
+        super().__init__(["emulate", "plate", "scenarios/plate_lenses.yaml", "--cell",
+                          str(cell), "--port", str(port), *extra], "plate emulator")
+        while "Ctrl-C to stop" not in self.line():
+            pass
+
+    def act(self, action: str) -> str:
+        self.write(action + "\n")
+        return self.line()
+
+
 class Emulator(Proc):
     def __init__(self, cell: Path, port: int, *extra: str) -> None:
         super().__init__(["emulate", "cell", "scenarios/lenses.yaml", "--cell", str(cell),
@@ -154,7 +180,7 @@ def _xy(prompt: str) -> tuple[str, str]:
 class Person:
     """Plays the person: ``skip`` holds prompt keys the person answers without acting."""
 
-    def __init__(self, emulator: Emulator, skip: tuple[str, ...] = (),
+    def __init__(self, emulator: Emulator | PlateEmulator, skip: tuple[str, ...] = (),
                  miss: dict[str, tuple[float, float]] | None = None) -> None:
         self.emu, self.skip = emulator, skip
         self.miss = miss or {}                          # touch key -> (dx, dy) off the mark
@@ -171,6 +197,9 @@ class Person:
         parts = key.split(".")
         if key in self.skip:
             return "no" if "[yes/no]" in prompt else ""
+        if parts[0] == "action":                      # at the plate: did it do that?
+            seen = self._do("look").split()           # "ok last NAME [xREPS]"
+            return "yes" if seen[1:3] == ["last", parts[1]] else "no"
         if parts[0] == "input":
             self._do(f"toggle {parts[1]}")
         elif parts[0] in ("output", "vacuum"):

@@ -131,8 +131,9 @@ class ReplayUi(UiProcess):
 class Client:
     """One user's HTTP session (cookie jar), as the page would make its requests."""
 
-    def __init__(self, base: str) -> None:
+    def __init__(self, base: str, headers: dict[str, str] | None = None) -> None:
         self.base = base
+        self.headers = dict(headers or {})   # sent with every request (X-Forwarded-For)
         self.jar = CookieJar()
         self.opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(self.jar))
 
@@ -140,8 +141,8 @@ class Client:
              raw: bytes | None = None) -> tuple[int, dict[str, Any], Any]:
         data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
         hdrs = {"Content-Type": "application/json"} if data is not None else {}
-        req = urllib.request.Request(self.base + path, data=data, headers={**hdrs,
-                                                                            **(headers or {})})
+        req = urllib.request.Request(self.base + path, data=data,
+                                     headers={**hdrs, **self.headers, **(headers or {})})
         try:
             with self.opener.open(req, timeout=20) as resp:
                 return resp.status, json.loads(resp.read()), resp.headers

@@ -1,4 +1,4 @@
-"""A link cut at every step of a pick-and-place (issue 13): tick by tick over the mock HAL,
+"""A link cut at every step of a pick-and-place: tick by tick over the mock HAL,
 and whole runs on the simulated cell with scripted cuts. Each ends with the part where the
 world says it is (placed, or back on the belt) and feeding resumed."""
 

@@ -1,4 +1,4 @@
-"""Each recovery path of issue 4, ticked through the fault and the recovery over the mock
+"""Each recovery path of the trees, ticked through the fault and the recovery over the mock
 HAL, asserting the order of the HAL calls."""
 
 from __future__ import annotations
@@ -141,7 +141,7 @@ def test_estop_stops_every_motion_at_once_and_needs_an_operator_reset():
     m = len(rig.hal.calls)
     rig.cell.reset()
     assert rig.cell.state is CellState.STOPPED
-    # the operator's reset is what turns the belt motors back on (issue 15, finding 6)
+    # the operator's reset is what turns the belt motors back on
     assert sorted(rig.hal.methods()[m:]) == ["horizontal.servo", "incline.servo"]
     assert all(args == (True,) for _, meth, args in rig.hal.calls[m:])
     assert rig.cell.stats.recoveries["estop"] == 1
@@ -194,3 +194,18 @@ def test_a_part_the_run_did_not_pick_goes_to_the_operator():
     tick(root, ctx)
     assert "did not pick" in bb_get("/faults/escalate")
     assert not ctx.hal.pending("robot", "pick")
+
+
+@pytest.mark.parametrize("code", [-604, -9007])
+def test_power_lost_to_a_stop_goes_to_a_person_and_never_to_recover(code):
+    """An e-stop or a guard took the arm's power (V+ -604 or the server's -9007): the tree
+    counts it and asks the cell for FAULT; it never runs the recovery program, whatever
+    the cell file's recover_power_on says (a guard that resets itself must not give the
+    arm its power back)."""
+    from feeder_bt.hal.adept.protocol import error_text, vplus_error
+
+    ctx, root = _place_fails_holding(vplus_error(code, error_text(code), "PLACE"))
+    tick(root, ctx, n=5)
+    assert robot_calls(ctx) == ["robot.pick", "robot.place"]        # no robot.recover
+    assert ctx.stats.faults["power_off"] == 1
+    assert "robot power off" in bb_get("/faults/escalate")

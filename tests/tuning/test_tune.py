@@ -269,7 +269,7 @@ def test_a_wear_budget_keeps_the_best_within_it(tmp_path, capsys):
 
 
 def test_baselines_search_every_pick_policy_and_frame_spacing():
-    """Issue 30: a baseline gets every option ours gets but belt control."""
+    """A baseline gets every option ours gets but belt control."""
     import optuna
 
     from feeder_bt.tuning.space import Limits, suggest

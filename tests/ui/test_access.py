@@ -1,4 +1,4 @@
-"""Issue 19: operator access that cannot be turned against the cell — lock-outs that spare
+"""Operator access that cannot be turned against the cell — lock-outs that spare
 the rightful user, control that cannot get stuck, sessions that end, the Host allow-list and
 forwarded headers, the users file. (Bodies, the fuzz and the event log: test_bodies.py.)
 

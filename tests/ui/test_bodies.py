@@ -1,4 +1,4 @@
-"""Issue 19, what a client may send and what is recorded: malformed and huge bodies are a
+"""What a client may send and what is recorded: malformed and huge bodies are a
 one-line 400 (a hypothesis fuzz of request bodies against a real simulated cell behind the
 real bridge, derandomized), refusals name no server paths, and failed logins, lock-outs and
 refused commands reach the event log, `feeder report` and the run's report.

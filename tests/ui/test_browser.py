@@ -1,4 +1,4 @@
-"""Issue 6 in a real browser: Debian's Chromium driven by Playwright against a real
+"""The dashboard in a real browser: Debian's Chromium driven by Playwright against a real
 `feeder run scenarios/lenses.yaml --ui` on loopback (the simulated cell in real time).
 
 What must be shown: (1) alice takes control and starts the cell and sees the total fed
@@ -139,7 +139,7 @@ def test_dashboard_screenshot(alice, bob, server, shots):
 
 
 def test_a_closed_page_shows_the_others_when_control_will_be_free(alice, bob, server):
-    """Issue 19: alice's page goes away while she holds control, and bob is shown the
+    """Alice's page goes away while she holds control, and bob is shown the
     count-down to control being free; her page back within that time, she keeps it."""
     feeding(alice)
     bob_logs_in(bob, server)

@@ -1,4 +1,4 @@
-"""Issue 17: the dashboard's camera view and belt view, over HTTP against a real operator UI
+"""The dashboard's camera view and belt view, over HTTP against a real operator UI
 (``OperatorUi`` serving on loopback) around a simulated cell run in virtual time until
 parts are queued. The cell is not ticked while the tests ask: what the server answers
 must match what the cell's locator and queue hold at that moment.

@@ -1,4 +1,4 @@
-"""Issue 17 in a real browser: Debian's Chromium driven by Playwright shows the dashboard's
+"""The camera and belt views in a real browser: Debian's Chromium driven by Playwright shows the dashboard's
 camera view and belt view of a simulated cell (``ServedRig`` from uiutil: run in virtual
 time until parts are queued, then served as it stands), and takes the screenshots in
 docs/operator-ui.md (docs/operator-camera.png, docs/operator-belt.png, with

@@ -1,4 +1,4 @@
-"""Issue 28: no malformed unauthenticated request gets a 5xx, and none fills the log. A real
+"""No malformed unauthenticated request gets a 5xx, and none fills the log. A real
 `feeder run --ui` on loopback is sent, over raw sockets, long numbers in every route
 parameter and query, long and many headers, cut and broken bodies."""
 

@@ -1,4 +1,4 @@
-"""Issue 6 over HTTP and a websocket, against a real `feeder run --ui` on loopback (the
+"""The dashboard over HTTP and a websocket, against a real `feeder run --ui` on loopback (the
 simulated cell in real time): logins, the rate limit, cookies, who may command, live
 updates. The rigs (``FeederUi``, ``Client``, ``make_users``) are in uiutil.py."""
 
@@ -68,7 +68,7 @@ def test_requests_from_another_site_are_refused(server):
     assert code == 415
     code, body, _ = c.call("api/control", raw=b'{"action": "' + b"x" * 70000 + b'"}')
     assert code == 413
-    code, body, _ = c.call("api/control", {"action": "take"},      # DNS rebinding (issue 19)
+    code, body, _ = c.call("api/control", {"action": "take"},      # DNS rebinding
                            headers={"Host": "evil.example:8080"})
     assert code == 400 and body["error"] == "refused: this server does not answer to that Host"
     code, body, _ = c.call("api/control", raw=b"[" * 20000 + b"]" * 20000)
@@ -136,7 +136,7 @@ def test_removed_user_is_logged_out(server):
 
 def test_wrong_passwords_are_refused_and_slowed(server):
     """A guesser on this machine shares 127.0.0.1 with everybody: it is locked out, but
-    alice's browser, which has logged in as her before, is not (issue 19)."""
+    alice's browser, which has logged in as her before, is not."""
     alice = Client(server.url)
     assert alice.login("alice", PASSWORDS["alice"])[0] == 200     # her browser is known now
     guesser = Client(server.url)
@@ -162,7 +162,7 @@ def test_ctrl_c_stops_in_order_and_reports_what_operators_did(server):
     assert ("alice", "took control") in done and ("alice", "load") in done
     assert {a for u, a in done if u == "bob"} <= {"logged in"}   # bob changed nothing
     assert server.url == report["operator"]["url"]
-    access = report["operator"]["access"]                  # issue 19: refusals on record
+    access = report["operator"]["access"]                  # refusals on record
     assert access["login_failed"] >= 4 and access["login_locked"] >= 1
     assert access["command_refused"] >= 6 and access["request_refused"] >= 1
     err = server.err.read_text()

@@ -1,4 +1,4 @@
-"""Issue 28, logins: a flood of strangers' logins cannot keep the rightful user out. A known
+"""A flood of strangers' logins cannot keep the rightful user out. A known
 browser (its ``known`` cookie) or the address the user logged in from before is served
 before strangers when password checks are scarce, and the limiter's memory stays bounded
 without a sort on the event loop."""

@@ -1,4 +1,4 @@
-"""Issue 27: the dashboard shows the parts placed misoriented, beside located / missed.
+"""The dashboard shows the parts placed misoriented, beside located / missed.
 
 Browser-free: the status payload from ``CellPanel.snapshot`` on a simulated cell, and the
 page's template and script that show it.
@@ -50,7 +50,7 @@ def test_the_status_payload_counts_the_misoriented_parts_of_the_simulated_cell(t
 
 
 def test_a_cell_without_a_simulated_world_shows_no_count():
-    panel = SimpleNamespace(cell=SimpleNamespace(hal=SimpleNamespace()))
+    panel = SimpleNamespace(cell=SimpleNamespace(hal=SimpleNamespace(truth=None)))   # a real cell
     assert CellPanel._world_count(panel, "misoriented") is None
     assert CellPanel._world_count(panel, "scrapped") is None
 

@@ -1,4 +1,4 @@
-"""Issue 28: `feeder replay --ui` signs in with the dashboard's users file; without a
+"""`feeder replay --ui` signs in with the dashboard's users file; without a
 session it serves the login page and nothing of the run."""
 
 from __future__ import annotations

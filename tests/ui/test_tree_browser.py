@@ -1,4 +1,4 @@
-"""Issue 17 in a real browser (Playwright, Debian's Chromium): `feeder replay FILE.db --ui`
+"""The trees' replay in a real browser (Playwright, Debian's Chromium): `feeder replay FILE.db --ui`
 over a fast fault run; dragging the timeline back before the fault redraws the trees in
 the colours they had then (the same statuses `feeder replay --at T --json` prints, which
 test_tree_replay.py checks against the live trees), "End" resumes. The live dashboard's
@@ -48,7 +48,7 @@ def replay(tmp_path_factory):
 
 
 def _log_in(pg, url: str) -> None:
-    pg.goto(url)                            # the replay asks for a login first (issue 28)
+    pg.goto(url)                            # the replay asks for a login first
     pg.fill("#login-user", "alice")
     pg.fill("#login-password", PASSWORD)
     pg.click("#login-submit")

@@ -1,4 +1,4 @@
-"""Light parts, holes and concave outlines, and the no-silent-zero watch (issue 14).
+"""Light parts, holes and concave outlines, and the no-silent-zero watch.
 
 Frames come from the simulator's renderer (backlit or front-lit), recipes and parts from the
 shipped scenarios; the locator sees only pixels. Fixed seeds, virtual time.
@@ -359,7 +359,7 @@ def test_new_scenarios_feed_and_lose_nothing(scenario):
 @pytest.mark.parametrize("reason,hint", [("too small", "min_area_mm2"),
                                          ("touches border", "border")])
 def test_watch_counts_blobs_that_are_no_part_for_any_reason(reason, hint):
-    """Issue 27: blobs too small (a size in the wrong unit) or always cut by the border are
+    """Blobs too small (a size in the wrong unit) or always cut by the border are
     a silent zero too; the alarm names the reason, and a part ends the spell."""
     watch, stats = RecipeWatch(), _Stats()
     empty = LocateResult(parts=[], rejected=[], ms=0.0)

@@ -1,4 +1,4 @@
-"""``feeder commission galil|adept|camera CELL.yaml``: a guided check of a new cell.
+"""``feeder commission galil|adept|camera|plate CELL.yaml``: a guided check of a new cell.
 
 Each step does something on the hardware, asks the person at the cell to act or to say
 what they saw when only a person can tell (is the lamp on? did the belt move towards the
@@ -19,6 +19,9 @@ emulator's standard input (``feeder_bt.emulators.operator``). docs/real-cell.md,
   trigger->latch->image timing with a marker riding the belt; a pylon camera also: found
   by enumeration, one frame per trigger, exposure x belt speed under half a pixel of
   blur, calibration views grabbed to files (``commission.pylon_steps``).
+- ``plate`` (``commission.plate``): an AnyFeeder: connect and its echo, init, the cell's
+  speeds and repetitions written and read back as answered, each action jogged once and
+  confirmed by the person, the error reset, the stop.
 """
 
 from __future__ import annotations
@@ -28,10 +31,11 @@ import sys
 from pathlib import Path
 from typing import TextIO
 
-from feeder_bt.cli.argtypes import positive
+from feeder_bt.cli.argtypes import expect_kind, positive
 from feeder_bt.cli.commission.adept import commission_adept, pick_window
 from feeder_bt.cli.commission.camera import CAMERA_STEPS, commission_camera
 from feeder_bt.cli.commission.galil import commission_galil
+from feeder_bt.cli.commission.plate import commission_plate
 from feeder_bt.cli.commission.steps import Asker, CommissionError, Report, load_answers
 from feeder_bt.config import load_cell
 
@@ -42,8 +46,9 @@ INPUT_WAIT_S = 5.0       # after the person says they acted, how long to look fo
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = subparsers.add_parser("commission", help="guided check of a new cell: controllers, "
                                                  "I/O, limits, e-stop, latch, directions, "
-                                                 "robot frame, reach, camera, timing")
-    p.add_argument("what", choices=["galil", "adept", "camera"])
+                                                 "robot frame, reach, camera, timing, plate "
+                                                 "feeder actions")
+    p.add_argument("what", choices=["galil", "adept", "camera", "plate"])
     p.add_argument("cell", help="cell description YAML")
     p.add_argument("--answers", metavar="FILE", help="YAML mapping of step keys to answers "
                                                      "(instead of asking on standard input)")
@@ -86,12 +91,14 @@ def camera_steps(text: str) -> tuple[str, ...]:
     return steps
 
 
-STEPS = {"galil": commission_galil, "adept": commission_adept, "camera": commission_camera}
+STEPS = {"galil": commission_galil, "adept": commission_adept, "camera": commission_camera,
+         "plate": commission_plate}
 
 
 def cmd_commission(args: argparse.Namespace, stdin: TextIO | None = None,
                    out: TextIO | None = None) -> int:
     # without the calibration files: commissioning makes them (the robot frame, the camera)
+    expect_kind(args.cell, "cell", "", "give the cell description it runs on (its `cell:` key names it)")
     cell = load_cell(args.cell, calibration_files=False)
     ask = Asker(load_answers(args.answers), stdin or sys.stdin, out or sys.stdout)
     report = Report(args.what, cell, out or sys.stdout)

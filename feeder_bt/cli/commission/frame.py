@@ -1,4 +1,4 @@
-"""The robot base's pose in the cell frame from touch points (FRAME_SPEC, issue 25).
+"""The robot base's pose in the cell frame from touch points (FRAME_SPEC).
 
 The person jogs the tool onto marks at known cell-frame points; the robot reports each in
 its own world frame (``HERE``). A rigid 2-D fit ``p_cell = Rot(a) p_robot + b`` by least

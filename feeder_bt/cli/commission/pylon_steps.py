@@ -81,9 +81,15 @@ def trigger_step(src: Any) -> dict[str, Any]:
 
 
 def exposure_step(cell: CellSpec, src: Any, opts: argparse.Namespace) -> dict[str, Any]:
-    """The exposure the camera really has (read back), against the belt's speed."""
-    exposure_ms = float(src.cam.ExposureTime.Value) / 1000.0      # SFNC: microseconds
-    return blur(exposure_ms, belt_speed(cell, opts), cell.camera.calibration.mm_per_px)
+    """The exposure the camera really has (read back, SFNC 1 or 2 name), against the
+    belt's speed; with a line trigger also how far the belt runs between the latched pulse
+    and the exposure (the line's debouncer and trigger delay)."""
+    speed = belt_speed(cell, opts)
+    out = blur(src.exposure_us() / 1000.0, speed, cell.camera.calibration.mm_per_px)
+    lag_us = src.trigger_lag_us()
+    if lag_us:
+        out.update(trigger_lag_us=lag_us, belt_mm_after_latch=round(speed * lag_us / 1e6, 3))
+    return out
 
 
 def views_step(ask: Asker, src: Any, folder: Path, n: int) -> dict[str, Any]:

@@ -57,13 +57,6 @@ class ControllerCommands:
             if from_program:
                 raise DmcError(6, "IH from a program is not emulated")
             return self._cmd_IH(s[2:].strip())
-        m = re.match(r"^~([a-h])\s*=\s*(.*)$", s)
-        if m:
-            if m.group(2).strip() == "?":
-                with self.interp.lock:
-                    return f" {self.interp.axis_vars.get(m.group(1), 0)}"
-            self.interp.set_axis_var(m.group(1), m.group(2))
-            return ""
         m = re.match(r"^([A-Za-z][A-Za-z0-9]*)\s*=\s*(.*)$", s)
         if m and not is_axis_command(m.group(1)):
             name, rhs = m.group(1), m.group(2).strip()

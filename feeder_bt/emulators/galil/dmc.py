@@ -5,8 +5,8 @@ programs shipped in ``galil_programs/`` are tested by running them, not by a sta
 
 Subset: labels (``#NAME``), ``JP``/``JS`` with optional conditions, ``EN`` (end a thread or
 return from ``JS``), ``IF``/``ELSE``/``ENDIF`` (nestable), variables and assignments,
-``~a``-``~h`` variable axis designators, arithmetic and comparison expressions, operands
-(``_TPB``, ``_BGB``, ``_TI0``, ``_ALB``, ``_RLB``, ``_TP~a`` ... answered by the host),
+arithmetic and comparison expressions, operands with their axis named (``_TPB``,
+``_BGB``, ``_TI0``, ``_ALB``, ``_RLB`` ... answered by the host),
 functions (``@IN[n]``, ``@OUT[n]`` from the host; ``@ABS``, ``@INT``, ``@FRAC``, ``@RND``,
 ``@COM``, ``@SQR`` here), ``MG`` with strings, expressions and ``{Fm.n}``/``{Zm.n}``/
 ``{$m.n}``/``{N}``/``{^n}`` formatting, ``WT`` (milliseconds of wall time), automatic
@@ -14,6 +14,11 @@ subroutines (``#POSERR``, ``#LIMSWI``, ``#AMPERR`` entered on the host's event, 
 on a program error, each ended by ``RE``/``EN``), ``NO`` and
 ``'`` comments. Anything else in a program is handed to the host as a command (``SB 1``,
 ``JG ,100``, ``BGB``...).
+
+Not in the subset, refused at download as the strictest card would: the variable axis
+designators ``~a``-``~h`` (``_TP~a``, ``ST ~b``). Galil's newer command references list
+them (DMC-30010, DMC-40x0), but no source confirms them on the DMC-21x3 the programs are
+written for (docs/real-cell.md, "Galil facts"), so the programs name each axis.
 
 Galil evaluates arithmetic strictly left to right, with no operator precedence:
 ``1+2*3`` is 9. Parentheses group; a comparison splits a condition into two such
@@ -100,7 +105,7 @@ def is_axis_command(word: str) -> bool:
 
 
 _ASSIGN_RE = re.compile(r"^([A-Za-z][A-Za-z0-9]*)\s*=\s*(.*)$")
-_AXVAR_RE = re.compile(r"^~([a-h])\s*=\s*(.*)$")
+_AXIS_DESIGNATOR_RE = re.compile(r'~[a-h]?(?=(?:[^"]*"[^"]*")*[^"]*$)')
 _JUMP_RE = re.compile(r"^(JP|JS)\s*(#[A-Za-z0-9]+)\s*(?:,(.*))?$")
 
 
@@ -108,6 +113,9 @@ def compile_statement(text: str, line: int) -> Stmt:
     """One statement -> ``Stmt`` (expressions tokenised now, evaluated when run)."""
     s = text.strip()
     head = s[:2]
+    if not s.startswith("'") and _AXIS_DESIGNATOR_RE.search(s):
+        raise DmcError(1, f"{s!r}: a variable axis designator (~a-~h) is not confirmed on "
+                          "the DMC-21x3: name the axis")
     if s.startswith("'") or (head == "NO" and (len(s) == 2 or not s[2].isalnum())):
         return Stmt("nop", s, line)
     if s == "ELSE":
@@ -131,10 +139,6 @@ def compile_statement(text: str, line: int) -> Stmt:
         return Stmt("wt", s, line, expr=s[2:].strip(), toks=tokenize(s[2:]))
     if head == "MG" and not s[2:3].isalnum():
         return Stmt("mg", s, line, expr=s[2:].strip())
-    m = _AXVAR_RE.match(s)
-    if m:
-        return Stmt("axis", s, line, target=m.group(1), expr=m.group(2).strip(),
-                    toks=tokenize(m.group(2)))
     m = _ASSIGN_RE.match(s)
     if m and not is_axis_command(m.group(1)):
         name = m.group(1)
@@ -226,14 +230,8 @@ class _Env:
                 raise DmcError(1, f"undefined variable {name}")
             return self.interp.variables[name]
 
-    def axis_var(self, letter: str) -> int:
-        with self.interp.lock:
-            return self.interp.axis_vars.get(letter, 0)
-
     def operand(self, text: str) -> float:
         name, suffix = text[1:3], text[3:]
-        if suffix.startswith("~"):
-            suffix = AXES[self.axis_var(suffix[1])]
         return float(self.interp.host.operand(name, suffix))
 
     def function(self, name: str, arg: float) -> float:
@@ -261,7 +259,6 @@ class DmcInterpreter:
         self.max_threads = threads
         self.program: Program | None = None
         self.variables: dict[str, float] = {}
-        self.axis_vars: dict[str, int] = {}
         self.lock = threading.RLock()
         self._threads: dict[int, _Thread] = {}
         self._env = _Env(self)
@@ -293,26 +290,6 @@ class DmcInterpreter:
         value = self.evaluate(expr)
         with self.lock:
             self.variables[name] = value
-
-    def set_axis_var(self, letter: str, expr: str | list[Tok]) -> None:
-        """``~a=1`` (axis B) or ``~a="B"``."""
-        if isinstance(expr, str):
-            s = expr.strip()
-            if len(s) == 3 and s[0] == s[2] == '"' and s[1].upper() in AXES:
-                value = AXES.index(s[1].upper())
-            else:
-                value = int(self.evaluate(s))
-        else:
-            toks = expr
-            if len(toks) == 1 and toks[0].kind == "str" and toks[0].text[1:-1].upper() in AXES \
-                    and len(toks[0].text) == 3:
-                value = AXES.index(toks[0].text[1].upper())
-            else:
-                value = int(self.evaluate(toks))
-        if not 0 <= value < len(AXES):
-            raise DmcError(6, f"~{letter}={value}: no such axis")
-        with self.lock:
-            self.axis_vars[letter] = value
 
     def message(self, args: str) -> str:
         """The text ``MG args`` prints, with CR/LF unless ``{N}``."""
@@ -483,19 +460,9 @@ class DmcInterpreter:
             self.host.output(self.message(st.expr))
         elif kind == "assign":
             self.assign(st.target, st.toks or [])
-        elif kind == "axis":
-            self.set_axis_var(st.target, st.toks or [])
         else:
-            self.host.command(self._axis_letters(st.text), t.number)
+            self.host.command(st.text, t.number)
         return pc, None
-
-    def _axis_letters(self, text: str) -> str:
-        """``ST ~b`` -> ``ST B``: a variable axis designator in a command is its axis."""
-        if "~" not in text:
-            return text
-        with self.lock:
-            return re.sub(r"~([a-h])", lambda m: AXES[self.axis_vars.get(m.group(1), 0)],
-                          text)
 
 
 __all__ = ["DmcError", "DmcHost", "DmcInterpreter", "Program", "format_number", "tokenize"]

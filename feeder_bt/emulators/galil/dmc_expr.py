@@ -51,9 +51,8 @@ _TOKEN_RE = re.compile(r"""
   | (?P<str>"[^"]*")
   | (?P<hex>\$[0-9A-Fa-f]+)
   | (?P<num>\d+\.?\d*|\.\d+)
-  | (?P<opnd>_[A-Z]{2}(?:~[a-h]|[A-H0-9]*))
+  | (?P<opnd>_[A-Z]{2}[A-H0-9]*)
   | (?P<func>@[A-Z]{2,4})
-  | (?P<axv>~[a-h])
   | (?P<name>[A-Za-z][A-Za-z0-9]*)
   | (?P<cmp><>|<=|>=|=|<|>)
   | (?P<op>[-+*/&|])
@@ -151,8 +150,6 @@ class _Parser:
             return self.env.variable(tok.text)
         if tok.kind == "opnd":
             return self.env.operand(tok.text)
-        if tok.kind == "axv":
-            return float(self.env.axis_var(tok.text[1]))
         if tok.kind == "func":
             self.expect("[", 55)
             arg = self.condition()

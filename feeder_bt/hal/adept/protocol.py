@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab, ServoTimeout
+from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab, PowerOff, ServoTimeout
 from feeder_bt.hal.interfaces import Held, Pose
 
 PROTOCOL_VERSION = 1
@@ -109,7 +109,8 @@ def command(socket: str, verb: str) -> Command:
 # ---------------------------------------------------------------------------- error codes
 # V+ system messages (numbers from the V+ Language Reference's numerical list), and the
 # codes our own server programs send. The class decides what the retriever does next:
-# ServoTimeout runs the recovery subtree (RECOVER), EnvelopeError gives the part up.
+# ServoTimeout runs the recovery subtree (RECOVER), EnvelopeError gives the part up, and
+# PowerOff (power lost to an e-stop or a guard) goes to a person: never RECOVER.
 CODE_POWER_OFF = -604
 CODE_OUT_OF_RANGE = -610
 CODE_TIMEOUT_NULLING = -1003
@@ -126,7 +127,7 @@ CODE_ESTOP = -9007
 CODE_NO_FRAME = -9008
 
 VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
-    CODE_POWER_OFF: ("*Robot power off*", ServoTimeout),
+    CODE_POWER_OFF: ("*Robot power off*", PowerOff),
     CODE_OUT_OF_RANGE: ("*Location out of range*", EnvelopeError),
     CODE_TIMEOUT_NULLING: ("*Time-out nulling errors*", ServoTimeout),
     CODE_SOFT_ENVELOPE: ("*Soft envelope error*", ServoTimeout),
@@ -138,7 +139,7 @@ VPLUS_ERRORS: dict[int, tuple[str, type[HalError]]] = {
     CODE_OUTSIDE_WINDOW: ("*Outside belt window*", EnvelopeError),
     CODE_REJECTED: ("*Request rejected*", VplusError),
     CODE_STOPPED: ("*Stopped by request*", VplusError),
-    CODE_ESTOP: ("*E-stop input active*", ServoTimeout),
+    CODE_ESTOP: ("*E-stop input active*", PowerOff),
     CODE_NO_FRAME: ("*No cell frame*", VplusError),
 }
 
@@ -153,7 +154,7 @@ _TEXT_CLASSES: tuple[tuple[str, type[HalError]], ...] = (
     ("time-out nulling", ServoTimeout),
     ("envelope error", ServoTimeout),      # V+'s envelope = servo following error
     ("amplifier", ServoTimeout),
-    ("power off", ServoTimeout),
+    ("power off", PowerOff),
     ("servo", ServoTimeout),
 )
 

@@ -1,1 +1,1 @@
-"""The AnyFeeder-class plate feeder on its serial line (issue 31, docs/plate-feeders.md)."""
+"""The AnyFeeder-class plate feeder on its serial line (docs/plate-feeders.md)."""

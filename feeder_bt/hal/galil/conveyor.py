@@ -270,7 +270,7 @@ class GalilConveyor:
 
     def position_age(self) -> float | None:
         """Clock seconds since ``position()``'s count was read (None: never). An encoder
-        sync must anchor only on a fresh count (issue 15, finding 11)."""
+        sync must anchor only on a fresh count."""
         return self.ctl.position_age(self.axis)
 
     def read_position(self) -> Job:

@@ -1,4 +1,4 @@
-"""The start-up sequence and the health poll of the Galil driver (issues 15 and 25), kept
+"""The start-up sequence and the health poll of the Galil driver, kept
 apart from the link handling of ``driver``: which handle we are, ``CF``, ``IH`` clean-up,
 halting only our threads, the safety settings (``ER`` ``TL`` ``TK`` ``OE`` ``CN``), ``SH``
 only as the cell description allows, and the periodic poll that pets the card's watchdog,
@@ -159,7 +159,7 @@ class CardSetup:
         if self._has_notifier:
             step = max(1, round(self.spec.notify_mm * self.cpm))
             self._ask_on(conn, f"DSTEP={step}")
-            self._ask_on(conn, f"~a={AXES.index(self.spec.latch_axis.upper())}")
+            self._ask_on(conn, f"DAXIS={AXES.index(self.spec.latch_axis.upper())}")
         if self._has_watchdog:
             self._ask_on(conn, f"WDMS={round(self.spec.watchdog_s * 1000)}")
             self._ask_on(conn, f"WDAXES={sum(1 << AXES.index(a) for a in self.servo_axes)}")

@@ -1,4 +1,4 @@
-// Belt view (issue 17): the horizontal belt in plan, drawn from the controller's own data
+// Belt view: the horizontal belt in plan, drawn from the controller's own data
 // (status.belt: the queued parts moved by the robot's belt encoder since their latch, the
 // camera window through the calibration, the robot's reach and too_far). The belt runs
 // left to right; y across it grows downwards as in the camera picture.
@@ -35,7 +35,7 @@ window.feederBelt = (() => {
     svg.setAttribute("viewBox", `${-MARGIN} ${-MARGIN - 20} ${right + 2 * MARGIN} ` +
                                 `${b.width_mm + 2 * MARGIN + 20}`);
     svg.replaceChildren();
-    // a plate cell (issue 31): the plate's rectangle in the same frame, its parts still
+    // a plate cell: the plate's rectangle in the same frame, its parts still
     const area = b.plate ? {x: b.plate.origin_mm[0], y: b.plate.origin_mm[1],
                             w: b.plate.size_mm[0], h: b.plate.size_mm[1]}
                          : {x: 0, y: 0, w: b.length_mm, h: b.width_mm};

@@ -1,4 +1,4 @@
-// Camera view (issue 17): the last frame the cell located parts in, as the controller drew
+// Camera view: the last frame the cell located parts in, as the controller drew
 // it (parts green with class, pose, x, y and angle; rejected blobs red with the reason),
 // and the same list as text. Asks /api/camera at most as often as the controller allows
 // (its `fps`, a setting), and only while the dashboard is shown; a 429 says when to ask

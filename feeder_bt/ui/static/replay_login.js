@@ -1,4 +1,4 @@
-// The replay UI's login (issue 28): the dashboard's users file; on success the page
+// The replay UI's login: the dashboard's users file; on success the page
 // reloads and the server sends the replay itself.
 "use strict";
 document.getElementById("login-form").addEventListener("submit", async (ev) => {

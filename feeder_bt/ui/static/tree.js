@@ -1,4 +1,4 @@
-// feeder_bt tree view (issue 17): the behaviour trees drawn as a graph in SVG, with each
+// feeder_bt tree view: the behaviour trees drawn as a graph in SVG, with each
 // node's status in colour, collapsible subtrees, the blackboard, and a timeline to rewind
 // (drag back: the trees and blackboard as they were then) and resume ("Live", or "Play"
 // from there). The same view serves a running cell (feeder run --ui, inside the dashboard)
