@@ -33,20 +33,21 @@ def _perimeter(outline: np.ndarray) -> float:
 
 def outline_area_span(sc: Scenario, part: str, pose: str, mm_per_px: float
                       ) -> tuple[float, float, float]:
-    """The outline's area (mm²) and the lowest and highest area a blob of it can measure
-    through a camera of ``mm_per_px``."""
-    from feeder_bt.core.geometry import polygon_area, pose_outline
-    out = pose_outline(sc.parts[part], pose)
+    """The outline's area (mm²) as ``area_mm2`` measures it (inside its outer edge, holes
+    included: a washer's is its disc's) and the lowest and highest area a blob of it can
+    measure through a camera of ``mm_per_px``."""
+    from feeder_bt.core.geometry import outer, polygon_area, pose_outline
+    out = outer(pose_outline(sc.parts[part], pose))
     area = polygon_area(out)
     edge = _perimeter(out) * mm_per_px
     return area, max(area * (1 - SCALE_SLACK) - edge, 0.0), area * (1 + SCALE_SLACK) + edge
 
 
 def outline_edge_mm2(sc: Scenario, part: str, pose: str, mm_per_px: float) -> float:
-    """The area a pixel's width all along the outline's edge covers, mm²: how far a
-    blob's measured area may be off the outline's (threshold, blur, pixel grid)."""
-    from feeder_bt.core.geometry import pose_outline
-    return _perimeter(pose_outline(sc.parts[part], pose)) * mm_per_px
+    """The area a pixel's width all along the outline's outer edge covers, mm²: how far
+    a blob's measured area may be off the outline's (threshold, blur, pixel grid)."""
+    from feeder_bt.core.geometry import outer, pose_outline
+    return _perimeter(outer(pose_outline(sc.parts[part], pose))) * mm_per_px
 
 
 def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:

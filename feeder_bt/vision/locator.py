@@ -31,11 +31,14 @@ Recipe semantics worth knowing:
   level, but never below ``value``, so an empty belt does not turn noise into blobs), or
   ``adaptive`` (``block_px``; foreground above the local mean minus ``c``: OpenCV's
   ``C``, so ``c`` < 0).
-* ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
-  (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
-  which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
-  fall back to the principal axis when elongated, else 0. The face and angle are read
-  from the blob's outline to a fraction of a pixel (``Locator._faces``).
+* ``orientation`` (the recipe's, or a class's own): ``none`` -> 0; ``principal_axis`` ->
+  the long axis from moments, in (-90, 90]; ``cut_corner`` -> for classes with
+  ``mirrored`` set, the angle (and face) at which the part's ``face_up`` outline matches
+  the blob, in (-180, 180]; other classes fall back to the principal axis when elongated,
+  else 0. The face and angle are read from the blob's outline to a fraction of a pixel
+  (``Locator._faces``). ``outline`` -> the class's own outline (its pose's silhouette,
+  holes and all) matched against the blob (``vision.outline``); ``moment`` -> the long
+  axis turned to the heavier end (the third moment: a screw's head).
 
 * ``rulers``: gauges on the outline from the centroid (``vision.rulers``): a line's width
   or a circle's arcs, checked after every feature of a class (they cost the most).
@@ -74,7 +77,7 @@ from feeder_bt.vision.corners import (
 )
 from feeder_bt.vision.features import FEATURES, GROUP_OF
 from feeder_bt.vision.jit import kernels, warm
-from feeder_bt.vision.outline import OutlineModel, orient_outline
+from feeder_bt.vision.outline import MomentModel, OutlineModel, orient_moment, orient_outline
 from feeder_bt.vision.overlay import draw
 from feeder_bt.vision.pixels import Calibration, PixelGrid
 from feeder_bt.vision.rulers import measure as measure_ruler
@@ -127,10 +130,12 @@ class Locator(Segmenter):
         # the chain's corners are kept (the same polygon: the same moments, hull and
         # rectangle, fewer points to trace and sum). The face reads only the hull, but
         # counting a corner chain's boundary pixels costs more than tracing them all.
+        # each class's orientation: its own, else the recipe's
+        self._modes = [cls.orientation or recipe.orientation for cls in recipe.classes]
+        chiral_cut = any(m == "cut_corner" and cls.mirrored is not None
+                         for cls, m in zip(recipe.classes, self._modes, strict=True))
         self._full_chain = any(GROUP_OF[n] == GROUP_OF["perimeter_mm"]
-                               for cls in recipe.classes for n in cls.ranges) or (
-            recipe.orientation == "cut_corner"
-            and any(cls.mirrored is not None for cls in recipe.classes))
+                               for cls in recipe.classes for n in cls.ranges) or chiral_cut
         # hole contours are searched for only when a class ranges over them, or a class's
         # outline has holes: its point is the area centroid with them taken out (the part
         # frame's origin), which the filled outline's is not
@@ -145,34 +150,46 @@ class Locator(Segmenter):
         # are measured a blob at a time, when asked for (a lens on edge: its rectangle).
         first = {GROUP_OF[n] for n in recipe.classes[0].ranges} if recipe.classes else set()
         self._want_length = GROUP_OF["perimeter_mm"] in first
-        self._want_hulls = bool({GROUP_OF["aspect"], GROUP_OF["solidity"]} & first) or (
-            recipe.orientation == "cut_corner"
-            and any(cls.mirrored is not None for cls in recipe.classes))
+        self._want_hulls = bool({GROUP_OF["aspect"], GROUP_OF["solidity"]} & first) or \
+            chiral_cut
         warm()                  # the compiled per-blob work: loaded now, not on a frame
         self._signatures: dict[str, _CornerSignature] = {}
-        if recipe.orientation == "cut_corner":
-            for cls in recipe.classes:
-                if cls.mirrored is None or cls.part in self._signatures:
-                    continue
-                sig = _part_signature(parts[cls.part])
-                if sig is None:
-                    raise ValueError(f"part {cls.part}: no cut corner to orient by")
-                self._signatures[cls.part] = sig
-        # orientation: outline: every class's part, matched by its outline (vision.outline)
-        self._outlines: dict[str, OutlineModel] = {}
-        if recipe.orientation == "outline":
-            for cls in recipe.classes:
-                if cls.part in parts and cls.part not in self._outlines:
-                    self._outlines[cls.part] = OutlineModel(parts[cls.part])
+        for cls, mode in zip(recipe.classes, self._modes, strict=True):
+            if mode != "cut_corner" or cls.mirrored is None or cls.part in self._signatures:
+                continue
+            sig = _part_signature(parts[cls.part])
+            if sig is None:
+                raise ValueError(f"part {cls.part}: no cut corner to orient by")
+            self._signatures[cls.part] = sig
+        # orientation outline / moment: each class matched against its own pose's outline
+        # (vision.outline), one model per outline shown; the key names it in Blob.oriented
+        self._models: dict[str, OutlineModel | MomentModel] = {}
+        keys: list[str | None] = []
+        for cls, mode in zip(recipe.classes, self._modes, strict=True):
+            part = parts.get(cls.part)
+            if mode not in ("outline", "moment") or part is None or cls.pose not in part.poses:
+                keys.append(None)
+                continue
+            if mode == "outline":      # face up and down of one silhouette: one model
+                own = part.poses[cls.pose].silhouette is not None
+                key = f"outline:{cls.part}:{cls.pose if own else ''}"
+                if key not in self._models:
+                    self._models[key] = OutlineModel(part, cls.pose, recipe.outline_match)
+            else:
+                key = f"moment:{cls.part}:{cls.pose}"
+                if key not in self._models:
+                    self._models[key] = MomentModel(part, cls.pose)
+            keys.append(key)
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
-        # what ``_classify`` needs of each class, looked up once: its checks and how its
-        # face is told (an outline model, a cut-corner signature, or neither)
-        cut = recipe.orientation == "cut_corner"
-        self._plan = [(cls, checks, self._outlines.get(cls.part),
-                       self._signatures.get(cls.part) if cut else None)
-                      for cls, checks in self._checks]
+        # what ``_classify`` needs of each class, looked up once: its checks, its
+        # orientation and how its angle or face is told (an outline or moment model's key,
+        # a cut-corner signature, or neither)
+        self._plan = [(cls, checks, mode, key,
+                       self._signatures.get(cls.part) if mode == "cut_corner" else None)
+                      for (cls, checks), mode, key
+                      in zip(self._checks, self._modes, keys, strict=True)]
         self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
         if recipe.rulers:              # without rulers the cascade keeps its plain lookup
             self._feature = self._feature_or_ruler            # type: ignore[method-assign]
@@ -357,7 +374,7 @@ class Locator(Segmenter):
         chosen: VisionClass | None = None
         looked = False                       # a face was asked for
         why = ""                             # the outline match's reason, if it failed
-        for cls, checks, outline, model in self._plan:
+        for cls, checks, mode, key, model in self._plan:
             for name, lo, hi in checks:      # the ranges, cheapest feature first
                 v = feats.get(name)
                 if v is None:
@@ -365,29 +382,26 @@ class Locator(Segmenter):
                 if not lo <= v <= hi:
                     break
             else:
-                if outline is not None:
+                if key is not None:          # outline or moment
                     looked = True
-                    oriented = b.oriented.get(cls.part, False)
+                    oriented = b.oriented.get(key, False)
                     if oriented is False:
-                        oriented = b.oriented[cls.part] = orient_outline(
-                            outline, contour_mm(b, self.calibration),
-                            (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
+                        oriented = b.oriented[key] = self._orient_by(b, key)
                     if isinstance(oriented, str):
                         why = oriented
                         continue
                     angle, mirrored = oriented
-                    feats["mirrored"] = 1.0 if mirrored else 0.0
-                    if cls.mirrored is None or mirrored == cls.mirrored:
+                    if mode == "outline":
+                        feats["mirrored"] = 1.0 if mirrored else 0.0
+                    if cls.mirrored is None or mode == "moment" or mirrored == cls.mirrored:
                         chosen = cls
                         det.angle_deg = angle
                         break
                     continue
-                if cls.mirrored is None:
+                if cls.mirrored is None or model is None:
+                    # no face to tell, or no way to tell it: trust the class
                     chosen = cls
-                    det.angle_deg = self._symmetric_angle(b)
-                    break
-                if model is None:
-                    chosen = cls              # no way to tell the faces apart: trust the class
+                    det.angle_deg = self._symmetric_angle(b, mode)
                     break
                 if not b.faced:
                     return False
@@ -412,6 +426,22 @@ class Locator(Segmenter):
             det.angle_deg = wrap_deg(det.angle_deg, self.parts[chosen.part].period_deg)
         return True
 
+    def _orient_by(self, b: Blob, key: str) -> tuple[float, bool] | str:
+        """The blob's angle and face by the outline or moment model ``key``, or why not:
+        read on its outline and its holes (of at least ``min_hole_mm2``), in mm."""
+        model = self._models[key]
+        cal = self.calibration
+        holes: list[np.ndarray] = []
+        if b.holes:
+            px2 = self.recipe.min_hole_mm2 / (b.scale or cal.mm_per_px) ** 2
+            holes = [cal.px_to_mm(h.reshape(-1, 2)) for h in b.holes
+                     if abs(cv2.contourArea(h)) >= 0.5 * px2]
+        xy = contour_mm(b, cal)
+        if isinstance(model, MomentModel):
+            return orient_moment(model, xy, holes)
+        return orient_outline(model, xy, (b.det.x_mm, b.det.y_mm), b.scale or cal.mm_per_px,
+                              holes)
+
     def _no_class(self, b: Blob) -> str:
         """Why a blob fits no class: the class nearest it by area and the first of that
         class's ranges it is outside (already measured: the cascade stopped there)."""
@@ -431,13 +461,15 @@ class Locator(Segmenter):
                         f"[{lo:.4g}, {hi:.4g}]")
         return f"no class; nearest {cls.part}/{cls.pose}: its face"
 
-    def _symmetric_angle(self, b: Blob) -> float:
-        """Angle of a class without a face to tell: its long axis if it has one, else 0."""
-        o = self.recipe.orientation
-        if o == "none":
+    def _symmetric_angle(self, b: Blob, mode: str) -> float:
+        """Angle of a class without a face to tell (orientation ``mode``): its long axis
+        if it has one, else 0."""
+        if mode == "none":
             return 0.0
-        if o == "principal_axis":
-            return b.det.angle_deg            # measured with the blob
+        if mode == "principal_axis":
+            if self.recipe.orientation == "principal_axis":
+                return b.det.angle_deg        # measured with the blob
+            return principal_angle(cv2.moments(contour_mm(b, self.calibration)))
         if self._feature(b, "aspect") > _ELONGATED:
             return principal_angle(cv2.moments(contour_mm(b, self.calibration)))
         return 0.0
