@@ -7,8 +7,9 @@ otherwise show only as a run that feeds nothing, or faults after its misses.
   drawn at the cell's scale and measured by the locator itself (``outline_features``);
 * two classes whose ranges overlap on every feature both range over: a blob in both is
   taken as the first, whichever part it is;
-* ``principal_axis`` orienting a part whose symmetry it cannot resolve (a long axis gives
-  an angle modulo 180°: right for ``symmetry: 2`` only);
+* a part placed oriented by a class that cannot orient it: ``principal_axis`` when its
+  symmetry is not 2 (a long axis gives an angle modulo 180°), ``moment`` when its ends
+  weigh the same, ``none`` at all;
 * a belt speed that looks like m/s (under ``MIN_BELT_MM_S``).
 """
 
@@ -316,30 +317,49 @@ def check_classes_against_outlines(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> N
 
 
 def check_orientation(sc: Scenario, ctx: _Ctx) -> None:
-    """``principal_axis`` on a part placed oriented: the long axis tells the angle modulo
-    180°, which is the part's own period only when ``symmetry`` is 2 (or when any angle
-    is within its orientation tolerance, as for a disc)."""
-    if sc.vision.orientation != "principal_axis":
-        return
-    seen: set[str] = set()
-    for vc in sc.vision.classes:
+    """Each pickable class of a part placed oriented (``place.orient``), by its own
+    orientation (else the recipe's): ``principal_axis`` tells the angle modulo 180°, which
+    is the part's own period only when ``symmetry`` is 2 (or when any angle is within its
+    orientation tolerance, as for a disc); ``moment`` needs an end heavier than the other;
+    ``none`` places every part at the angle it lay. A recipe with a ``leaf`` locator reads
+    angles its own way: not checked."""
+    from feeder_bt.vision.outline import MIN_SKEW, MomentModel
+    if sc.vision.leaf:
+        return                                        # its own locator reads the angle
+    seen: set[tuple[str, str, str]] = set()
+    for i, vc in enumerate(sc.vision.classes):
         part = sc.parts.get(vc.part)
-        if part is None or vc.part in seen or not vc.pickable or not part.place.orient:
+        mode = vc.orientation or sc.vision.orientation
+        if part is None or vc.pose not in part.poses or not vc.pickable \
+                or not part.place.orient or (vc.part, vc.pose, mode) in seen:
             continue
-        seen.add(vc.part)
+        seen.add((vc.part, vc.pose, mode))
+        where = f"vision.classes[{i}].orientation" if vc.orientation \
+            else "vision.orientation"
         n, tol = part.symmetry, part.orientation_tolerance_deg
-        if n == 2 or part.period_deg <= 2 * tol:
-            continue
-        if n == 1:
-            why = ("its long axis is the same turned 180°, the part is not (symmetry: 1): "
-                   "about half would be placed turned round")
-        else:
-            why = (f"a part with symmetry {n} has no long axis (its second moments are the "
-                   f"same every way), so the angle read is noise")
-        ctx.add_problem("vision.orientation",
-                        f"principal_axis cannot orient {vc.part} (place.orient): {why}; "
-                        f"use cut_corner or outline, or symmetry: 2 if the part looks the "
-                        f"same turned half a turn")
+        if part.period_deg <= 2 * tol:
+            continue                                  # any angle is near enough
+        if mode == "principal_axis" and n != 2:
+            if n == 1:
+                why = ("its long axis is the same turned 180°, the part is not (symmetry: 1): "
+                       "about half would be placed turned round")
+            else:
+                why = (f"a part with symmetry {n} has no long axis (its second moments are "
+                       f"the same every way), so the angle read is noise")
+            ctx.add_problem(where, f"principal_axis cannot orient {vc.part} (place.orient): "
+                                   f"{why}; use cut_corner, outline or moment, or symmetry: 2 "
+                                   f"if the part looks the same turned half a turn")
+        elif mode == "moment" and n == 1 and not (m := MomentModel(part, vc.pose)).usable:
+            why = ("it has no long axis" if m.skew >= MIN_SKEW else
+                   f"its ends weigh the same (skewness {m.skew:.2f} along its long axis)")
+            ctx.add_problem(where, f"moment cannot orient {vc.part}/{vc.pose} (place.orient): "
+                                   f"{why}, so about half would be placed turned round; "
+                                   f"use outline")
+        elif mode == "none":
+            ctx.add_problem(where, f"{vc.part}/{vc.pose} is placed oriented (place.orient) "
+                                   f"but its class reads no angle (orientation: none): each "
+                                   f"is placed turned as it lay; choose principal_axis, "
+                                   f"cut_corner, outline or moment")
 
 
 # ---------------------------------------------------------------------------- speeds

@@ -154,3 +154,21 @@ def test_a_speed_in_m_per_s_is_named(tmp_path):
     out = _check(tmp_path, "lenses.yaml", ("min_mm_s: 80", "min_mm_s: 0.08"))
     assert len(out) == 1 and "adjust.params.min_mm_s: 0.08 mm/s: is this m/s?" in out[0]
     assert _check(tmp_path, "lenses.yaml", ("horizontal_mm_s: 150", "horizontal_mm_s: 1")) == []
+
+
+def test_a_class_that_cannot_orient_its_part_placed_oriented_is_named(tmp_path):
+    """Per class: ``moment`` on a lever whose ends weigh the same (no bores), ``none``
+    on a part placed oriented; the class's own ``orientation`` is the one named."""
+    text = (ROOT / "scenarios" / "levers.yaml").read_text()
+    bores = text[text.index("        holes_mm:\n"):text.index("    poses:\n")]
+    out = _check(tmp_path, "levers.yaml", (bores, ""), ("holes: [2, 2]", "holes: [0, 0]"),
+                 ("orientation: outline\n", "orientation: moment\n"))
+    assert len(out) == 2                            # each pickable pose, face up and down
+    assert "vision.orientation: moment cannot orient lever/face_up" in out[0]
+    assert "vision.orientation: moment cannot orient lever/face_down" in out[1]
+    assert "its ends weigh the same" in out[0] and "use outline" in out[0]
+    out = _check(tmp_path, "levers.yaml",
+                 ("mirrored: false,", "mirrored: false, orientation: none,"))
+    assert len(out) == 1 and "vision.classes[0].orientation: lever/face_up is placed " \
+                             "oriented (place.orient) but its class reads no angle" in out[0]
+    assert _check(tmp_path, "levers.yaml") == []
