@@ -51,6 +51,23 @@ def test_a_ring_gripped_at_its_centroid_is_named_with_a_grip_on_the_material(tmp
     assert "offset_mm: [8.5, 0]" in out[0]          # mid-ring, where the shipped grips are
 
 
+def test_feeder_check_exits_2_on_a_ring_without_grips_and_the_ring_with_them_feeds(
+        tmp_path, capsys):
+    """The operator's view: ``feeder check`` exits 2 naming the hole; with the pick
+    points on the ring it passes and a short run places washers, none gripped over the
+    hole."""
+    from feeder_bt.app.run import RunOptions, run_job
+    from feeder_bt.cli.main import main
+    _check(tmp_path, "washers.yaml", (WASHER_GRIPS, ""))
+    assert main(["check", str(tmp_path / "washers.yaml")]) == 2
+    assert "washer/flat lies in a hole" in capsys.readouterr().err
+    assert main(["check", str(ROOT / "scenarios" / "washers.yaml")]) == 0
+    rep = run_job(RunOptions(scenario=str(ROOT / "scenarios" / "washers.yaml"), duration=90.0,
+                             fast=True, seed=1, view="none"))
+    assert rep["parts"]["retrieved"]["washer"] > 20
+    assert rep["parts"]["grip_misses"]["grip_on_hole"] == 0
+
+
 def test_a_grip_in_the_hole_or_a_cup_over_the_edge_is_named(tmp_path):
     out = _check(tmp_path, "washers.yaml", ("{offset_mm: [0, 8.5]}", "{offset_mm: [0, 3]}"))
     assert len(out) == 1 and "parts.washer.pick.grips[1].offset_mm" in out[0]
