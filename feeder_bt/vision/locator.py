@@ -82,7 +82,7 @@ from feeder_bt.vision.overlay import draw
 from feeder_bt.vision.pixels import Calibration, PixelGrid
 from feeder_bt.vision.rulers import measure as measure_ruler
 from feeder_bt.vision.segment import Segmenter, to_grey
-from feeder_bt.vision.split import split_blob
+from feeder_bt.vision.split import H_SHARE, inscribed_px, split_blob
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
@@ -191,6 +191,21 @@ class Locator(Segmenter):
                       for (cls, checks), mode, key
                       in zip(self._checks, self._modes, keys, strict=True)]
         self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
+        # split_touching: a part's dome of the distance transform rises about its inscribed
+        # radius; a marker is a dome that stands a share of the smallest (pickable) part's
+        # above its saddles (vision.split). A blob at the frame's edge is cut only if it
+        # is at least half as big again as the smallest class's least area: a part cut by
+        # the edge is smaller, a clump of two is not
+        self._split_h: float | None = None
+        self._split_border_mm2 = math.inf
+        if recipe.split_touching:
+            named = [c for c in recipe.classes
+                     if c.part in parts and c.pose in parts[c.part].poses]
+            sizes = [inscribed_px(pose_outline(parts[c.part], c.pose), calibration.mm_per_px)
+                     for c in (([c for c in named if c.pickable]) or named)]
+            self._split_h = H_SHARE * min(sizes) if sizes else None
+            lows = [c.ranges["area_mm2"][0] for c in named if "area_mm2" in c.ranges]
+            self._split_border_mm2 = 1.5 * min(lows) if lows else 0.0
         if recipe.rulers:              # without rulers the cascade keeps its plain lookup
             self._feature = self._feature_or_ruler            # type: ignore[method-assign]
         super().__init__(recipe)       # the segmentation, once the classes are known good
@@ -242,14 +257,18 @@ class Locator(Segmenter):
 
     def _split(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
                level: float | None) -> list[Blob]:
-        """``split_touching``: each blob that fits no class, cut into pieces
-        (``vision.split``); if every piece is a part, the pieces replace it."""
+        """``split_touching``: each blob that fits no class, or a clump touching the frame's
+        edge, cut into pieces (``vision.split``); if every piece is a part or touches the
+        edge, and one at least is a part, the pieces replace it."""
         out: list[Blob] = []
         for b in blobs:
-            if not b.det.reason.startswith("no class"):
+            reason = b.det.reason
+            if not (reason.startswith("no class") or (
+                    reason == "touches border"
+                    and b.det.features["area_mm2"] >= self._split_border_mm2)):
                 out.append(b)
                 continue
-            pieces = split_blob(b)
+            pieces = split_blob(b, self._split_h, img.shape[:2])
             new = find_blobs([c for c, _ in pieces], img.shape[:2], self.calibration,
                              self.recipe.min_area_mm2, full=True,
                              holes=[hs for _, hs in pieces],
@@ -262,7 +281,8 @@ class Locator(Segmenter):
                 self._faces(waiting, img, diff, level)
                 for p in waiting:
                     self._classify(p)
-            if new and all(not p.det.reason for p in new):
+            if any(not p.det.reason for p in new) and all(
+                    not p.det.reason or p.det.reason == "touches border" for p in new):
                 for p in new:
                     p.det.features["split"] = 1.0
                 out += new

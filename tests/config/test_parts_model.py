@@ -7,19 +7,12 @@ from pathlib import Path
 import pytest
 
 from feeder_bt.cli.main import main
+from tests.support.scenarios import edited_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _scenario(tmp_path: Path, name: str, *edits: tuple[str, str]) -> Path:
-    text = (ROOT / "scenarios" / name).read_text()
-    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new)
-    p = tmp_path / name
-    p.write_text(text)
-    return p
+_scenario = edited_scenario
 
 
 def test_check_names_a_class_whose_area_range_cannot_hold_its_outline(tmp_path, capsys):

@@ -11,6 +11,7 @@ import pytest
 from feeder_bt.config import check_files
 from feeder_bt.config.loader import load_scenario
 from feeder_bt.config.part_checks import outline_features
+from tests.support.scenarios import edited_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -24,14 +25,7 @@ M20 = "[[17.32, 0], [8.66, 15], [-8.66, 15], [-17.32, 0], [-8.66, -15], [8.66, -
 
 
 def _check(tmp_path: Path, name: str, *edits: tuple[str, str]) -> list[str]:
-    text = (ROOT / "scenarios" / name).read_text()
-    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new)
-    p = tmp_path / name
-    p.write_text(text)
-    return check_files([str(p)])
+    return check_files([str(edited_scenario(tmp_path, name, *edits))])
 
 
 def test_the_shipped_scenarios_and_examples_pass():

@@ -17,6 +17,7 @@ from feeder_bt.core.geometry import place_outline, pose_outline, wrap_deg
 from feeder_bt.sim.render import Renderer
 from feeder_bt.vision.locator import Locator
 from feeder_bt.vision.pixels import Calibration
+from tests.support.scenarios import edited_scenario as _scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -54,17 +55,6 @@ vision:
     - {{part: nut, pose: flat, pickable: true, orientation: outline, area_mm2: [740, 860], holes: [1, 1]}}
   orientation: none
 """
-
-
-def _scenario(tmp_path: Path, name: str, *edits: tuple[str, str], text: str = "") -> Path:
-    text = text or (ROOT / "scenarios" / name).read_text()
-    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new)
-    p = tmp_path / name
-    p.write_text(text)
-    return p
 
 
 def _located(path: Path, lay: list[tuple[str, str]], frames: int = 6, seed: int = 3
