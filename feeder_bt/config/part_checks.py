@@ -23,6 +23,7 @@ import numpy as np
 from feeder_bt.config.tables import _num
 from feeder_bt.config.walker import _Ctx
 from feeder_bt.core.model import CellSpec, PartSpec, Scenario, VisionClass
+from feeder_bt.vision.features import PIXEL_FEATURES
 
 if TYPE_CHECKING:
     from feeder_bt.core.model import VisionRecipe
@@ -171,6 +172,8 @@ def outline_features(part: PartSpec, pose: str, recipe: VisionRecipe, mm_per_px:
             continue
         feats = max(dets, key=lambda d: d.features["area_mm2"]).features
         for name, v in feats.items():
+            if name in PIXEL_FEATURES:          # the drawing's grey is not the part's
+                continue
             lo, hi = spans.get(name, (v, v))
             spans[name] = (min(lo, v), max(hi, v))
     return spans

@@ -89,11 +89,13 @@ class Frame:
     those points) and the hulls' vertices (indices, ends per contour; empty if hulls were
     not asked for)."""
 
-    __slots__ = ("pts", "hull", "hull_ends", "contours")
+    __slots__ = ("pts", "hull", "hull_ends", "contours", "grey")
 
-    def __init__(self, contours: Contours, hull: np.ndarray, hull_ends: np.ndarray) -> None:
+    def __init__(self, contours: Contours, hull: np.ndarray, hull_ends: np.ndarray,
+                 grey: np.ndarray | None = None) -> None:
         self.pts, self.hull, self.hull_ends = contours.pts, hull, hull_ends
         self.contours = contours
+        self.grey = grey              # the frame (grey), for ``grey_mean`` and ``grey_std``
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
@@ -101,7 +103,7 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
                holes: list[list[np.ndarray]] | None = None,
                mapping: Calibration | PixelGrid | None = None,
                length: bool = False, hulls: bool = False,
-               min_hole_mm2: float = 0.0) -> list[Blob]:
+               min_hole_mm2: float = 0.0, grey: np.ndarray | None = None) -> list[Blob]:
     """The contours worth reporting (not specks), measured as far as every blob is: area,
     centroid (mm), the border and size rules (``reason`` "touches border", "too small").
 
@@ -112,7 +114,8 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     also measure every blob's smoothed length (``full`` contours only), its convex hull and
     minimum-area rectangle now, in the same compiled pass (``kernels.blob_stats``) — what
     the recipe's classes or faces will ask of most blobs; ``measure_feature`` measures them
-    one blob at a time otherwise.
+    one blob at a time otherwise. ``grey``: the frame the contours were found in, for the
+    features read from its pixels (``features.PIXEL_FEATURES``).
 
     The centroid is the blob's area centroid with its holes (of at least ``min_hole_mm2``)
     taken out, the part frame's origin, when its holes were looked for; else the filled
@@ -134,7 +137,7 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     boxes, stats, hull, hull_ends = k.blob_stats(
         pts, lens, min_px, full, length and full, hulls,
         WINDOW, kind, cells, par)
-    frame = Frame(Contours(pts, lens) if given else contours, hull, hull_ends)
+    frame = Frame(Contours(pts, lens) if given else contours, hull, hull_ends, grey)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
     # calibration's mm_per_px over the window), for areas and lengths
     local = not calibration.linear
@@ -264,6 +267,17 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         # cv2.contourArea and cv2.arcLength of the hull
         hull_area = row[k.HULL_AREA] + 0.5 * row[k.HULL_LEN] + 1.0
         feats["solidity"] = min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0
+    elif group == GROUP_OF["grey_mean"]:
+        grey = b.frame.grey if b.frame is not None else None
+        if grey is None:
+            raise RuntimeError("grey features asked of a blob found without its frame")
+        u, v, w, h = b.box
+        mask = np.zeros((h, w), np.uint8)
+        cv2.drawContours(mask, [b.contour], -1, 255, thickness=cv2.FILLED, offset=(-u, -v))
+        if b.holes:
+            cv2.drawContours(mask, b.holes, -1, 0, thickness=cv2.FILLED, offset=(-u, -v))
+        mean, std = cv2.meanStdDev(grey[v:v + h, u:u + w], mask=mask)
+        feats["grey_mean"], feats["grey_std"] = float(mean[0, 0]), float(std[0, 0])
     return feats[name]
 
 

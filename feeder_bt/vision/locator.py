@@ -223,7 +223,8 @@ class Locator(Segmenter):
         mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
         contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
-        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes,
+                            grey=img)
         # classes first; the blobs that need a face wait for one batch of fine outlines
         waiting = [b for b in blobs if not b.det.reason and not self._classify(b)]
         if waiting:
@@ -252,7 +253,8 @@ class Locator(Segmenter):
         """
         img = to_grey(image)
         contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
-        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes,
+                            grey=img)
         return [b.det for b in blobs]
 
     def _split(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
@@ -274,7 +276,7 @@ class Locator(Segmenter):
                              holes=[hs for _, hs in pieces],
                              mapping=self._mapping(img.shape[:2]),
                              length=self._want_length, hulls=self._want_hulls,
-                             min_hole_mm2=self.recipe.min_hole_mm2) \
+                             min_hole_mm2=self.recipe.min_hole_mm2, grey=img) \
                 if pieces else []
             waiting = [p for p in new if not p.det.reason and not self._classify(p)]
             if waiting:
@@ -293,7 +295,8 @@ class Locator(Segmenter):
     # -------------------------------------------------------------- per blob
 
     def _blobs(self, contours: list[np.ndarray], shape: tuple[int, int], all_features: bool,
-               full: bool = True, holes: list[list[np.ndarray]] | None = None) -> list[Blob]:
+               full: bool = True, holes: list[list[np.ndarray]] | None = None,
+               grey: np.ndarray | None = None) -> list[Blob]:
         """The contours worth reporting, measured as far as every blob is (``find_blobs``);
         with ``all_features`` every feature of every blob, the rejected ones too."""
         mapping = self._mapping(shape)
@@ -301,7 +304,7 @@ class Locator(Segmenter):
                            full=full, holes=holes, mapping=mapping,
                            length=all_features or self._want_length,
                            hulls=all_features or self._want_hulls,
-                           min_hole_mm2=self.recipe.min_hole_mm2)
+                           min_hole_mm2=self.recipe.min_hole_mm2, grey=grey)
         if all_features:
             for b in blobs:
                 for name in (*FEATURES, *self.recipe.rulers):
