@@ -95,6 +95,9 @@ class LocateResult:
     rejected: list[Detection]
     ms: float
     blobs: list[Blob] = field(default_factory=list, repr=False)   # parts + rejected
+    # the (part, pose) classes whose angle means something (a class that reads one, of a
+    # part not alike at every turn): the drawing puts an arrow on those only
+    angled: frozenset[tuple[str, str]] | None = field(default=None, repr=False)
 
     @property
     def contours(self) -> list[np.ndarray]:
@@ -180,6 +183,10 @@ class Locator(Segmenter):
                 if key not in self._models:
                     self._models[key] = MomentModel(part, cls.pose)
             keys.append(key)
+        self._angled = frozenset(
+            (cls.part, cls.pose) for cls, mode in zip(recipe.classes, self._modes, strict=True)
+            if mode != "none" and cls.part in parts
+            and parts[cls.part].period_deg > 2 * parts[cls.part].orientation_tolerance_deg)
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
@@ -241,7 +248,8 @@ class Locator(Segmenter):
         for b in blobs:
             (rejected if b.det.reason else parts).append(b.det)
         ms = (time.perf_counter() - t0) * 1e3
-        return LocateResult(parts=parts, rejected=rejected, ms=ms, blobs=blobs)
+        return LocateResult(parts=parts, rejected=rejected, ms=ms, blobs=blobs,
+                            angled=self._angled)
 
     def measure_blobs(self, image: np.ndarray) -> list[Detection]:
         """Every blob's features, unclassified, measured exactly as ``locate`` measures them
