@@ -6,9 +6,9 @@ face up and face down (unless ``mirror_symmetric``), each turned so that its pri
 lies along the blob's (two turns, 180° apart: four hypotheses), or, for an outline whose
 inertia is nearly the same in every direction (no principal axis to trust), every 6°. Each
 is drawn at the blob's centroid and scored by its overlap with the blob, holes drawn as
-holes (intersection over union on a raster of ``OutlineMatch.raster_mm``); the best is
-refined by halving turns (only without an axis: with one, the moments' axis is the finer
-angle). So moments give the angle and the rendered template the end and the face, which
+holes (intersection over union on a raster of ``OutlineMatch.raster_mm``); without an axis
+the best turn is refined on the edge points (point to line, ``_fit_turn``); with one, the
+moments' axis is the finer angle. So moments give the angle and the rendered template the end and the face, which
 moments alone cannot tell apart: a lever whose ends differ only by their bores (10 and
 5 mm) is told end from end by the bores. Measured on drawn frames of 12 light
 L-brackets, half face-down, over 360° (300 parts): every face right, angle error mean
@@ -38,7 +38,6 @@ from feeder_bt.core.model import OutlineMatch, PartSpec
 
 ISOTROPIC = 1.08          # inertia ratio under which the principal axis is not trusted
 COARSE_DEG = 6.0          # the search step without an axis
-FINE_DEG = 0.5            # the sweep about the best step without an axis
 DISTINCT_DEG = 10.0       # hypotheses farther apart than this (mod the period) differ
 SKEW_SHARE = 1 / 3        # ``moment``: a blob's skewness under this share of its outline's
 MIN_SKEW = 0.05           # ``moment``: an outline less skewed than this has no head end
@@ -105,7 +104,7 @@ class OutlineModel:
         self.axes = {f: _axis_of(region_moments(r)[2])[0] for f, r in self.rings.items()}
         self.period = part.period_deg
         self.match = match or OutlineMatch()
-        self.edges = {f: _densify(r) for f, r in self.rings.items()}   # for ``_fit_turn``
+        self.edges = {f: _Edges(r) for f, r in self.rings.items()}     # for ``_fit_turn``
 
     def distinct(self, a: tuple[float, bool], b: tuple[float, bool]) -> bool:
         """Whether two (angle, face) hypotheses are different poses of the part."""
@@ -164,15 +163,10 @@ def orient_outline(model: OutlineModel, xy: np.ndarray, centre: tuple[float, flo
         peaks.sort(reverse=True)
         best_s, best_a, best_f = peaks[0]
         rivals = [s for s, a, f in peaks[1:] if model.distinct((a, f), (best_a, best_f))]
-        # the raster's overlap moves in steps: the middle of the best run of a 1° sweep
-        # across the step either side, not a hill climb that stops on a step's edge
-        sweep = np.arange(-step, step + 1e-9, FINE_DEG) + best_a
-        ss = np.array([score(a, best_f) for a in sweep.tolist()])
-        top = np.flatnonzero(ss >= ss.max() - 1e-9)
-        best_s, best_a = float(ss.max()), float(sweep[top].mean())
         # the overlap of a coarse blob barely changes over a few degrees (a hex nut at
-        # 1 mm/px: up to 4° off): the edge points themselves give the finer angle
+        # 1 mm/px: up to 4° off), so the edge points themselves give the finer angle
         best_a = _fit_turn(model.edges[best_f], np.vstack([xy, *inner]) - centre, best_a)
+        best_s = max(best_s, score(best_a, best_f))
     if best_s < model.match.min_iou:
         return (f"outline does not match (overlap {best_s:.2f} < min_iou "
                 f"{model.match.min_iou:g})")
@@ -221,39 +215,62 @@ def orient_moment(model: MomentModel, xy: np.ndarray, holes: list[np.ndarray] | 
     return wrap_deg(axis - model.axis), False
 
 
-def _densify(rs: list[np.ndarray], step_mm: float = 0.25) -> np.ndarray:
-    """Points every ``step_mm`` along every ring's edges (closed), each with its edge's
-    unit normal: ``(n, 4)`` rows x, y, nx, ny."""
-    out = []
-    for r in rs:
-        nxt = np.roll(r, -1, axis=0)
-        for a, b in zip(r, nxt, strict=True):
-            length = float(np.hypot(*(b - a)))
-            if length < 1e-9:
-                continue
-            k = max(1, int(math.ceil(length / step_mm)))
-            t = np.arange(k)[:, None] / k
-            normal = np.array([b[1] - a[1], a[0] - b[0]]) / length
-            out.append(np.hstack([a + t * (b - a), np.broadcast_to(normal, (k, 2))]))
-    return np.vstack(out)
+class _Edges:
+    """An outline's edges as points every ``STEP_MM`` with their normals, and a table of
+    the nearest of them from every cell of a grid about the outline (part frame), so that
+    ``_fit_turn`` pairs a blob's points with the outline's in one lookup each."""
+
+    STEP_MM = 0.25
+    MARGIN_MM = 6.0
+
+    def __init__(self, rs: list[np.ndarray]) -> None:
+        rows = []
+        for r in rs:
+            nxt = np.roll(r, -1, axis=0)
+            for a, b in zip(r, nxt, strict=True):
+                length = float(np.hypot(*(b - a)))
+                if length < 1e-9:
+                    continue
+                k = max(1, int(math.ceil(length / self.STEP_MM)))
+                t = np.arange(k)[:, None] / k
+                normal = np.array([b[1] - a[1], a[0] - b[0]]) / length
+                rows.append(np.hstack([a + t * (b - a), np.broadcast_to(normal, (k, 2))]))
+        self.pts = np.vstack(rows)                       # x, y, nx, ny
+        self.lo = self.pts[:, :2].min(axis=0) - self.MARGIN_MM
+        span = self.pts[:, :2].max(axis=0) + self.MARGIN_MM - self.lo
+        self.cell = max(self.STEP_MM, float(span.max()) / 400.0)
+        w, h = (np.ceil(span / self.cell).astype(int) + 1).tolist()
+        at = np.round((self.pts[:, :2] - self.lo) / self.cell).astype(int)
+        grid = np.ones((h, w), np.uint8)
+        grid[at[:, 1], at[:, 0]] = 0
+        _, labels = cv2.distanceTransformWithLabels(grid, cv2.DIST_L2, 5,
+                                                    labelType=cv2.DIST_LABEL_PIXEL)
+        of_label = np.zeros(int(labels.max()) + 1, np.int64)
+        of_label[labels[at[:, 1], at[:, 0]]] = np.arange(len(at))
+        self.nearest = of_label[labels]                  # cell -> index of its nearest point
+
+    def near(self, p: np.ndarray) -> np.ndarray:
+        """Index of the edge point nearest each point of ``p`` (part frame, ``(n, 2)``)."""
+        h, w = self.nearest.shape
+        at = np.round((p - self.lo) / self.cell).astype(int)
+        return self.nearest[np.clip(at[:, 1], 0, h - 1), np.clip(at[:, 0], 0, w - 1)]
 
 
-def _fit_turn(model: np.ndarray, pts: np.ndarray, angle: float, rounds: int = 6) -> float:
-    """``angle`` refined so that the model's edges (``_densify``), turned by it about the
-    origin, run nearest the blob's edge points ``pts`` (about its centroid): each round
-    pairs every blob point with its nearest model point and takes the least-squares turn
-    that closes their distances along the model edge's normal (point to line: a point
-    may slide along an edge, so a polygon's turn is not held back by where its points lie
-    on the edges)."""
-    p = pts.astype(np.float64)
+def _fit_turn(edges: _Edges, pts: np.ndarray, angle: float, rounds: int = 6) -> float:
+    """``angle`` refined so that the outline's edges, turned by it about the origin, run
+    nearest the blob's edge points ``pts`` (about its centroid): each round takes the
+    blob's points into the outline's frame, pairs each with its nearest edge point and
+    takes the least-squares turn that closes their distances along that edge's normal
+    (point to line: a point may slide along an edge, so a polygon's turn is not held back
+    by where its points lie on the edges)."""
+    p0 = pts.astype(np.float64)
     for _ in range(rounds):
         a = math.radians(angle)
-        rot = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
-        q, nrm = model[:, :2] @ rot, model[:, 2:] @ rot
-        k = ((p[:, None, :] - q[None, :, :]) ** 2).sum(axis=2).argmin(axis=1)
-        q, nrm = q[k], nrm[k]
+        p = p0 @ np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        e = edges.pts[edges.near(p)]
+        q, nrm = e[:, :2], e[:, 2:]
         r = ((p - q) * nrm).sum(axis=1)                 # distance along the normal
-        j = q[:, 0] * nrm[:, 1] - q[:, 1] * nrm[:, 0]   # its change per radian of turn
+        j = p[:, 0] * nrm[:, 1] - p[:, 1] * nrm[:, 0]   # its change per radian of turn
         den = float((j * j).sum())
         if den < 1e-12:
             break
