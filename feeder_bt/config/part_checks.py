@@ -7,6 +7,8 @@ otherwise show only as a run that feeds nothing, or faults after its misses.
   drawn at the cell's scale and measured by the locator itself (``outline_features``);
 * two classes whose ranges overlap on every feature both range over: a blob in both is
   taken as the first, whichever part it is;
+* an outline that ``orientation: outline`` cannot match on itself, drawn at the cell's
+  scale (ambiguous, or under ``outline_match.min_iou``): every blob of it rejected;
 * a part placed oriented by a class that cannot orient it: ``principal_axis`` when its
   symmetry is not 2 (a long axis gives an angle modulo 180°), ``moment`` when its ends
   weigh the same, ``none`` at all;
@@ -16,7 +18,8 @@ otherwise show only as a run that feeds nothing, or faults after its misses.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +30,7 @@ from feeder_bt.vision.features import PIXEL_FEATURES
 
 if TYPE_CHECKING:
     from feeder_bt.core.model import VisionRecipe
+    from feeder_bt.vision.pixels import Calibration
 
 #: Below this a belt speed is a unit mistake: at 1 mm/s a part takes 20 minutes to cross a
 #: 1.2 m belt, which no feeder does, while every belt speed written in m/s is below it
@@ -132,47 +136,67 @@ def _in_hole(outline: np.ndarray, x: float, y: float) -> bool:
 # ---------------------------------------------------------------------------- features
 
 
-def outline_features(part: PartSpec, pose: str, recipe: VisionRecipe, mm_per_px: float
-                     ) -> dict[str, tuple[float, float]]:
-    """Each feature's lowest and highest value on the pose's outline drawn at
-    ``mm_per_px`` at several turns (``DRAW_TURNS_DEG``), measured by the locator's own
-    code (``Locator.measure_blobs``) on the drawn frame: no second feature extractor to
-    disagree with the one that feeds."""
+def _drawn(part: PartSpec, pose: str, mm_per_px: float, turns: tuple[float, ...]
+           ) -> Iterator[tuple[float, np.ndarray]]:
+    """The pose's outline drawn light on dark at ``mm_per_px`` (origin at the middle of a
+    square frame, a calibration of that scale without turn: ``_drawing_calibration``) at
+    each turn, as the simulated camera draws it (sub-pixels, area-averaged, so that a
+    pixel is the part's when over half of it is: a blurred edge thresholded midway)."""
     import cv2
 
     from feeder_bt.core.geometry import circumradius, place_outline, pose_outline, rings
-    from feeder_bt.core.model import CameraCalibration, Morphology, Threshold, VisionRecipe
-    from feeder_bt.vision.locator import Locator
-    from feeder_bt.vision.pixels import Calibration
-
-    drawing = VisionRecipe(backlight=False, golden_image=False, foreground="light",
-                           threshold=Threshold(method="fixed", value=127),
-                           morphology=Morphology(), min_area_mm2=0.0,
-                           min_hole_mm2=recipe.min_hole_mm2, classes=[])
-    cal = Calibration(CameraCalibration(origin_mm=(0.0, 0.0), mm_per_px=mm_per_px))
-    locator = Locator(drawing, {part.name: part}, cal)
+    cal = _drawing_calibration(mm_per_px)
     outline = pose_outline(part, pose)
     r_px = circumradius(outline) / mm_per_px
     side = int(math.ceil(2 * r_px)) + 2 * _MARGIN_PX
     side = -(-side // 64) * 64                              # whole words of pixels
     centre = side / 2.0
-    spans: dict[str, tuple[float, float]] = {}
     k = SUPERSAMPLE
-    for turn in DRAW_TURNS_DEG:
+    for turn in turns:
         placed = place_outline(outline, 0.0, 0.0, turn)
-        # as the simulated camera draws (sim.render): sub-pixels, area-averaged, so that a
-        # pixel is the part's when over half of it is (a blurred edge thresholded midway)
         fine = np.zeros((side * k, side * k), np.uint8)
         px = [np.round(((cal.mm_to_px(r) + centre) * k + (k - 1) / 2.0) * 16)
               .astype(np.int32).reshape(-1, 1, 2) for r in rings(placed)]
         cv2.fillPoly(fine, px, 255, lineType=cv2.LINE_8, shift=4)   # holes left dark
-        img = cv2.resize(fine, (side, side), interpolation=cv2.INTER_AREA)
+        yield turn, cv2.resize(fine, (side, side), interpolation=cv2.INTER_AREA)
+
+
+def _drawing_calibration(mm_per_px: float) -> Calibration:
+    from feeder_bt.core.model import CameraCalibration
+    from feeder_bt.vision.pixels import Calibration
+    return Calibration(CameraCalibration(origin_mm=(0.0, 0.0), mm_per_px=mm_per_px))
+
+
+def _drawing_recipe(recipe: VisionRecipe, **kw: Any) -> VisionRecipe:
+    """A recipe that finds a drawn outline (light on dark, no golden image), with the
+    scenario's ``min_hole_mm2`` and ``outline_match``."""
+    from feeder_bt.core.model import Morphology, Threshold, VisionRecipe
+    return VisionRecipe(backlight=False, golden_image=False, foreground="light",
+                        threshold=Threshold(method="fixed", value=127),
+                        morphology=Morphology(), min_area_mm2=0.0,
+                        min_hole_mm2=recipe.min_hole_mm2,
+                        outline_match=recipe.outline_match, **kw)
+
+
+def outline_features(part: PartSpec, pose: str, recipe: VisionRecipe, mm_per_px: float
+                     ) -> dict[str, tuple[float, float]]:
+    """Each feature's lowest and highest value on the pose's outline drawn at
+    ``mm_per_px`` at several turns (``DRAW_TURNS_DEG``), measured by the locator's own
+    code (``Locator.measure_blobs``) on the drawn frame: no second feature extractor to
+    disagree with the one that feeds. Not the features read from the pixels
+    (``PIXEL_FEATURES``): the drawing's grey is not the part's."""
+    from feeder_bt.vision.locator import Locator
+
+    locator = Locator(_drawing_recipe(recipe, classes=[]), {part.name: part},
+                      _drawing_calibration(mm_per_px))
+    spans: dict[str, tuple[float, float]] = {}
+    for _, img in _drawn(part, pose, mm_per_px, DRAW_TURNS_DEG):
         dets = [d for d in locator.measure_blobs(img) if not d.reason]
         if not dets:
             continue
         feats = max(dets, key=lambda d: d.features["area_mm2"]).features
         for name, v in feats.items():
-            if name in PIXEL_FEATURES:          # the drawing's grey is not the part's
+            if name in PIXEL_FEATURES:
                 continue
             lo, hi = spans.get(name, (v, v))
             spans[name] = (min(lo, v), max(hi, v))
@@ -314,6 +338,53 @@ def check_classes_against_outlines(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> N
     spans = _class_spans(sc, cell)
     check_class_features(sc, ctx, cell, spans)
     check_class_overlap(sc, ctx, spans)
+    check_outline_orientation(sc, ctx, cell)
+
+
+#: ``check_outline_orientation`` draws each outline at these turns.
+ORIENT_TURNS_DEG = (10.0, 105.0, 200.0)
+
+
+def check_outline_orientation(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
+    """Each pickable class oriented by its outline, run on its own outline drawn at the
+    cell's scale (``_drawn``) by the locator itself: an outline that does not match itself
+    (``outline_match.min_iou`` too high for the raster) or whose poses overlap it alike
+    (ambiguous: a part that looks the same turned or turned over, and is not declared so)
+    would have every blob of it rejected, and the run would feed nothing."""
+    from feeder_bt.vision.locator import Locator
+    s = cell.camera.calibration.mm_per_px
+    seen: set[tuple[str, str]] = set()
+    for i, vc in enumerate(sc.vision.classes):
+        part = sc.parts.get(vc.part)
+        mode = vc.orientation or sc.vision.orientation
+        if mode != "outline" or part is None or vc.pose not in part.poses or not vc.pickable:
+            continue
+        # one outline, one line: the poses showing the part's shape (either face) match it
+        shows = (vc.part, vc.pose if part.poses[vc.pose].silhouette is not None else "")
+        if shows in seen:
+            continue
+        seen.add(shows)
+        one = VisionClass(part=vc.part, pose=vc.pose, pickable=True,
+                          ranges={"area_mm2": (0.0, math.inf)})
+        locator = Locator(_drawing_recipe(sc.vision, classes=[one], orientation="outline"),
+                          {vc.part: part}, _drawing_calibration(s))
+        why = []
+        for _, img in _drawn(part, vc.pose, s, ORIENT_TURNS_DEG):
+            why += [d.reason for d in locator.locate(img).rejected if d.reason]
+        if not why:
+            continue
+        where = f"vision.classes[{i}].orientation" if vc.orientation else "vision.orientation"
+        reason = why[0].removeprefix("no class (").removesuffix(")")
+        if "ambiguous" in reason:
+            fix = ("if it looks the same turned, give its symmetry; if turned over, "
+                   "mirror_symmetric: true; else tell its ends apart by a feature it has "
+                   "(orientation: moment for a heavier end)")
+        else:
+            fix = "lower outline_match.min_iou"
+        ctx.add_problem(where, f"outline cannot orient {vc.part}/{vc.pose}: its own outline, "
+                               f"drawn at the cell's {_num(s)} mm/px, reads \"{reason}\" at "
+                               f"{len(why)} of {len(ORIENT_TURNS_DEG)} turns, so blobs of it "
+                               f"would be rejected; {fix}")
 
 
 # ---------------------------------------------------------------------------- orientation

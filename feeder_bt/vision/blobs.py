@@ -65,7 +65,8 @@ class Blob:
         self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
-        # part -> angle, face (None: no face; a str: why not, ``orientation: outline``)
+        # angle, face by the part (cut_corner) or by the outline or moment model's key
+        # (``Locator._models``); None: no face; a str: why not (outline, moment)
         self.oriented: dict[str, tuple[float, bool] | str | None] = {}
         # ``kernels.blob_stats``' row, and the frame's arrays it came with (``Frame``) and
         # its index there: its hull's vertices for the faces

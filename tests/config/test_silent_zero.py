@@ -183,3 +183,17 @@ def test_a_class_that_cannot_orient_its_part_placed_oriented_is_named(tmp_path):
     assert len(out) == 1 and "vision.classes[0].orientation: lever/face_up is placed " \
                              "oriented (place.orient) but its class reads no angle" in out[0]
     assert _check(tmp_path, "levers.yaml") == []
+
+
+def test_an_outline_that_cannot_orient_itself_is_named(tmp_path):
+    """``orientation: outline`` on the lever without its bores (alike end to end: every
+    blob "ambiguous", the run would place nothing), or with a least overlap its own
+    drawn outline does not reach: one line for the outline both faces show."""
+    text = (ROOT / "scenarios" / "levers.yaml").read_text()
+    bores = text[text.index("        holes_mm:\n"):text.index("    poses:\n")]
+    out = _check(tmp_path, "levers.yaml", (bores, ""), ("holes: [2, 2]", "holes: [0, 0]"))
+    assert len(out) == 1 and "vision.orientation: outline cannot orient lever/face_up" in out[0]
+    assert "orientation ambiguous" in out[0] and "give its symmetry" in out[0]
+    out = _check(tmp_path, "levers.yaml", ("min_iou: 0.75", "min_iou: 0.99"))
+    assert len(out) == 1 and "< min_iou 0.99" in out[0] and "lower outline_match.min_iou" \
+        in out[0]
