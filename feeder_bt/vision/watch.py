@@ -151,6 +151,13 @@ def _hint(n: int, cls: str, feature: str, example: str = "") -> str:
     elif feature == "touches border":
         text = (f"{n} blob(s) in the last frame, all cut by the image border: parts too "
                 f"big for the camera window, or frames too far apart?")
+    elif cls == "-" and "orientation ambiguous" in feature:
+        text = (f"{n} blob(s) in the last frame rejected: {feature}: give the part's "
+                f"symmetry (or mirror_symmetric) if it looks alike turned (`feeder check`)")
+    elif cls == "-" and "outline does not match" in feature:
+        text = (f"{n} blob(s) in the last frame rejected: {feature}: another pose's "
+                f"outline, or vision.outline_match.min_iou too high for the camera? "
+                f"(`feeder locate`)")
     elif cls == "-":
         text = f"{n} blob(s) in the last frame rejected: {feature}"
     elif (k := touching(example)) is not None:

@@ -92,3 +92,17 @@ def test_a_clump_of_touching_discs_is_not_a_belt_passing_the_threshold():
     assert any("parts touching each other" in ln and "split_touching" in ln for ln in why), why
     assert not any("than the belt" in ln for ln in why), why
     assert all(len(ln) <= LINE_CHARS for ln in why)
+
+
+def test_an_ambiguous_or_unmatched_outline_says_what_to_give():
+    """Blobs rejected by ``orientation: outline``: the hint says what the recipe lacks
+    (the part's symmetry, a lower least overlap), in one short line."""
+    for reason, said in [("no class (orientation ambiguous (overlap 0.93 vs 0.93: the "
+                          "outline is nearly symmetric))", "give the part's symmetry"),
+                         ("no class (outline does not match (overlap 0.62 < min_iou 0.75))",
+                          "outline_match.min_iou")]:
+        watch, stats = RecipeWatch(), _Stats()
+        for k in range(40):
+            watch.feed(float(k), _frame([reason]), stats)
+        hint = next(d for _, kind, d in stats.events if kind == "vision_no_match")["hint"]
+        assert said in hint and len(hint) <= LINE_CHARS, hint
