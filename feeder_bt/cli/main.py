@@ -168,9 +168,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
     if nm.get("alarms"):
-        why = ", ".join(f"{k} {v}" for k, v in (nm.get("reasons") or {}).items())
-        print(f"WARNING: for up to {nm['longest_s']:.0f} s frames showed blobs but no part: "
-              f"{nm['example']} (blobs: {why}; see the vision_no_match events)",
+        from feeder_bt.vision.watch import reasons_line, short
+        why = reasons_line(nm.get("reasons") or {}, 60)
+        print(short(f"WARNING: for up to {nm['longest_s']:.0f} s frames showed blobs but no "
+                    f"part: {short(nm['example'], 60)} (blobs: {why}; see the "
+                    f"vision_no_match events)", 200),
               file=sys.stderr)
     problems = p.get("accounting") or []
     if p.get("outcomes"):               # the world and the cell disagree on placements

@@ -33,13 +33,21 @@ def _perimeter(outline: np.ndarray) -> float:
 
 def outline_area_span(sc: Scenario, part: str, pose: str, mm_per_px: float
                       ) -> tuple[float, float, float]:
-    """The outline's area (mm²) and the lowest and highest area a blob of it can measure
-    through a camera of ``mm_per_px``."""
-    from feeder_bt.core.geometry import polygon_area, pose_outline
-    out = pose_outline(sc.parts[part], pose)
+    """The outline's area (mm²) as ``area_mm2`` measures it (inside its outer edge, holes
+    included: a washer's is its disc's) and the lowest and highest area a blob of it can
+    measure through a camera of ``mm_per_px``."""
+    from feeder_bt.core.geometry import outer, polygon_area, pose_outline
+    out = outer(pose_outline(sc.parts[part], pose))
     area = polygon_area(out)
     edge = _perimeter(out) * mm_per_px
     return area, max(area * (1 - SCALE_SLACK) - edge, 0.0), area * (1 + SCALE_SLACK) + edge
+
+
+def outline_edge_mm2(sc: Scenario, part: str, pose: str, mm_per_px: float) -> float:
+    """The area a pixel's width all along the outline's outer edge covers, mm²: how far
+    a blob's measured area may be off the outline's (threshold, blur, pixel grid)."""
+    from feeder_bt.core.geometry import outer, pose_outline
+    return _perimeter(outer(pose_outline(sc.parts[part], pose))) * mm_per_px
 
 
 def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
@@ -50,6 +58,7 @@ def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
         if vc.part not in sc.parts or vc.pose not in sc.parts[vc.part].poses:
             continue                              # listed by _check_scenario
         area, lo, hi = outline_area_span(sc, vc.part, vc.pose, s)
+        edge = outline_edge_mm2(sc, vc.part, vc.pose, s)
         rng = vc.ranges.get("area_mm2")
         if rng is not None and (rng[1] < lo or rng[0] > hi):
             ctx.add_problem(f"vision.classes[{i}].area_mm2",
@@ -61,6 +70,12 @@ def check_class_areas(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                             f"{_num(sc.vision.min_area_mm2)} mm² is above {vc.part}/{vc.pose}'s "
                             f"outline area {area:.4g} mm² (at most {hi:.4g} mm² measured at "
                             f"{_num(s)} mm/px): every one would be rejected as too small")
+        elif vc.pickable and area - 0.5 * edge < sc.vision.min_area_mm2:
+            ctx.add_problem("vision.min_area_mm2",
+                            f"{_num(sc.vision.min_area_mm2)} mm² is above what {vc.part}/"
+                            f"{vc.pose} measures at its low end ({area:.4g} mm² outline, "
+                            f"{area - 0.5 * edge:.4g} mm² with half a pixel off its edge at "
+                            f"{_num(s)} mm/px): many of them would be rejected as too small")
         if area / (s * s) < 4 * math.pi:          # under a 4-px-wide disc: no shape to see
             ctx.add_problem(f"parts.{vc.part}.shape",
                             f"{vc.part}/{vc.pose} is {area:.4g} mm², {area / (s * s):.3g} px "

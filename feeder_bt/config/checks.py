@@ -11,6 +11,12 @@ from __future__ import annotations
 import math
 
 from feeder_bt.config.area_checks import check_class_areas, check_class_rulers
+from feeder_bt.config.part_checks import (
+    check_classes_against_outlines,
+    check_grips,
+    check_orientation,
+    check_speed_units,
+)
 from feeder_bt.config.special import part_size_mm
 from feeder_bt.config.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
 from feeder_bt.config.walker import _Ctx, _suggest
@@ -164,6 +170,8 @@ def _check_scenario(sc: Scenario, ctx: _Ctx) -> None:
                         f"(c: -{_num(abs(th.c) or 5)} puts it {_num(abs(th.c) or 5)} grey "
                         f"levels above the mean)")
     _check_rulers(sc, ctx)
+    ctx.collect(check_grips, sc, ctx)
+    ctx.collect(check_orientation, sc, ctx)
     for i, vc in enumerate(sc.vision.classes):
         cpath = f"vision.classes[{i}]"
         if vc.part not in sc.parts:
@@ -288,6 +296,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                                   f"{_num(v * pct / 100.0)} mm/s on the incline, above its "
                                   f"max_mm_s {_num(imax)} ({cfile})")
 
+    check_speed_units(sc, ctx, cell)
     h = sc.present.horizontal_mm_s
     if h > hmax:
         speed("present.horizontal_mm_s", h)
@@ -327,6 +336,7 @@ def _check_against_cell(sc: Scenario, ctx: _Ctx, cell: CellSpec) -> None:
                             f"more than sticking friction")
     check_class_areas(sc, ctx, cell)
     check_class_rulers(sc, ctx, cell)
+    ctx.collect(check_classes_against_outlines, sc, ctx, cell)
     _check_reach_and_kernels(sc, ctx, cell)
     window = cell.camera.height_px * cell.camera.calibration.mm_per_px
     biggest, size = max(((n, part_size_mm(p)) for n, p in sc.parts.items()),

@@ -219,6 +219,10 @@ def _vision_class() -> dict[str, Any]:
     hints = L._hints(VisionClass)
     props = {f.name: _type(hints[f.name]) for f in dataclasses.fields(VisionClass)
              if f.name != "ranges"}
+    props["orientation"] = {"anyOf": [{"enum": list(L.ENUMS[(VisionClass, "orientation")])},
+                                      {"type": "null"}],
+                            "description": "this class's own orientation (default the "
+                                           "recipe's)"}
     pair = {"type": "array", "items": [{"type": "number"}] * 2, "additionalItems": False,
             "minItems": 2, "maxItems": 2}
     for feat, what in FEATURES.items():

@@ -176,7 +176,7 @@ def _recentre(ctx: _Ctx, pts: list[tuple[float, float]], holes: list[list[tuple[
 
 
 def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
-    """``{part, pose, pickable, mirrored?, rulers?, <feature>: [lo, hi], ...}``."""
+    """``{part, pose, pickable, mirrored?, rulers?, orientation?, <feature>: [lo, hi], ...}``."""
     hints = _hints(VisionClass)
     plain = {f.name: f for f in dataclasses.fields(VisionClass) if f.name != "ranges"}
     kwargs: dict[str, Any] = {}
@@ -194,6 +194,7 @@ def _build_vision_class(ctx: _Ctx, node: Node, path: str) -> VisionClass:
         with g.step():
             if key in plain:
                 kwargs[key] = ctx.build(hints[key], vnode, sub)
+                ctx.check_field(VisionClass, key, kwargs[key], sub)
             else:
                 lo, hi = ctx.build(tuple[float, float], vnode, sub)
                 if lo > hi:

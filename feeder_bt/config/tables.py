@@ -23,6 +23,7 @@ from feeder_bt.core.model import (
     IoSignal,
     LocateParams,
     Morphology,
+    OutlineMatch,
     PartSpec,
     PickSpec,
     PresentParams,
@@ -36,6 +37,7 @@ from feeder_bt.core.model import (
     StablePose,
     TargetSpec,
     Threshold,
+    VisionClass,
     VisionRecipe,
 )
 from feeder_bt.core.plate_model import (
@@ -54,7 +56,8 @@ THRESHOLD_METHODS: tuple[str, ...] = ("fixed", "otsu", "adaptive")
 FOREGROUNDS: tuple[str, ...] = ("dark", "light")
 LIGHTINGS: tuple[str, ...] = ("backlit", "frontlit")
 TARGET_KINDS: tuple[str, ...] = ("chessboard", "circles", "acircles", "charuco")
-ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner", "outline")
+ORIENTATION_METHODS: tuple[str, ...] = ("none", "principal_axis", "cut_corner", "outline",
+                                        "moment")
 CELL_HALS: tuple[str, ...] = ("sim", "emulated", "real")
 IO_DIRS: tuple[str, ...] = ("in", "out")
 #: pylon cameras (feeder_bt.hal.camera.pylon): the FrameStart trigger's source, and the
@@ -116,6 +119,7 @@ ENUMS: dict[tuple[type, str], tuple[str, ...]] = {
     (RetrieveParams, "policy"): RETRIEVE_POLICIES,
     (Threshold, "method"): THRESHOLD_METHODS,
     (VisionRecipe, "orientation"): ORIENTATION_METHODS,
+    (VisionClass, "orientation"): ORIENTATION_METHODS,
     (VisionRecipe, "foreground"): FOREGROUNDS,
     (RenderSpec, "lighting"): LIGHTINGS,
     (TargetSpec, "kind"): TARGET_KINDS,
@@ -149,6 +153,9 @@ RANGES: dict[tuple[type, str], Range] = {
     (Morphology, "close_px"): NON_NEGATIVE,
     (VisionRecipe, "min_area_mm2"): NON_NEGATIVE,
     (VisionRecipe, "min_hole_mm2"): NON_NEGATIVE,
+    (OutlineMatch, "min_iou"): Range(0, 1, lo_open=True),
+    (OutlineMatch, "margin"): Range(0, 1),
+    (OutlineMatch, "raster_mm"): Range(0.05, 5),
     (Ruler, "line_deg"): Range(-180, 180),
     (Ruler, "circle_mm"): POSITIVE,
     (PresentParams, "horizontal_mm_s"): POSITIVE,

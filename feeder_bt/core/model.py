@@ -143,6 +143,9 @@ class VisionClass:
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # feature -> [lo, hi]
     mirrored: bool | None = None         # for chiral outlines (cut_corner): face seen
     rulers: dict[str, tuple[float, float]] = field(default_factory=dict)  # ruler -> [lo, hi]
+    # how this class's angle is read (``VisionRecipe.orientation``'s values); None: the
+    # recipe's. A screw's head end and a nut's hexagon need different readings in one recipe
+    orientation: str | None = None
 
 
 @dataclass
@@ -159,6 +162,17 @@ class Ruler:
 
 
 @dataclass
+class OutlineMatch:
+    """How ``orientation: outline`` judges a match (``vision.outline``): a part whose
+    outline the camera draws coarsely (a thin screw) needs a lower ``min_iou`` or a finer
+    raster than a plate does."""
+
+    min_iou: float = 0.75                # a best overlap under this is no match
+    margin: float = 0.04                 # the best must beat every other pose by this much
+    raster_mm: float = 0.5               # the cell of the raster the overlap is counted on
+
+
+@dataclass
 class VisionRecipe:
     backlight: bool = True
     golden_image: bool = True
@@ -169,7 +183,9 @@ class VisionRecipe:
     min_hole_mm2: float = 3.0            # smaller holes in a blob are not counted (specks)
     rulers: dict[str, Ruler] = field(default_factory=dict)   # named gauges, for classes
     classes: list[VisionClass] = field(default_factory=list)
-    orientation: str = "none"            # none | cut_corner | principal_axis | outline
+    # none | cut_corner | principal_axis | outline | moment (a class may have its own)
+    orientation: str = "none"
+    outline_match: OutlineMatch = field(default_factory=OutlineMatch)
     # offer only grips whose footprint is clear of other blobs (``PartSpec.pick``);
     # false: offer the first grip whatever is beside it (to measure what the check saves)
     check_clearance: bool = True

@@ -41,7 +41,10 @@ POWER_OFF = ("robot power off (an e-stop or a guard): no software recovery; rele
 
 def _failed_picks(ctx: Ctx) -> str:
     ptype, n = ctx.stats.failed_picks_in_a_row.most_common(1)[0]
-    return (f"{n} picks of {ptype} failed one after another with none placed: check the "
+    # the part's own pick point first: a ring gripped at its centroid (in its hole) misses
+    # every pick however right the robot is (``feeder check`` names it before the run)
+    return (f"{n} picks of {ptype} failed one after another with none placed: check "
+            f"{ptype}'s pick point (parts.{ptype}.pick: on the material, not in a hole), the "
             f"robot frame (robot.base_mm, base_deg, frame_file), the camera's calibration "
             f"and the gripper")
 

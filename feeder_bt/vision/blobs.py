@@ -65,7 +65,8 @@ class Blob:
         self.length: float | None = None  # smoothed contour length, px (``_smooth_length``)
         self.faced = False                # ``face`` measured (``Locator._faces``)
         self.face: _CornerSignature | None = None   # the cut-corner signature of its outline
-        # part -> angle, face (None: no face; a str: why not, ``orientation: outline``)
+        # angle, face by the part (cut_corner) or by the outline or moment model's key
+        # (``Locator._models``); None: no face; a str: why not (outline, moment)
         self.oriented: dict[str, tuple[float, bool] | str | None] = {}
         # ``kernels.blob_stats``' row, and the frame's arrays it came with (``Frame``) and
         # its index there: its hull's vertices for the faces
@@ -89,18 +90,21 @@ class Frame:
     those points) and the hulls' vertices (indices, ends per contour; empty if hulls were
     not asked for)."""
 
-    __slots__ = ("pts", "hull", "hull_ends", "contours")
+    __slots__ = ("pts", "hull", "hull_ends", "contours", "grey")
 
-    def __init__(self, contours: Contours, hull: np.ndarray, hull_ends: np.ndarray) -> None:
+    def __init__(self, contours: Contours, hull: np.ndarray, hull_ends: np.ndarray,
+                 grey: np.ndarray | None = None) -> None:
         self.pts, self.hull, self.hull_ends = contours.pts, hull, hull_ends
         self.contours = contours
+        self.grey = grey              # the frame (grey), for ``grey_mean`` and ``grey_std``
 
 
 def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: Calibration,
                min_area_mm2: float, full: bool = True,
                holes: list[list[np.ndarray]] | None = None,
                mapping: Calibration | PixelGrid | None = None,
-               length: bool = False, hulls: bool = False) -> list[Blob]:
+               length: bool = False, hulls: bool = False,
+               min_hole_mm2: float = 0.0, grey: np.ndarray | None = None) -> list[Blob]:
     """The contours worth reporting (not specks), measured as far as every blob is: area,
     centroid (mm), the border and size rules (``reason`` "touches border", "too small").
 
@@ -111,7 +115,12 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     also measure every blob's smoothed length (``full`` contours only), its convex hull and
     minimum-area rectangle now, in the same compiled pass (``kernels.blob_stats``) — what
     the recipe's classes or faces will ask of most blobs; ``measure_feature`` measures them
-    one blob at a time otherwise.
+    one blob at a time otherwise. ``grey``: the frame the contours were found in, for the
+    features read from its pixels (``features.PIXEL_FEATURES``).
+
+    The centroid is the blob's area centroid with its holes (of at least ``min_hole_mm2``)
+    taken out, the part frame's origin, when its holes were looked for; else the filled
+    outline's (the same for a part without holes).
     """
     if not contours:
         return []
@@ -129,7 +138,7 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
     boxes, stats, hull, hull_ends = k.blob_stats(
         pts, lens, min_px, full, length and full, hulls,
         WINDOW, kind, cells, par)
-    frame = Frame(Contours(pts, lens) if given else contours, hull, hull_ends)
+    frame = Frame(Contours(pts, lens) if given else contours, hull, hull_ends, grey)
     # a lens or a tilted camera: the scale where each blob lies (a few per mille from the
     # calibration's mm_per_px over the window), for areas and lengths
     local = not calibration.linear
@@ -145,8 +154,13 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         area = area_px * sc * sc if local else area_px * s2
         reason = "touches border" if bu <= 0 or bv <= 0 or bu + bw >= w or bv + bh >= h \
             else ("too small" if area < min_area_mm2 else "")
-        det = Detection(None, None, False, row[k.X], row[k.Y], 0.0, row[k.CU], row[k.CV],
-                        {"area_mm2": area}, reason)
+        x, y, cu, cv = row[k.X], row[k.Y], row[k.CU], row[k.CV]
+        if holes is not None and holes[i]:
+            cu, cv, moved = _region_centroid(row[k.M00], cu, cv, holes[i],
+                                             min_hole_mm2 / s2)
+            if moved:
+                x, y = (mapping or calibration).px_to_mm(np.array([[cu, cv]]))[0].tolist()
+        det = Detection(None, None, False, x, y, 0.0, cu, cv, {"area_mm2": area}, reason)
         b = Blob(contours[i] if given else None, tuple(box), area_px, det, full,
                  None if holes is None else holes[i])
         if local:
@@ -156,6 +170,27 @@ def find_blobs(contours: list[np.ndarray], shape: tuple[int, int], calibration: 
         b.stats, b.frame, b.index = row, frame, i
         blobs.append(b)
     return blobs
+
+
+def _region_centroid(m00: float, cu: float, cv: float, holes: list[np.ndarray],
+                     min_px: float) -> tuple[float, float, bool]:
+    """The centroid (px) of the outline's polygon less its holes' of at least ``min_px``
+    (smaller ones are specks), and whether any was taken out: a part's holes move its
+    area centroid off the filled outline's (a lever with bores at one end: millimetres)."""
+    a, su, sv = m00, m00 * cu, m00 * cv
+    moved = False
+    for h in holes:
+        mom = cv2.moments(h)
+        ah = mom["m00"]
+        if ah <= 0 or ah < min_px:
+            continue
+        a -= ah
+        su -= mom["m10"]
+        sv -= mom["m01"]
+        moved = True
+    if not moved or a <= 0:
+        return cu, cv, False
+    return su / a, sv / a, True
 
 
 def _hull_stats(b: Blob) -> list[float]:
@@ -233,6 +268,17 @@ def measure_feature(b: Blob, name: str, calibration: Calibration,
         # cv2.contourArea and cv2.arcLength of the hull
         hull_area = row[k.HULL_AREA] + 0.5 * row[k.HULL_LEN] + 1.0
         feats["solidity"] = min(area_px / hull_area, 1.0) if hull_area > 0 else 0.0
+    elif group == GROUP_OF["grey_mean"]:
+        grey = b.frame.grey if b.frame is not None else None
+        if grey is None:
+            raise RuntimeError("grey features asked of a blob found without its frame")
+        u, v, w, h = b.box
+        mask = np.zeros((h, w), np.uint8)
+        cv2.drawContours(mask, [b.contour], -1, 255, thickness=cv2.FILLED, offset=(-u, -v))
+        if b.holes:
+            cv2.drawContours(mask, b.holes, -1, 0, thickness=cv2.FILLED, offset=(-u, -v))
+        mean, std = cv2.meanStdDev(grey[v:v + h, u:u + w], mask=mask)
+        feats["grey_mean"], feats["grey_std"] = float(mean[0, 0]), float(std[0, 0])
     return feats[name]
 
 

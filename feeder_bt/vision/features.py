@@ -11,7 +11,15 @@ FEATURES: dict[str, str] = {
     "solidity": "area / area of the convex hull",
     "hu1": "first Hu moment invariant",
     "hu2": "second Hu moment invariant",
+    "grey_mean": "mean grey level (0-255) of the frame inside the blob, holes out",
+    "grey_std": "spread (standard deviation) of those grey levels",
 }
+
+#: Features read from the frame's pixels, not from the outline: a brass and a steel part of
+#: one outline differ in them under a front light (a backlight shows both dark). ``feeder
+#: check`` cannot measure them on a drawn outline, so it leaves their ranges to the images
+#: (``feeder check --images``).
+PIXEL_FEATURES = frozenset({"grey_mean", "grey_std"})
 
 #: Features that one measurement gives together, cheapest first. ``Locator.locate`` measures
 #: a group only when a class it checks ranges over one of its features (the area always: it
@@ -24,6 +32,7 @@ GROUPS: tuple[tuple[str, ...], ...] = (
     ("perimeter_mm", "circularity"),     # the contour smoothed along itself
     ("aspect", "rectangularity"),        # the minimum-area rectangle
     ("solidity",),                       # the convex hull
+    ("grey_mean", "grey_std"),           # the frame's pixels under the blob's mask
 )
 
 #: Each feature's group, by index into ``GROUPS`` (its cost rank).

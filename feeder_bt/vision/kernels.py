@@ -22,7 +22,8 @@ here: before these kernels half of the locator's time was that glue between call
   signatures (``corners._corner_signatures``' rule); ``signatures`` is that last step alone.
 
 This module imports numba, which costs about 0.3 s: it is imported only when a ``Locator``
-is built (``warm``), never by ``feeder --help`` or ``feeder check``. The compiled code is
+is built (``warm``), never by ``feeder --help`` (``feeder check`` of a scenario builds one
+to measure its outlines: ``config.part_checks``). The compiled code is
 cached beside this file (``__pycache__``; numba writes each file under a temporary name and
 renames it, so processes compiling at once do not clash), or, where that is read-only, in
 the user's cache (``NUMBA_CACHE_DIR`` moves it); with no writable place at all the kernels

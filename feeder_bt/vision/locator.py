@@ -8,8 +8,9 @@ class ranges over ``holes`` or ``hole_area_mm2``); blobs touching the image bord
 smaller than ``min_area_mm2`` are rejected; features (``FEATURES``) are measured in mm (mm² for areas) through the
 calibration, corrected for pixelisation so that they are close to the physical value (a
 50.8 mm disc: ~2030 mm², circularity ~0.99); the first recipe class whose ranges all hold
-names the part and pose. Position is the blob's area centroid, which is the part frame's
-origin (``geometry``). The image work (difference image, threshold, morphology, contours)
+names the part and pose. Position is the blob's area centroid with its holes taken out
+(found whenever a class's outline has holes), which is the part frame's origin
+(``geometry``). The image work (difference image, threshold, morphology, contours)
 is ``segment.Segmenter``'s, of which ``Locator`` is one; the blobs and their features are
 measured in ``blobs``; the cut-corner face and angle in ``corners``.
 Merged (touching) parts fall outside every class and are rejected, so they are never
@@ -30,11 +31,14 @@ Recipe semantics worth knowing:
   level, but never below ``value``, so an empty belt does not turn noise into blobs), or
   ``adaptive`` (``block_px``; foreground above the local mean minus ``c``: OpenCV's
   ``C``, so ``c`` < 0).
-* ``orientation``: ``none`` -> 0; ``principal_axis`` -> the long axis from moments, in
-  (-90, 90]; ``cut_corner`` -> for classes with ``mirrored`` set, the angle (and face) at
-  which the part's ``face_up`` outline matches the blob, in (-180, 180]; other classes
-  fall back to the principal axis when elongated, else 0. The face and angle are read
-  from the blob's outline to a fraction of a pixel (``Locator._faces``).
+* ``orientation`` (the recipe's, or a class's own): ``none`` -> 0; ``principal_axis`` ->
+  the long axis from moments, in (-90, 90]; ``cut_corner`` -> for classes with
+  ``mirrored`` set, the angle (and face) at which the part's ``face_up`` outline matches
+  the blob, in (-180, 180]; other classes fall back to the principal axis when elongated,
+  else 0. The face and angle are read from the blob's outline to a fraction of a pixel
+  (``Locator._faces``). ``outline`` -> the class's own outline (its pose's silhouette,
+  holes and all) matched against the blob (``vision.outline``); ``moment`` -> the long
+  axis turned to the heavier end (the third moment: a screw's head).
 
 * ``rulers``: gauges on the outline from the centroid (``vision.rulers``): a line's width
   or a circle's arcs, checked after every feature of a class (they cost the most).
@@ -52,7 +56,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from feeder_bt.core.geometry import wrap_deg
+from feeder_bt.core.geometry import pose_outline, rings, wrap_deg
 from feeder_bt.core.model import PartSpec, VisionClass, VisionRecipe
 from feeder_bt.vision.blobs import (
     Blob,
@@ -73,12 +77,12 @@ from feeder_bt.vision.corners import (
 )
 from feeder_bt.vision.features import FEATURES, GROUP_OF
 from feeder_bt.vision.jit import kernels, warm
-from feeder_bt.vision.outline import OutlineModel, orient_outline
+from feeder_bt.vision.outline import MomentModel, OutlineModel, orient_moment, orient_outline
 from feeder_bt.vision.overlay import draw
 from feeder_bt.vision.pixels import Calibration, PixelGrid
 from feeder_bt.vision.rulers import measure as measure_ruler
 from feeder_bt.vision.segment import Segmenter, to_grey
-from feeder_bt.vision.split import split_blob
+from feeder_bt.vision.split import H_SHARE, inscribed_px, split_blob
 
 _ELONGATED = 1.3               # aspect above which a symmetric blob has a principal axis
 
@@ -91,6 +95,9 @@ class LocateResult:
     rejected: list[Detection]
     ms: float
     blobs: list[Blob] = field(default_factory=list, repr=False)   # parts + rejected
+    # the (part, pose) classes whose angle means something (a class that reads one, of a
+    # part not alike at every turn): the drawing puts an arrow on those only
+    angled: frozenset[tuple[str, str]] | None = field(default=None, repr=False)
 
     @property
     def contours(self) -> list[np.ndarray]:
@@ -126,48 +133,86 @@ class Locator(Segmenter):
         # the chain's corners are kept (the same polygon: the same moments, hull and
         # rectangle, fewer points to trace and sum). The face reads only the hull, but
         # counting a corner chain's boundary pixels costs more than tracing them all.
+        # each class's orientation: its own, else the recipe's
+        self._modes = [cls.orientation or recipe.orientation for cls in recipe.classes]
+        chiral_cut = any(m == "cut_corner" and cls.mirrored is not None
+                         for cls, m in zip(recipe.classes, self._modes, strict=True))
         self._full_chain = any(GROUP_OF[n] == GROUP_OF["perimeter_mm"]
-                               for cls in recipe.classes for n in cls.ranges) or (
-            recipe.orientation == "cut_corner"
-            and any(cls.mirrored is not None for cls in recipe.classes))
-        # hole contours are searched for only when a class ranges over them
+                               for cls in recipe.classes for n in cls.ranges) or chiral_cut
+        # hole contours are searched for only when a class ranges over them, or a class's
+        # outline has holes: its point is the area centroid with them taken out (the part
+        # frame's origin), which the filled outline's is not
         self._want_holes = any(GROUP_OF[n] == GROUP_OF["holes"]
-                               for cls in recipe.classes for n in cls.ranges)
+                               for cls in recipe.classes for n in cls.ranges) or any(
+            cls.part in parts and cls.pose in parts[cls.part].poses
+            and len(rings(pose_outline(parts[cls.part], cls.pose))) > 1
+            for cls in recipe.classes)
         # What most blobs will be asked for, measured for all of a frame's blobs in one
         # compiled pass (``find_blobs``): the features the first class ranges over (every
         # blob of its size is checked against it), and the hull where faces are read. Others
         # are measured a blob at a time, when asked for (a lens on edge: its rectangle).
         first = {GROUP_OF[n] for n in recipe.classes[0].ranges} if recipe.classes else set()
         self._want_length = GROUP_OF["perimeter_mm"] in first
-        self._want_hulls = bool({GROUP_OF["aspect"], GROUP_OF["solidity"]} & first) or (
-            recipe.orientation == "cut_corner"
-            and any(cls.mirrored is not None for cls in recipe.classes))
+        self._want_hulls = bool({GROUP_OF["aspect"], GROUP_OF["solidity"]} & first) or \
+            chiral_cut
         warm()                  # the compiled per-blob work: loaded now, not on a frame
         self._signatures: dict[str, _CornerSignature] = {}
-        if recipe.orientation == "cut_corner":
-            for cls in recipe.classes:
-                if cls.mirrored is None or cls.part in self._signatures:
-                    continue
-                sig = _part_signature(parts[cls.part])
-                if sig is None:
-                    raise ValueError(f"part {cls.part}: no cut corner to orient by")
-                self._signatures[cls.part] = sig
-        # orientation: outline: every class's part, matched by its outline (vision.outline)
-        self._outlines: dict[str, OutlineModel] = {}
-        if recipe.orientation == "outline":
-            for cls in recipe.classes:
-                if cls.part in parts and cls.part not in self._outlines:
-                    self._outlines[cls.part] = OutlineModel(parts[cls.part])
+        for cls, mode in zip(recipe.classes, self._modes, strict=True):
+            if mode != "cut_corner" or cls.mirrored is None or cls.part in self._signatures:
+                continue
+            sig = _part_signature(parts[cls.part])
+            if sig is None:
+                raise ValueError(f"part {cls.part}: no cut corner to orient by")
+            self._signatures[cls.part] = sig
+        # orientation outline / moment: each class matched against its own pose's outline
+        # (vision.outline), one model per outline shown; the key names it in Blob.oriented
+        self._models: dict[str, OutlineModel | MomentModel] = {}
+        keys: list[str | None] = []
+        for cls, mode in zip(recipe.classes, self._modes, strict=True):
+            part = parts.get(cls.part)
+            if mode not in ("outline", "moment") or part is None or cls.pose not in part.poses:
+                keys.append(None)
+                continue
+            if mode == "outline":      # face up and down of one silhouette: one model
+                own = part.poses[cls.pose].silhouette is not None
+                key = f"outline:{cls.part}:{cls.pose if own else ''}"
+                if key not in self._models:
+                    self._models[key] = OutlineModel(part, cls.pose, recipe.outline_match)
+            else:
+                key = f"moment:{cls.part}:{cls.pose}"
+                if key not in self._models:
+                    self._models[key] = MomentModel(part, cls.pose)
+            keys.append(key)
+        self._angled = frozenset(
+            (cls.part, cls.pose) for cls, mode in zip(recipe.classes, self._modes, strict=True)
+            if mode != "none" and cls.part in parts
+            and parts[cls.part].period_deg > 2 * parts[cls.part].orientation_tolerance_deg)
         self._picks = any(parts[cls.part].pick is not None for cls in recipe.classes
                           if cls.part in parts)
         self._clearance = recipe.check_clearance
-        # what ``_classify`` needs of each class, looked up once: its checks and how its
-        # face is told (an outline model, a cut-corner signature, or neither)
-        cut = recipe.orientation == "cut_corner"
-        self._plan = [(cls, checks, self._outlines.get(cls.part),
-                       self._signatures.get(cls.part) if cut else None)
-                      for cls, checks in self._checks]
+        # what ``_classify`` needs of each class, looked up once: its checks, its
+        # orientation and how its angle or face is told (an outline or moment model's key,
+        # a cut-corner signature, or neither)
+        self._plan = [(cls, checks, mode, key,
+                       self._signatures.get(cls.part) if mode == "cut_corner" else None)
+                      for (cls, checks), mode, key
+                      in zip(self._checks, self._modes, keys, strict=True)]
         self._grids: dict[tuple[int, int], PixelGrid] = {}    # image size -> its table
+        # split_touching: a part's dome of the distance transform rises about its inscribed
+        # radius; a marker is a dome that stands a share of the smallest (pickable) part's
+        # above its saddles (vision.split). A blob at the frame's edge is cut only if it
+        # is at least half as big again as the smallest class's least area: a part cut by
+        # the edge is smaller, a clump of two is not
+        self._split_h: float | None = None
+        self._split_border_mm2 = math.inf
+        if recipe.split_touching:
+            named = [c for c in recipe.classes
+                     if c.part in parts and c.pose in parts[c.part].poses]
+            sizes = [inscribed_px(pose_outline(parts[c.part], c.pose), calibration.mm_per_px)
+                     for c in (([c for c in named if c.pickable]) or named)]
+            self._split_h = H_SHARE * min(sizes) if sizes else None
+            lows = [c.ranges["area_mm2"][0] for c in named if "area_mm2" in c.ranges]
+            self._split_border_mm2 = 1.5 * min(lows) if lows else 0.0
         if recipe.rulers:              # without rulers the cascade keeps its plain lookup
             self._feature = self._feature_or_ruler            # type: ignore[method-assign]
         super().__init__(recipe)       # the segmentation, once the classes are known good
@@ -185,7 +230,8 @@ class Locator(Segmenter):
         mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
         contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
-        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes,
+                            grey=img)
         # classes first; the blobs that need a face wait for one batch of fine outlines
         waiting = [b for b in blobs if not b.det.reason and not self._classify(b)]
         if waiting:
@@ -202,7 +248,8 @@ class Locator(Segmenter):
         for b in blobs:
             (rejected if b.det.reason else parts).append(b.det)
         ms = (time.perf_counter() - t0) * 1e3
-        return LocateResult(parts=parts, rejected=rejected, ms=ms, blobs=blobs)
+        return LocateResult(parts=parts, rejected=rejected, ms=ms, blobs=blobs,
+                            angled=self._angled)
 
     def measure_blobs(self, image: np.ndarray) -> list[Detection]:
         """Every blob's features, unclassified, measured exactly as ``locate`` measures them
@@ -214,31 +261,38 @@ class Locator(Segmenter):
         """
         img = to_grey(image)
         contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
-        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes)
+        blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes,
+                            grey=img)
         return [b.det for b in blobs]
 
     def _split(self, blobs: list[Blob], img: np.ndarray, diff: np.ndarray | None,
                level: float | None) -> list[Blob]:
-        """``split_touching``: each blob that fits no class, cut into pieces
-        (``vision.split``); if every piece is a part, the pieces replace it."""
+        """``split_touching``: each blob that fits no class, or a clump touching the frame's
+        edge, cut into pieces (``vision.split``); if every piece is a part or touches the
+        edge, and one at least is a part, the pieces replace it."""
         out: list[Blob] = []
         for b in blobs:
-            if not b.det.reason.startswith("no class"):
+            reason = b.det.reason
+            if not (reason.startswith("no class") or (
+                    reason == "touches border"
+                    and b.det.features["area_mm2"] >= self._split_border_mm2)):
                 out.append(b)
                 continue
-            pieces = split_blob(b)
+            pieces = split_blob(b, self._split_h, img.shape[:2])
             new = find_blobs([c for c, _ in pieces], img.shape[:2], self.calibration,
                              self.recipe.min_area_mm2, full=True,
                              holes=[hs for _, hs in pieces],
                              mapping=self._mapping(img.shape[:2]),
-                             length=self._want_length, hulls=self._want_hulls) \
+                             length=self._want_length, hulls=self._want_hulls,
+                             min_hole_mm2=self.recipe.min_hole_mm2, grey=img) \
                 if pieces else []
             waiting = [p for p in new if not p.det.reason and not self._classify(p)]
             if waiting:
                 self._faces(waiting, img, diff, level)
                 for p in waiting:
                     self._classify(p)
-            if new and all(not p.det.reason for p in new):
+            if any(not p.det.reason for p in new) and all(
+                    not p.det.reason or p.det.reason == "touches border" for p in new):
                 for p in new:
                     p.det.features["split"] = 1.0
                 out += new
@@ -249,14 +303,16 @@ class Locator(Segmenter):
     # -------------------------------------------------------------- per blob
 
     def _blobs(self, contours: list[np.ndarray], shape: tuple[int, int], all_features: bool,
-               full: bool = True, holes: list[list[np.ndarray]] | None = None) -> list[Blob]:
+               full: bool = True, holes: list[list[np.ndarray]] | None = None,
+               grey: np.ndarray | None = None) -> list[Blob]:
         """The contours worth reporting, measured as far as every blob is (``find_blobs``);
         with ``all_features`` every feature of every blob, the rejected ones too."""
         mapping = self._mapping(shape)
         blobs = find_blobs(contours, shape, self.calibration, self.recipe.min_area_mm2,
                            full=full, holes=holes, mapping=mapping,
                            length=all_features or self._want_length,
-                           hulls=all_features or self._want_hulls)
+                           hulls=all_features or self._want_hulls,
+                           min_hole_mm2=self.recipe.min_hole_mm2, grey=grey)
         if all_features:
             for b in blobs:
                 for name in (*FEATURES, *self.recipe.rulers):
@@ -349,7 +405,7 @@ class Locator(Segmenter):
         chosen: VisionClass | None = None
         looked = False                       # a face was asked for
         why = ""                             # the outline match's reason, if it failed
-        for cls, checks, outline, model in self._plan:
+        for cls, checks, mode, key, model in self._plan:
             for name, lo, hi in checks:      # the ranges, cheapest feature first
                 v = feats.get(name)
                 if v is None:
@@ -357,29 +413,26 @@ class Locator(Segmenter):
                 if not lo <= v <= hi:
                     break
             else:
-                if outline is not None:
+                if key is not None:          # outline or moment
                     looked = True
-                    oriented = b.oriented.get(cls.part, False)
+                    oriented = b.oriented.get(key, False)
                     if oriented is False:
-                        oriented = b.oriented[cls.part] = orient_outline(
-                            outline, contour_mm(b, self.calibration),
-                            (det.x_mm, det.y_mm), b.scale or self.calibration.mm_per_px)
+                        oriented = b.oriented[key] = self._orient_by(b, key)
                     if isinstance(oriented, str):
                         why = oriented
                         continue
                     angle, mirrored = oriented
-                    feats["mirrored"] = 1.0 if mirrored else 0.0
-                    if cls.mirrored is None or mirrored == cls.mirrored:
+                    if mode == "outline":
+                        feats["mirrored"] = 1.0 if mirrored else 0.0
+                    if cls.mirrored is None or mode == "moment" or mirrored == cls.mirrored:
                         chosen = cls
                         det.angle_deg = angle
                         break
                     continue
-                if cls.mirrored is None:
+                if cls.mirrored is None or model is None:
+                    # no face to tell, or no way to tell it: trust the class
                     chosen = cls
-                    det.angle_deg = self._symmetric_angle(b)
-                    break
-                if model is None:
-                    chosen = cls              # no way to tell the faces apart: trust the class
+                    det.angle_deg = self._symmetric_angle(b, mode)
                     break
                 if not b.faced:
                     return False
@@ -404,6 +457,22 @@ class Locator(Segmenter):
             det.angle_deg = wrap_deg(det.angle_deg, self.parts[chosen.part].period_deg)
         return True
 
+    def _orient_by(self, b: Blob, key: str) -> tuple[float, bool] | str:
+        """The blob's angle and face by the outline or moment model ``key``, or why not:
+        read on its outline and its holes (of at least ``min_hole_mm2``), in mm."""
+        model = self._models[key]
+        cal = self.calibration
+        holes: list[np.ndarray] = []
+        if b.holes:
+            px2 = self.recipe.min_hole_mm2 / (b.scale or cal.mm_per_px) ** 2
+            holes = [cal.px_to_mm(h.reshape(-1, 2)) for h in b.holes
+                     if abs(cv2.contourArea(h)) >= 0.5 * px2]
+        xy = contour_mm(b, cal)
+        if isinstance(model, MomentModel):
+            return orient_moment(model, xy, holes)
+        return orient_outline(model, xy, (b.det.x_mm, b.det.y_mm), b.scale or cal.mm_per_px,
+                              holes)
+
     def _no_class(self, b: Blob) -> str:
         """Why a blob fits no class: the class nearest it by area and the first of that
         class's ranges it is outside (already measured: the cascade stopped there)."""
@@ -423,13 +492,15 @@ class Locator(Segmenter):
                         f"[{lo:.4g}, {hi:.4g}]")
         return f"no class; nearest {cls.part}/{cls.pose}: its face"
 
-    def _symmetric_angle(self, b: Blob) -> float:
-        """Angle of a class without a face to tell: its long axis if it has one, else 0."""
-        o = self.recipe.orientation
-        if o == "none":
+    def _symmetric_angle(self, b: Blob, mode: str) -> float:
+        """Angle of a class without a face to tell (orientation ``mode``): its long axis
+        if it has one, else 0."""
+        if mode == "none":
             return 0.0
-        if o == "principal_axis":
-            return b.det.angle_deg            # measured with the blob
+        if mode == "principal_axis":
+            if self.recipe.orientation == "principal_axis":
+                return b.det.angle_deg        # measured with the blob
+            return principal_angle(cv2.moments(contour_mm(b, self.calibration)))
         if self._feature(b, "aspect") > _ELONGATED:
             return principal_angle(cv2.moments(contour_mm(b, self.calibration)))
         return 0.0

@@ -14,7 +14,8 @@ import numpy as np
 from feeder_bt.vision.pixels import Calibration
 from feeder_bt.vision.segment import to_grey
 
-ARROW_MM = 25.0                 # the angle arrow's length in the belt frame
+ARROW_REACH = 1.15              # the angle arrow reaches this far past the part's farthest point
+LABEL_RINGS = 3                 # a label is tried this many label heights out at most
 PART = (0, 200, 0)              # BGR: located parts
 REJECT = (0, 0, 230)            # rejected blobs
 CONTOUR = (255, 160, 0)         # every blob's outline
@@ -23,19 +24,35 @@ CONTOUR = (255, 160, 0)         # every blob's outline
 def draw(image: np.ndarray, result: Any, calibration: Calibration | None
          ) -> tuple[np.ndarray, list[dict[str, Any]], list[dict[str, Any]]]:
     """A BGR copy of ``image`` with ``result`` drawn on it, and the parts and rejected
-    blobs drawn, as plain data (rounded as labelled)."""
+    blobs drawn, as plain data (rounded as labelled; ``label_px``: the label's box).
+
+    The angle arrow reaches just past the part's farthest point from its centre and
+    is drawn only where the angle means something: not for a class that reads none, nor
+    for a part any angle of which is right, a disc (``LocateResult.angled``; every part
+    when the result does not say). Labels are put where they cover no other label
+    (right, left, above, below the part, then farther out); where none is free, only the
+    name is written, or nothing (``label_px`` None)."""
     out = cv2.cvtColor(to_grey(image), cv2.COLOR_GRAY2BGR)
     contours = getattr(result, "contours", None)
     if contours:
         cv2.drawContours(out, contours, -1, CONTOUR, 1, cv2.LINE_AA)
+    angled = getattr(result, "angled", None)
+    far = {id(b.det): b for b in getattr(result, "blobs", ())}     # each part's outline
+    # no label covers a part's or a reject's mark
+    taken = [(int(round(d.u_px)) - 5, int(round(d.v_px)) - 5, 11, 11)
+             for d in (*result.parts, *result.rejected)]
     parts: list[dict[str, Any]] = []
     for det in result.parts:
         c = (int(round(det.u_px)), int(round(det.v_px)))
         cv2.circle(out, c, 3, PART, -1, cv2.LINE_AA)
-        if calibration is not None:
+        b = far.get(id(det))            # the part's farthest point: arrow and label past it
+        r = int(np.hypot(*(b.contour.reshape(-1, 2) - c).T).max()) if b is not None \
+            else _radius_px(det, calibration)
+        if calibration is not None and (angled is None or (det.part, det.pose) in angled):
             a = math.radians(det.angle_deg)
-            tip = calibration.mm_to_px(np.array([[det.x_mm + ARROW_MM * math.cos(a),
-                                                  det.y_mm + ARROW_MM * math.sin(a)]]))[0]
+            reach = ARROW_REACH * r * calibration.mm_per_px
+            tip = calibration.mm_to_px(np.array([[det.x_mm + reach * math.cos(a),
+                                                  det.y_mm + reach * math.sin(a)]]))[0]
             cv2.arrowedLine(out, c, (int(round(tip[0])), int(round(tip[1]))), PART, 1,
                             cv2.LINE_AA, tipLength=0.25)
         d = {"part": det.part, "pose": det.pose, "pickable": bool(det.pickable),
@@ -43,17 +60,17 @@ def draw(image: np.ndarray, result: Any, calibration: Calibration | None
              "angle_deg": round(det.angle_deg, 1),
              "u_px": round(det.u_px, 1), "v_px": round(det.v_px, 1)}
         name = f"{det.part}/{det.pose}" + ("" if det.pickable else " (no pick)")
-        _tag(out, [name, f"x {d['x_mm']:g} y {d['y_mm']:g} a {d['angle_deg']:g}"], c,
-             _radius_px(det, calibration), (0, 120, 0))
+        d["label_px"] = _tag(out, [name, f"x {d['x_mm']:g} y {d['y_mm']:g} a {d['angle_deg']:g}"],
+                             c, r, (0, 120, 0), taken)
         parts.append(d)
     rejected: list[dict[str, Any]] = []
     for det in result.rejected:
         c = (int(round(det.u_px)), int(round(det.v_px)))
         cv2.drawMarker(out, c, REJECT, cv2.MARKER_TILTED_CROSS, 10, 2)
-        _tag(out, [det.reason], c, 6, REJECT)
+        box = _tag(out, [det.reason], c, 6, REJECT, taken)
         rejected.append({"reason": det.reason, "x_mm": round(det.x_mm, 1),
                          "y_mm": round(det.y_mm, 1), "u_px": round(det.u_px, 1),
-                         "v_px": round(det.v_px, 1)})
+                         "v_px": round(det.v_px, 1), "label_px": box})
     return out, parts, rejected
 
 
@@ -64,22 +81,50 @@ def _radius_px(det: Any, calibration: Calibration | None) -> int:
     return int(math.sqrt(area / math.pi) / scale) if area else 8
 
 
+def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> int:
+    """Pixels two boxes (x, y, w, h) share."""
+    w = min(a[0] + a[2], b[0] + b[2]) - max(a[0], b[0])
+    h = min(a[1] + a[3], b[1] + b[3]) - max(a[1], b[1])
+    return max(w, 0) * max(h, 0)
+
+
 def _tag(out: np.ndarray, lines: list[str], at: tuple[int, int], r: int,
-         colour: tuple[int, int, int]) -> None:
-    """Lines of text on a pale box right of ``at`` (left of it near the right edge),
-    kept inside the image, so that they read on dark parts and bright belt alike."""
+         colour: tuple[int, int, int], taken: list[tuple[int, int, int, int]]
+         ) -> list[int] | None:
+    """Lines of text on a pale box beside ``at`` (``r`` px from it), kept inside the
+    image, so that they read on dark parts and bright belt alike: the nearest place
+    (right, left, above, below, then as much farther out, up to ``LABEL_RINGS`` times)
+    whose box covers none of ``taken``; else the first line alone, placed so; else none
+    (a crowd of labels covering each other reads as none). The box drawn is added to
+    ``taken`` and returned."""
     font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.38
-    sizes = [cv2.getTextSize(t, font, scale, 1)[0] for t in lines]
-    w = max(s[0] for s in sizes) + 4
-    lh = max(s[1] for s in sizes) + 5
-    h = lh * len(lines) + 2
-    x = at[0] + r + 3
-    if x + w > out.shape[1]:
-        x = at[0] - r - 3 - w
-    x = min(max(x, 0), max(out.shape[1] - w, 0))
-    y = min(max(at[1] - h // 2, 0), max(out.shape[0] - h, 0))
-    box = out[y:y + h, x:x + w]
-    box[:] = (box.astype(np.uint16) + 3 * 255) // 4          # a pale box, the belt showing
+    ih, iw = out.shape[:2]
+
+    def free(texts: list[str]) -> tuple[int, int, int, int] | None:
+        sizes = [cv2.getTextSize(t, font, scale, 1)[0] for t in texts]
+        w = max(s[0] for s in sizes) + 4
+        h = (max(s[1] for s in sizes) + 5) * len(texts) + 2
+        for ring in range(LABEL_RINGS):
+            g = r + 3 + ring * h
+            for x, y in ((at[0] + g, at[1] - h // 2), (at[0] - g - w, at[1] - h // 2),
+                         (at[0] - w // 2, at[1] - g - h), (at[0] - w // 2, at[1] + g)):
+                box = (min(max(x, 0), max(iw - w, 0)), min(max(y, 0), max(ih - h, 0)), w, h)
+                if not any(_overlap(box, t) for t in taken):
+                    return box
+        return None
+
+    box = free(lines)
+    if box is None:
+        lines = lines[:1]
+        box = free(lines)
+        if box is None:
+            return None
+    x, y, w, h = box
+    lh = (h - 2) // len(lines)
+    region = out[y:y + h, x:x + w]
+    region[:] = (region.astype(np.uint16) + 3 * 255) // 4    # a pale box, the belt showing
     for i, t in enumerate(lines):
         cv2.putText(out, t, (x + 2, y + lh * (i + 1) - 2), font, scale, colour, 1,
                     cv2.LINE_AA)
+    taken.append(box)
+    return list(box)

@@ -29,6 +29,11 @@ REPEAT_S = 30.0             # and again this often while it lasts
 
 # "no class; nearest lens/flat: area_mm2 4118 not in [1800, 2300]"
 _REASON = re.compile(r"^no class; nearest (?P<cls>\S+): (?P<feature>\S+)")
+_VALUE = re.compile(r": (?P<feature>\S+) (?P<v>[-+\d.eE]+) not in \[(?P<lo>[^,]+), (?P<hi>[^\]]+)\]")
+# a parenthesis holding a figure: "(overlap 0.83)", "(overlap 0.90 vs 0.88: ...)"
+_FIGURES = re.compile(r"\s*\([^()]*\d[^()]*\)")
+LINE_CHARS = 200            # a hint or a summary line: at most this long
+TOUCHING = 1.6              # a blob this many times a class's largest area: parts touching
 
 
 class RecipeWatch:
@@ -70,9 +75,10 @@ class RecipeWatch:
             self.last_alarm = t
             self.alarms += 1
             (cls, feature), _ = spell.most_common(1)[0]
+            example = self.examples[(cls, feature)]
             stats.emit(t, "vision_no_match", seconds=round(lasted, 1), nearest=cls,
-                       feature=feature, example=self.examples[(cls, feature)],
-                       hint=_hint(len(unmatched), cls, feature))
+                       feature=feature, example=example,
+                       hint=_hint(len(unmatched), cls, feature, example))
 
     def restarted(self) -> None:
         """The job restarted (after an e-stop, a fault): a spell of no matches does not
@@ -85,34 +91,100 @@ class RecipeWatch:
                                "longest_s": round(self.longest_s, 1)}
         if self.nearest:
             (cls, feature), n = self.nearest.most_common(1)[0]
+            reasons: Counter[str] = Counter()
+            for k, v in self.nearest.items():     # by kind: no blob's own figures
+                reasons[_reason_name(k)] += v
             out.update(nearest=cls, feature=feature, blobs=n,
                        example=self.examples[(cls, feature)],   # the commonest reason's
-                       reasons={_reason_name(k): v for k, v in self.nearest.items()})
+                       reasons=dict(reasons.most_common()))
         return out
 
 
 def _key(reason: str) -> tuple[str, str]:
-    """(class, feature) of a "no class" reason; ("-", reason) of the others."""
+    """(class, feature) of a "no class" reason; ("-", its kind) of the others: the
+    reason without the blob's own figures, so that alike reasons group."""
     m = _REASON.match(reason)
-    return (m["cls"], m["feature"]) if m else ("-", reason)
+    return (m["cls"], m["feature"]) if m else ("-", reason_kind(reason))
+
+
+def reason_kind(reason: str) -> str:
+    """A reject reason without its figures ("no class (outline does not match (overlap
+    0.83))" -> "no class (outline does not match)"); a "no class; nearest" reason keeps
+    its class and feature only."""
+    m = _REASON.match(reason)
+    if m:
+        return f"no class; nearest {m['cls']}: {m['feature']}"
+    prev = None
+    while prev != reason:
+        prev, reason = reason, _FIGURES.sub("", reason)
+    return reason
+
+
+def touching(reason: str) -> float | None:
+    """How many times its nearest class's largest area a blob rejected on ``area_mm2``
+    measures, when that is ``TOUCHING`` or more (parts lying against each other); else
+    None."""
+    m = _VALUE.search(reason)
+    if m is None or m["feature"] != "area_mm2":
+        return None
+    try:
+        v, hi = float(m["v"]), float(m["hi"])
+    except ValueError:
+        return None
+    return v / hi if hi > 0 and v >= TOUCHING * hi else None
+
+
+def short(text: str, limit: int = LINE_CHARS) -> str:
+    """``text`` cut to ``limit`` characters (an ellipsis at the cut)."""
+    return text if len(text) <= limit else text[:limit - 1].rstrip() + "…"
 
 
 def _reason_name(key: tuple[str, str]) -> str:
     return key[1] if key[0] == "-" else f"no class ({key[0]} {key[1]})"
 
 
-def _hint(n: int, cls: str, feature: str) -> str:
-    """What to look at, by the commonest reason of the spell."""
+def _hint(n: int, cls: str, feature: str, example: str = "") -> str:
+    """What to look at, by the commonest kind of reason of the spell: one short line."""
     if feature == "too small":
-        return (f"{n} blob(s) in the last frame, all under vision.min_area_mm2: a part's "
+        text = (f"{n} blob(s) in the last frame, all under vision.min_area_mm2: a part's "
                 f"size in the wrong unit, or the camera's mm_per_px? (`feeder locate`)")
-    if feature == "touches border":
-        return (f"{n} blob(s) in the last frame, all cut by the image border: parts too "
+    elif feature == "touches border":
+        text = (f"{n} blob(s) in the last frame, all cut by the image border: parts too "
                 f"big for the camera window, or frames too far apart?")
-    if cls == "-":
-        return f"{n} blob(s) in the last frame rejected: {feature}"
-    return (f"{n} blob(s) in the last frame fit no class; check the ranges of {cls} "
-            f"({feature}) with `feeder locate`")
+    elif cls == "-" and "orientation ambiguous" in feature:
+        text = (f"{n} blob(s) in the last frame rejected: {feature}: give the part's "
+                f"symmetry (or mirror_symmetric) if it looks alike turned (`feeder check`)")
+    elif cls == "-" and "outline does not match" in feature:
+        text = (f"{n} blob(s) in the last frame rejected: {feature}: another pose's "
+                f"outline, or vision.outline_match.min_iou too high for the camera? "
+                f"(`feeder locate`)")
+    elif cls == "-":
+        text = f"{n} blob(s) in the last frame rejected: {feature}"
+    elif (k := touching(example)) is not None:
+        text = (f"{n} blob(s) in the last frame fit no class; blobs of {k:.1f}x {cls}'s "
+                f"area: parts touching? spread them (a slower incline) or set "
+                f"vision.split_touching: true")
+    else:
+        text = (f"{n} blob(s) in the last frame fit no class; check the ranges of {cls} "
+                f"({feature}) with `feeder locate`")
+    return short(text)
+
+
+def reasons_line(reasons: dict[str, int], limit: int = LINE_CHARS) -> str:
+    """Blobs per kind of reason, commonest first, as one line of at most ``limit``
+    characters (the kinds that do not fit counted as "N more")."""
+    items = sorted(reasons.items(), key=lambda kv: -kv[1])
+    parts: list[str] = []
+    for i, (k, v) in enumerate(items):
+        left = len(items) - i                       # this one and those after it
+        part = f"{k} {v}"
+        more = f", {left - 1} more" if left > 1 else ""
+        if len(", ".join([*parts, part])) + len(more) > limit:
+            if parts:
+                return ", ".join(parts) + f", {left} more"
+            return short(part, limit - len(more)) + more
+        parts.append(part)
+    return ", ".join(parts)
 
 
 def recipe_watch(extras: dict[str, Any]) -> RecipeWatch:

@@ -110,3 +110,22 @@ def test_suggest_clusters_proposes_washer_and_slug(washer_frames, capsys, tmp_pa
     assert main(["check", str(p), "--images", str(washer_frames)]) == 0
     out = capsys.readouterr().out
     assert "washer/flat" in out and "slug/flat" in out
+
+
+def test_check_images_names_each_image_not_the_cameras_size(washer_frames, tmp_path, capsys):
+    """Frames (and their golden image) scaled to 800 x 605 px, not the cell's 640 x 484
+    (another camera's): one line per image, and exit 1."""
+    import cv2
+    for p in [*washer_frames.glob("frame_*.png"), washer_frames / "golden.png"]:
+        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(tmp_path / p.name), cv2.resize(img, (800, 605)))
+    capsys.readouterr()
+    assert main(["check", WASHERS, "--images", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    lines = [ln for ln in out.splitlines() if "but the cell's camera takes 640x484 px" in ln]
+    assert len(lines) == 15 and all(": 800x605 px, but" in ln for ln in lines)
+    assert any(ln.strip().startswith("golden.png: 800x605 px") for ln in lines)
+    assert "15 image(s) not 640x484 px, the camera's" in out
+    capsys.readouterr()
+    assert main(["check", WASHERS, "--images", str(washer_frames)]) == 0
+    assert "the cell's camera takes" not in capsys.readouterr().out

@@ -7,19 +7,12 @@ from pathlib import Path
 import pytest
 
 from feeder_bt.cli.main import main
+from tests.support.scenarios import edited_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _scenario(tmp_path: Path, name: str, *edits: tuple[str, str]) -> Path:
-    text = (ROOT / "scenarios" / name).read_text()
-    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new)
-    p = tmp_path / name
-    p.write_text(text)
-    return p
+_scenario = edited_scenario
 
 
 def test_check_names_a_class_whose_area_range_cannot_hold_its_outline(tmp_path, capsys):
@@ -52,11 +45,14 @@ def _run(path: Path, seconds: float = 150.0) -> dict:
                               view="none"))
 
 
-def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_are(tmp_path):
-    """The chain-link plate (180° symmetric) placed turned to 0 by its
-    long axis: with ``symmetry: 2`` none misoriented; without, about half, and the
-    summary line says so."""
+def test_a_symmetric_plate_is_never_misoriented_and_without_its_symmetry_half_are(
+        tmp_path, monkeypatch):
+    """The chain-link plate (180° symmetric) placed turned to 0 by its long axis: with
+    ``symmetry: 2`` none misoriented; without, about half, and the summary line says so
+    (``feeder check`` refuses that file: its check is turned off here to show what it
+    spares)."""
     from feeder_bt.analysis.summary import summary
+    monkeypatch.setattr("feeder_bt.config.checks.check_orientation", lambda sc, ctx: None)
     report = _run(ROOT / "scenarios" / "chain_links.yaml")
     placed = report["parts"]["retrieved"]["link"]
     assert placed > 50 and report["parts"]["misoriented"] == 0
@@ -186,16 +182,21 @@ def test_a_part_whose_every_grip_is_blocked_is_not_offered(tmp_path):
     assert all(d.reason == "" and d.grip_deg == 0 for d in _three_lenses(off, 5.0).values())
 
 
-def test_a_washer_is_gripped_on_its_ring_never_over_its_hole(tmp_path):
+def test_a_washer_is_gripped_on_its_ring_never_over_its_hole(tmp_path, monkeypatch):
     """The washer's cup grips sit on the ring: none over the hole; gripped at its
     centroid (no ``pick``), every washer grip is over the hole and misses: the cell stops
     after ``max_failed_picks`` of them in a row (the slugs between picked well), and without
-    that limit misses every washer."""
+    that limit misses every washer. ``feeder check`` names that file first (its check is
+    turned off below to show what it spares)."""
+    from feeder_bt.config import check_files
     rep = _run(ROOT / "scenarios" / "washers.yaml", 200.0)
     assert rep["parts"]["retrieved"]["washer"] > 100
     assert rep["parts"]["grip_misses"]["grip_on_hole"] == 0
     no_pick = ("    pick:\n      grips: [{offset_mm: [8.5, 0]}, {offset_mm: [0, 8.5]}, "
                "{offset_mm: [-8.5, 0]}, {offset_mm: [0, -8.5]}]\n      cup_radius_mm: 3\n", "")
+    out = check_files([str(_scenario(tmp_path, "washers.yaml", no_pick))])
+    assert len(out) == 1 and "lies in a hole" in out[0]
+    monkeypatch.setattr("feeder_bt.config.checks.check_grips", lambda sc, ctx: None)
     rep = _run(_scenario(tmp_path, "washers.yaml", no_pick), 200.0)
     assert rep["state"] == "FAULT" and "20 picks of washer" in rep["fault"]
     assert rep["parts"]["missed"] == rep["parts"]["grip_misses"]["grip_on_hole"] >= 20

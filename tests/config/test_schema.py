@@ -180,3 +180,22 @@ def test_check_lists_every_problem_of_a_file(tmp_path, capsys):
     assert len(err) == len(want), err
     for got, (line, what) in zip(err, want, strict=True):
         assert got.startswith(f"{bad}:{line}: ") and what in got, (got, line, what)
+
+
+@pytest.mark.parametrize("where,key,bad,said", [
+    (("vision", "outline_match"), "min_iou", 1.5, "min_iou"),
+    (("vision", "outline_match"), "raster_mm", 0.0, "raster_mm"),
+    (("vision", "classes", 0), "orientation", "outlines", "orientation"),
+])
+def test_outline_thresholds_and_class_orientations_are_checked_both_ways(where, key, bad, said,
+                                                                          tmp_path):
+    """``outline_match`` out of its ranges, a class orientation not among the recipe's:
+    the editor's schema and the loader both refuse them."""
+    data = yaml.safe_load((ROOT / "scenarios/levers.yaml").read_text())
+    node = data
+    for step in where:
+        node = node[step]
+    node[key] = bad
+    assert list(validator("scenario").iter_errors(data))
+    with pytest.raises(ConfigError, match=said):
+        load_scenario(_write(tmp_path, "scenario", data))

@@ -21,19 +21,18 @@ from feeder_bt.sim.devices import make_sim_hal
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _asymmetric_links(tmp_path: Path) -> Path:
+def _asymmetric_links():
     """The chain-link plate without its ``symmetry: 2``: about half of the plates are
-    placed turned by 180° (tests/config/test_parts_model.py)."""
-    text = (ROOT / "scenarios" / "chain_links.yaml").read_text()
-    text = text.replace("cell: ../cells/", f"cell: {ROOT / 'cells'}/")
-    assert "    symmetry: 2\n" in text
-    p = tmp_path / "chain_links.yaml"
-    p.write_text(text.replace("    symmetry: 2\n", ""))
-    return p
+    placed turned by 180° (tests/config/test_parts_model.py). ``feeder check`` refuses
+    that file (principal_axis cannot orient it), so the part is changed once loaded."""
+    scenario, spec = load_scenario(ROOT / "scenarios" / "chain_links.yaml")
+    assert scenario.parts["link"].symmetry == 2
+    scenario.parts["link"].symmetry = 1
+    return scenario, spec
 
 
 def test_the_status_payload_counts_the_misoriented_parts_of_the_simulated_cell(tmp_path):
-    scenario, spec = load_scenario(_asymmetric_links(tmp_path))
+    scenario, spec = _asymmetric_links()
     clock = SimClock()
     hal = make_sim_hal(scenario, spec, clock, 1)
     cell = Cell(spec, hal, clock)
