@@ -55,6 +55,9 @@ ERROR_KINDS: dict[str, str] = {
 }
 
 
+LINK_DEATHS = ("refused", "silent")   # comms_lost: how a link dies
+
+
 @dataclass
 class FaultRate:
     """How often one kind of fault happens; only the kind's unit (``RATE_UNITS``) is set."""
@@ -64,6 +67,10 @@ class FaultRate:
     per_hour: float | None = None        # mean arrivals per hour of virtual time (Poisson)
     device: str = "alternate"            # comms_lost: galil | adept | camera | alternate
     outage_s: float = 2.0                # comms_lost: how long the link stays down
+    # comms_lost: how it dies. refused: every call fails at once (the controller gone, a
+    # cable unplugged at a switch that resets the connection); silent: a pulled cable, no
+    # FIN: each call waits out the driver's time-out before it fails, as on the drivers
+    link: str = "refused"
     counts: int = 200                    # encoder_slip: counts the robot's counter gains
 
     def rate(self) -> tuple[str, float]:
@@ -84,6 +91,7 @@ class ScriptedFault:
     release_after_s: float = 30.0        # estop: how long the e-stop input stays pressed
     device: str = "alternate"            # comms_lost: as FaultRate.device
     outage_s: float = 2.0                # comms_lost: as FaultRate.outage_s
+    link: str = "refused"                # comms_lost: as FaultRate.link
     phase: str | None = None             # comms_lost: at this step of the next pick (PHASES)
     counts: int = 200                    # encoder_slip: as FaultRate.counts
 
@@ -102,6 +110,7 @@ class FaultPlanSpec:
 _ONLY_FOR: dict[str, tuple[str, ...]] = {
     "device": ("comms_lost",),
     "outage_s": ("comms_lost",),
+    "link": ("comms_lost",),
     "phase": ("comms_lost",),
     "release_after_s": ("estop",),
     "counts": ("encoder_slip",),

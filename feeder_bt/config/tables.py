@@ -9,7 +9,14 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from feeder_bt.config.faults import COMMS_DEVICES, FAULT_KINDS, PHASES, FaultRate, ScriptedFault
+from feeder_bt.config.faults import (
+    COMMS_DEVICES,
+    FAULT_KINDS,
+    LINK_DEATHS,
+    PHASES,
+    FaultRate,
+    ScriptedFault,
+)
 from feeder_bt.core.model import (
     AdeptSpec,
     AdjustParams,
@@ -269,6 +276,8 @@ RANGES: dict[tuple[type, str], Range] = {
 }
 ENUMS[(FaultRate, "device")] = COMMS_DEVICES
 ENUMS[(ScriptedFault, "device")] = COMMS_DEVICES
+ENUMS[(FaultRate, "link")] = LINK_DEATHS
+ENUMS[(ScriptedFault, "link")] = LINK_DEATHS
 ENUMS[(ScriptedFault, "kind")] = FAULT_KINDS
 ENUMS[(ScriptedFault, "phase")] = PHASES
 ENUMS[(AdeptSpec, "belt_direction")] = ("forward", "reverse")

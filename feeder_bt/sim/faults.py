@@ -302,10 +302,13 @@ class FaultyConveyor(_Tracking):
         return None
 
     # -- for the injector --------------------------------------------------------------
-    def freeze(self, t: float, err: HalError) -> bool:
-        """The link dropped at ``t``: remember the reads, fail the jobs in flight (the
-        belt's motion itself is not touched). True if any job failed."""
+    def freeze(self, t: float) -> None:
+        """The link dropped at ``t``: remember the reads (the belt's motion itself is not
+        touched)."""
         self._frozen = (self._inner.speed(), self._inj.world.galil_count(t))
+
+    def fail_in_flight(self, err: HalError) -> bool:
+        """The jobs in flight fail with the lost link. True if any did."""
         return self._fail_jobs(err)
 
     def jammed(self, err: HalError) -> bool:
@@ -401,6 +404,7 @@ class FaultInjector:
         self.log: list[dict[str, Any]] = []
         self.power_on = True
         self.down: dict[str, bool] = dict.fromkeys(_LINKS, False)
+        self.silent: dict[str, bool] = dict.fromkeys(_LINKS, False)
         self.estop_presses = 0
         self.watchdog_stops = 0                   # outages the card's watchdog ended
         self._rngs = {kind: plan_rng(plan.seed, seed, i) for i, kind in enumerate(FAULT_KINDS)}
@@ -473,7 +477,7 @@ class FaultInjector:
         gap = float(self._rngs[kind].exponential(3600.0 / rate.per_hour))
 
         def arrive(t: float) -> None:
-            self._fire(kind, t, rate.device, rate.outage_s, rate.counts)
+            self._fire(kind, t, rate.device, rate.outage_s, rate.counts, rate.link)
             self._next_arrival(kind, rate, t)
 
         self._at(after + gap, arrive)
@@ -486,12 +490,13 @@ class FaultInjector:
         elif sf.kind == "estop":
             self._estop(t, sf.release_after_s)
         else:
-            self._fire(sf.kind, t, sf.device, sf.outage_s, sf.counts)
+            self._fire(sf.kind, t, sf.device, sf.outage_s, sf.counts, sf.link)
 
     def _fire(self, kind: str, t: float, device: str, outage_s: float,
-              counts: int = 0) -> None:
+              counts: int = 0, how: str = "refused") -> None:
         if kind == "comms_lost":
-            self._drop(device if device != "alternate" else next(self._alternate), t, outage_s)
+            self._drop(device if device != "alternate" else next(self._alternate), t, outage_s,
+                       how=how)
         elif kind == "conveyor_jam":
             self._jam(t)
         elif kind == "encoder_slip":
@@ -568,15 +573,18 @@ class FaultInjector:
             return False
         self._cuts.remove(sf)
         link = sf.device if sf.device != "alternate" else next(self._alternate)
-        self._drop(link, t, sf.outage_s, phase)
+        self._drop(link, t, sf.outage_s, phase, how=sf.link)
         return True
 
-    def _drop(self, link: str, t: float, outage_s: float, phase: str | None = None) -> None:
-        """The link goes down for ``outage_s``: calls fail at once; the replies of jobs in
-        flight are lost now (a robot motion itself goes on to its end)."""
+    def _drop(self, link: str, t: float, outage_s: float, phase: str | None = None,
+              how: str = "refused") -> None:
+        """The link goes down for ``outage_s``: calls fail at once (``refused``), or, on a
+        ``silent`` link (a pulled cable), each waits out the driver's time-out first; the
+        replies of jobs in flight are lost now (a robot motion itself goes on to its end)."""
         if self.down[link]:
             return                              # already down: not a second fault
         self.down[link] = True
+        self.silent[link] = how == "silent"
         at = f" ({phase.replace('_', ' ')})" if phase else ""
         entry = self._record(t, "comms_lost", link,
                              f"{_LINK_NAMES[link]} connection lost for {outage_s:g} s{at}",
@@ -585,18 +593,29 @@ class FaultInjector:
         err = CommsLost(f"{_LINK_NAMES[link]}: connection lost")
         if link == "adept":
             self.position.freeze(t)
-            if self.robot.lose_replies(err):
-                entry["seen"] = True
         elif link == "galil":
             for conv in self.conveyors.values():
-                if conv.freeze(t, err):
-                    entry["seen"] = True
+                conv.freeze(t)
             watchdog_s = self.world.cell.galil.watchdog_s
             if 0 < watchdog_s < outage_s:
                 self._at(t + watchdog_s, lambda now: self._watchdog(now, entry, watchdog_s))
-        else:
-            if self.camera.fail_in_flight(err):
+
+        def fail_in_flight(now: float) -> None:
+            """The jobs in flight learn of it: at once on a refused link, after the
+            driver's time-out on a silent one (nothing answers them meanwhile)."""
+            if link == "adept":
+                lost = self.robot.lose_replies(err)
+            elif link == "galil":
+                lost = any([conv.fail_in_flight(err) for conv in self.conveyors.values()])
+            else:
+                lost = self.camera.fail_in_flight(err)
+            if lost:
                 entry["seen"] = True
+
+        if how == "silent":
+            self._at(t + self._timeout_s(link), fail_in_flight)
+        else:
+            fail_in_flight(t)
         self._at(t + outage_s, lambda now: self._restore(link))
 
     def _watchdog(self, t: float, outage: dict[str, Any], watchdog_s: float) -> None:
@@ -626,8 +645,23 @@ class FaultInjector:
         entry = self._outage_entry.get(link)
         if entry is not None:
             entry["seen"] = True
-        return DoneJob(name, error=CommsLost(f"{_LINK_NAMES[link]}: connection lost; "
-                                             f"{name} not sent"))
+        err = CommsLost(f"{_LINK_NAMES[link]}: connection lost; {name} not sent")
+        if not self.silent[link]:
+            return DoneJob(name, error=err)
+        # a pulled cable: nothing answers, and the driver learns it only from its time-out
+        job = Job(name)
+        self._at(self.world.now() + self._timeout_s(link),
+                 lambda now: None if job.done else job.fail(err))
+        return job
+
+    def _timeout_s(self, link: str) -> float:
+        """How long the link's driver waits for a reply before it gives the link up."""
+        cell = self.world.cell
+        if link == "galil":
+            return cell.galil.timeout_s
+        if link == "adept":
+            return cell.adept.timeout_s
+        return cell.camera.grab_s + 1.0
 
     # ------------------------------------------------------------------ conveyor, e-stop
     def _jam(self, t: float) -> None:

@@ -480,6 +480,20 @@ def learn_outline(ms: list[Measured]) -> Outline:
     return Outline(pts, hs, sym, mirror, grips, cup, len(ms))
 
 
+def _holds(outline: Outline, grips: list[tuple[float, float]], cup_mm: float) -> bool:
+    """Does every grip hold the whole cup on this pose's outline: inside it, at least the
+    cup's radius from its edge, clear of its holes (as ``feeder check`` judges a pick)."""
+    outer = np.asarray(outline.points_mm, np.float32).reshape(-1, 1, 2)
+    holes = [np.asarray(h, np.float32).reshape(-1, 1, 2) for h in outline.holes_mm]
+    for x, y in grips:
+        pt = (float(x), float(y))
+        if cv2.pointPolygonTest(outer, pt, True) < cup_mm:
+            return False
+        if any(cv2.pointPolygonTest(h, pt, True) > -cup_mm for h in holes):
+            return False
+    return True
+
+
 def _grips(mask: np.ndarray, r: _Raster, sym: int) -> tuple[list[tuple[float, float]], float]:
     """Grip points on material clear of the edge and the holes: the centroid if it is
     nearly as clear as the clearest point, else the clearest point (turned about the
@@ -598,11 +612,17 @@ def write_scenario(taught: Taught, out: str | Path, cell: str | Path, cell_spec:
             if c == classes[0]:
                 lines.append(f"      {c[1]}: {{probability: {fmt(p)}, pickable: true}}"
                              f"   # {n} sample(s)")
-            else:
+            elif _holds(taught.outlines[c], main.grips_mm, main.cup_radius_mm):
                 lines.append(f"      {c[1]}:   # {n} sample(s); pickable: say false if the "
                              "gripper cannot take it")
                 lines.append(f"        probability: {fmt(p)}")
                 lines.append("        pickable: true")
+            else:
+                lines.append(f"      {c[1]}:   # {n} sample(s); the cup "
+                             f"({fmt(main.cup_radius_mm)} mm) finds no hold at the grips on "
+                             "this outline")
+                lines.append(f"        probability: {fmt(p)}")
+                lines.append("        pickable: false")
                 lines += _shape_lines(taught.outlines[c], "        silhouette:")
         lines.append(f"    place: {{x: {fmt(round(safe[0] - 40 - 80 * k))}, "
                      f"y: {fmt(round(safe[1] + 30))}, z: 0}}   # FILL IN: where it goes")
