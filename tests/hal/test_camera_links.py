@@ -93,7 +93,9 @@ def test_garbage_from_an_emulated_camera_is_a_typed_error(reply, error, text):
 
 
 def test_no_emulated_camera_there_is_a_lost_link():
-    port, held = _server(lambda conn: None)
-    _close(held)                                     # nobody listens any more
-    with pytest.raises(CommsLost, match="cannot connect"):
-        CameraClient(f"emulated-camera://127.0.0.1:{port}", timeout_s=1.0)
+    # a port bound and not listening: refused, and no other test can take it meanwhile
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        with pytest.raises(CommsLost, match="cannot connect"):
+            CameraClient(f"emulated-camera://127.0.0.1:{port}", timeout_s=1.0)
