@@ -108,6 +108,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overlay", metavar="OVERLAY.yaml",
                    help="a partial scenario merged over SCENARIO before it is checked, e.g. "
                         "the settings `feeder tune --out` found")
+    r.add_argument("--world", metavar="WORLD.yaml",
+                   help="simulated cell: the cell's truth (physical and sim: figures laid "
+                        "over the cell file, e.g. a twin from `feeder twin fit`); the "
+                        "controller still reads only the cell file (docs/simulator.md)")
     add_ui_options(r)
     from feeder_bt.app.run import add_plant_options
     add_plant_options(r)
@@ -168,7 +172,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
                                 faults=args.faults, supply=args.supply,
-                                plant=plant_options(args), overlay=args.overlay))
+                                plant=plant_options(args), overlay=args.overlay,
+                                world=args.world))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
