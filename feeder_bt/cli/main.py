@@ -16,7 +16,7 @@ from feeder_bt.core.errors import ConfigError, FeederError
 
 # feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission", "tune", "replay_cmd")
+         "users_cmd", "commission", "tune", "replay_cmd", "twin_cmd")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
