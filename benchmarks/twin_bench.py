@@ -6,7 +6,8 @@ settings against the plant's own mean over seeds; the uncalibrated defaults besi
         [--out benchmarks/results/twin.json]
 
 Plants: ``feeder_bt.tuning.roundtrip.PLANT_RANGES`` drawn with ``--seed``. The fit's log is
-the plant running scenarios/lenses.yaml as shipped for ``--duration`` s (seed 1). The
+the plant running scenarios/lenses.yaml as shipped for ``--duration`` s (plant i: seed
+``--log-seed`` + i). The
 settings predicted are five others: a fixed slow belt, a fixed fast belt with a higher
 lift, a fixed belt under a low lift, the shortest-cycle pick policy, and the
 lenses-and-squares kit. Each plant's truth is its mean over ``--plant-seeds``; the twin's
@@ -56,6 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plant-seeds", type=int, nargs="+", default=[11, 12, 13])
     ap.add_argument("--predict-seeds", type=int, nargs="+", default=[21, 22])
     ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--log-seed", type=int, default=31, help="plant i's log: this seed + i")
     ap.add_argument("--out", default=str(ROOT / "benchmarks/results/twin.json"))
     args = ap.parse_args(argv)
     t_start = time.time()
@@ -69,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     for i, fig in enumerate(plants):
         world = runner.world(fig)
         db = str(runner.tmp / f"plant{i}.db")
-        logged = runner.ppm(FIT_SETTING, world, (1,), db=db)
+        # each plant's log its own seed: one seed's draws are alike across plants
+        logged = runner.ppm(FIT_SETTING, world, (args.log_seed + i,), db=db)
         twin = fit_twin([db], cell, rounds=args.rounds,
                         say=lambda s, i=i: print(f"plant {i}: {s}", file=sys.stderr))
         tw = runner.world(twin.figures())

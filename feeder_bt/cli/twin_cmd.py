@@ -21,6 +21,8 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
                    help="the cell file the logged runs' controller read")
     f.add_argument("--out", required=True, metavar="TWIN.yaml",
                    help="write the twin's world file here")
+    f.add_argument("--scenario", metavar="SCENARIO.yaml",
+                   help="the scenario the logged runs ran (default: the path the log names)")
     f.add_argument("--rounds", type=int, default=4, metavar="N",
                    help="rounds of simulated runs to match the logged counts (default 4)")
     f.set_defaults(handler=cmd_twin_fit)
@@ -32,7 +34,7 @@ def cmd_twin_fit(args: argparse.Namespace) -> int:
     from feeder_bt.tuning.twin import fit_twin
     cell = load_cell(args.cell)
     twin = fit_twin(args.logs, cell, rounds=max(1, args.rounds),
-                    say=lambda s: print(s, file=sys.stderr))
+                    say=lambda s: print(s, file=sys.stderr), scenario=args.scenario)
     twin.write(args.out)
     print(f"twin of {args.cell} from {len(args.logs)} log(s):")
     for key, e in twin.estimates.items():

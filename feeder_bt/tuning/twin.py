@@ -294,22 +294,39 @@ def world_yaml(figures: dict[str, float]) -> dict[str, Any]:
     return out
 
 
-def simulate(run: RunLog, figures: dict[str, float], seeds: tuple[int, ...] = SEEDS,
-             duration: float | None = None) -> list[RunLog]:
-    """The logged run again on a world with ``figures`` (and nothing else of the log's
-    world: a plant's own world file is what is being found), one per seed."""
-    from feeder_bt.app.run import RunOptions, run_job
+def logged_files(run: RunLog, scenario: str | None = None) -> tuple[str, str | None]:
+    """The scenario and overlay the logged run ran (``scenario`` instead, if given): the
+    twin runs them again. A log names them as its run was given them, maybe relative to
+    another folder: one not found here is a TwinError that says how to give it."""
     o = run.options
+    scen = scenario or o.get("scenario_file")
+    if not scen or not Path(scen).is_file():
+        raise TwinError(f"{run.path}: run {run.run_id}'s scenario {scen!r} is not found from "
+                        "here; name it with --scenario")
+    overlay = o.get("overlay")
+    if overlay and not Path(overlay).is_file():
+        raise TwinError(f"{run.path}: run {run.run_id}'s overlay {overlay!r} is not found "
+                        "from here")
+    return scen, overlay
+
+
+def simulate(run: RunLog, cell: CellSpec, figures: dict[str, float],
+             seeds: tuple[int, ...] = SEEDS, scenario: str | None = None) -> list[RunLog]:
+    """The logged run again on a world with ``figures`` (and nothing else of the log's
+    world: a plant's own world file is what is being found), one per seed; the controller
+    reads ``cell``'s file, the cell file the fit was given."""
+    from feeder_bt.app.run import RunOptions, run_job
+    scen, overlay = logged_files(run, scenario)
+    duration = run.options.get("duration") or max(run.t_end - run.t0, 1.0)
     out: list[RunLog] = []
     with tempfile.TemporaryDirectory() as tmp:
         world = Path(tmp) / "world.yaml"
         world.write_text(yaml.safe_dump(world_yaml(figures), sort_keys=False))
         for seed in seeds:
             db = Path(tmp) / f"sim{seed}.db"
-            run_job(RunOptions(scenario=o["scenario_file"], cell=o.get("cell_file"),
-                               duration=duration or o.get("duration") or 600.0, fast=True,
-                               seed=seed, view="none", db=str(db), overlay=o.get("overlay"),
-                               world=str(world)))
+            run_job(RunOptions(scenario=scen, cell=str(cell.path), duration=duration,
+                               fast=True, seed=seed, view="none", db=str(db),
+                               overlay=overlay, world=str(world)))
             out.extend(read_logs([str(db)]))
     return out
 
@@ -371,7 +388,8 @@ def _not_fixed(m: Moment, obs: dict[str, float], sim: dict[str, float]) -> str |
 
 def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
                 rounds: int = ROUNDS, seeds: tuple[int, ...] = SEEDS,
-                say: Callable[[str], None] | None = None) -> dict[str, Estimate]:
+                say: Callable[[str], None] | None = None,
+                scenario: str | None = None) -> dict[str, Estimate]:
     """The simulated-moments figures (``MOMENTS``), from ``start`` (the arm's already)."""
     obs = _sum_counts(runs)
     fig = dict(start)
@@ -380,7 +398,7 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
     hist: dict[str, list[tuple[float, float]]] = {m.key: [] for m in MOMENTS}
     frozen: dict[str, str] = {}
     for rnd in range(rounds):
-        sc = _sum_counts(simulate(runs[0], fig, seeds))
+        sc = _sum_counts(simulate(runs[0], cell, fig, seeds, scenario))
         for m in MOMENTS:
             if m.key in frozen:
                 continue
@@ -497,14 +515,16 @@ def _flat(key: str) -> str:
 
 def fit_twin(logs: list[str], cell: CellSpec, rounds: int = ROUNDS,
              seeds: tuple[int, ...] = SEEDS,
-             say: Callable[[str], None] | None = None) -> Twin:
-    """Fit a twin of ``cell`` from the runs in ``logs`` (see the module)."""
+             say: Callable[[str], None] | None = None, scenario: str | None = None) -> Twin:
+    """Fit a twin of ``cell`` from the runs in ``logs`` (see the module); ``scenario``:
+    the scenario they ran, when the logs' own path to it does not hold here."""
     runs = read_logs(logs)
+    logged_files(runs[0], scenario)        # before any fitting: a missing file fails now
     arm = fit_arm(runs, cell)
     start = {_flat(k): e.value for k, e in arm.items() if e.fixed}
     if say:
         say(f"arm: {len(moves(runs, cell))} timed moves; " + ", ".join(
             f"{k} {e.value:.4g}" for k, e in arm.items() if e.fixed))
     est: dict[str, Estimate] = dict(arm)
-    est.update(fit_moments(runs, cell, start, rounds, seeds, say))
+    est.update(fit_moments(runs, cell, start, rounds, seeds, say, scenario))
     return Twin(est, [str(p) for p in logs], str(cell.path))
