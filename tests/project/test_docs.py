@@ -63,14 +63,15 @@ def test_docs_have_examples():
 def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
     args = shlex.split(line)[1:]
-    if args[0] in ("locate", "recipe", "report", "replay") or "--images" in args \
+    if args[0] in ("locate", "recipe", "report", "replay", "twin") or "--images" in args \
             or "--image" in args:
         # they read what `render` / `run --db` / `calibrate --save-image` wrote
         cmds = commands()
+        db = args[2] if args[0] == "twin" else args[1]       # twin fit RUN.db
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
             if d == doc and ((prev[0] == "render" or "--save-image" in prev)
-                             if args[0] not in ("report", "replay") else args[1] in prev):
+                             if args[0] not in ("report", "replay", "twin") else db in prev):
                 _run(doc, earlier, tmp_path, monkeypatch)
     _run(doc, line, tmp_path, monkeypatch)
 
