@@ -88,3 +88,14 @@ def test_bad_logs_are_one_line_exit_2(tmp_path: Path, capsys) -> None:
     assert rc == 2 and len(err) == 1 and "x.db" in err[0]
     assert not (tmp_path / "t.yaml").exists()
     assert yaml.safe_load("a: 1")          # the module's YAML stays importable here
+
+
+def test_tune_runs_its_trials_on_a_world() -> None:
+    """`feeder tune --world`: every trial on the world's truth, in a study of its own."""
+    from feeder_bt.tuning.objective import Job, evaluate
+    from feeder_bt.tuning.search import TuneConfig, study_name
+    plant = str(ROOT / "examples/plant_b.yaml")
+    on_cell = evaluate(Job(LENSES, {}, 1, 120.0))
+    on_plant = evaluate(Job(LENSES, {}, 1, 120.0, world=plant))
+    assert on_plant["ppm"] != on_cell["ppm"]
+    assert study_name(TuneConfig(LENSES, world=plant)) != study_name(TuneConfig(LENSES))
