@@ -137,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
                        "that checks YAML as you type (docs/getting-started.md), or of "
                        "the run report (--report), the JSON contract for CI")
-    s.add_argument("kind", choices=[*KINDS, "report"])
+    s.add_argument("kind", choices=[*KINDS, "world", "report"])
     s.add_argument("-o", "--output", help="write to this file instead of standard output")
 
     r.set_defaults(handler=cmd_run)
@@ -263,7 +263,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_schema(args: argparse.Namespace) -> int:
     from feeder_bt.analysis.run_report import report_schema
     from feeder_bt.config.schema import schema
-    doc = report_schema() if args.kind == "report" else schema(args.kind)
+    from feeder_bt.config.world import world_schema
+    doc = (report_schema() if args.kind == "report" else world_schema()
+           if args.kind == "world" else schema(args.kind))
     text = json.dumps(doc, indent=2) + "\n"
     if args.output:
         Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)

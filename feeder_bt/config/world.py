@@ -126,3 +126,28 @@ def load_world(path: str | Path, cell: CellSpec) -> CellSpec:
                                   base_deg=world.robot.base_deg
                                   if _from_overlay("robot.base_deg", taken)
                                   else cell.robot.base_deg))
+
+
+def world_schema() -> dict[str, Any]:
+    """The JSON Schema of a world file (``feeder schema world``): the cell file's, kept to
+    the world's sections and figures, nothing required, and the ``fit:`` notes."""
+    from feeder_bt.config.schema import schema
+    cell = schema("cell")
+    props: dict[str, Any] = {}
+    for key, beliefs in WORLD_SECTIONS.items():
+        sec = cell["properties"].get(key)
+        if sec is None:
+            continue
+        sec = dict(sec)
+        if "properties" in sec:
+            sec["properties"] = {k: v for k, v in sec["properties"].items() if k not in beliefs}
+            sec.pop("required", None)
+        props[key] = sec
+    props[NOTES_KEY] = {"type": "object", "description": "a twin's notes (feeder twin fit): "
+                        "each figure's estimate, uncertainty and what fixed it; not read by "
+                        "the simulator"}
+    return {"$schema": cell["$schema"], "$id": "urn:feeder-bt:schema:world",
+            "title": "feeder_bt world", "description": "a world file for feeder_bt: the "
+            "simulated cell's truth, laid over the cell file (feeder run --world)",
+            "type": "object", "properties": props, "additionalProperties": False}
+

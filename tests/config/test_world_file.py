@@ -88,3 +88,17 @@ def test_an_empty_world_is_the_cell(tmp_path: Path) -> None:
                            view="none", world=str(w)))
     assert a["parts"]["retrieved"] == b["parts"]["retrieved"]
     assert a["parts"]["located"] == b["parts"]["located"]
+
+
+def test_the_world_schema_takes_world_figures_only() -> None:
+    """`feeder schema world`: an editor checks a world file as the loader does."""
+    jsonschema = pytest.importorskip("jsonschema")
+    import yaml
+
+    from feeder_bt.config.world import world_schema
+    schema = world_schema()
+    jsonschema.validate(yaml.safe_load((ROOT / "examples/plant_b.yaml").read_text()), schema)
+    for bad in ({"camera": {"calibration_file": "c.yaml"}}, {"name": "x"},
+                {"sim": {"clump_prob": 3}}):
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(bad, schema)
