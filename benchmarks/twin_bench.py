@@ -90,6 +90,15 @@ def main(argv: list[str] | None = None) -> int:
                                     "fixed_by": e.fixed_by}
                                 for k, e in twin.estimates.items()},
                      "settings": per})
+        _write(args, settings, rows, t_start, ps, qs)      # each plant as it is done
+    _write(args, settings, rows, t_start, ps, qs, final=True)
+    return 0
+
+
+def _write(args: argparse.Namespace, settings: list[Setting], rows: list[dict],
+           t_start: float, ps: tuple[int, ...], qs: tuple[int, ...],
+           final: bool = False) -> None:
+    """The JSON so far (plants done), and with ``final`` the table on standard output."""
     summary = {}
     for s in settings:
         summary[s.name] = {
@@ -99,18 +108,20 @@ def main(argv: list[str] | None = None) -> int:
     others = [s.name for s in SETTINGS]
     overall = {k: statistics.mean(summary[n][k] for n in others)
                for k in ("twin_mae_pct", "defaults_mae_pct")}
-    out = {"benchmark": "twin round trip", "plants": args.plants, "seed": args.seed,
+    out = {"benchmark": "twin round trip", "plants": args.plants, "plants_done": len(rows),
+           "seed": args.seed,
            "duration_s": args.duration, "plant_seeds": ps, "predict_seeds": qs,
            "rounds": args.rounds, "settings": summary, "other_settings_mae_pct": overall,
            "rows": rows, "wall_s": time.time() - t_start, "python": platform.python_version()}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=1))
+    if not final:
+        return
     for name, v in summary.items():
         print(f"{name:34s} twin {v['twin_mae_pct']:5.1f} %  defaults {v['defaults_mae_pct']:5.1f} %")
     print(f"{'five other settings':34s} twin {overall['twin_mae_pct']:5.1f} %  "
           f"defaults {overall['defaults_mae_pct']:5.1f} %")
     print(f"json: {args.out}")
-    return 0
 
 
 if __name__ == "__main__":
