@@ -14,13 +14,14 @@ Two kinds of fit:
   their accelerations. Its uncertainty is the fit's (residual scatter through the
   Jacobian).
 - **by simulated moments**: the hopper's release, the return transit, the clumping scale and
-  the grip curve's width set counts the log has (parts located early, before any part could
-  come back; parts located once the loop is full; blobs no class takes; missed grabs). The
-  twin simulates the logged run itself — the same scenario, cell, settings and length, the
-  controller reading only the cell file — and moves each figure until the simulated counts
-  match the logged ones (a few rounds of ratio updates: each count is monotone in its
-  figure). Each figure's uncertainty is its count's Poisson error carried through the
-  count's measured sensitivity to it.
+  the grip curve's width set counts the log has (parts located per mm the incline ran;
+  how far that falls once parts come back; blobs no class takes; missed grabs). The twin
+  simulates the logged run itself — the same scenario, settings and length, the controller
+  reading only the cell file — and moves each figure until the simulated counts match the
+  logged ones (a few rounds of ratio updates: each count is monotone in its figure). Each
+  figure's uncertainty is its count's Poisson error carried through the count's
+  sensitivity to it (the model's own for the release, measured between rounds for the
+  rest).
 
 A figure is left at the cell file's value, with the reason, when the log cannot fix it:
 a count too small, a speed never varied, an effect the cell never reached.
@@ -480,6 +481,7 @@ class Twin:
     estimates: dict[str, Estimate]
     logs: list[str]
     cell: str
+    untested: dict[str, str] = field(default_factory=dict)   # assumptions the log never tried
 
     def figures(self) -> dict[str, float]:
         """The world file's figures: every estimate the log fixed."""
@@ -492,6 +494,7 @@ class Twin:
                   for k, e in self.estimates.items() if e.fixed}
         unfixed = {k: e.fixed_by for k, e in self.estimates.items() if not e.fixed}
         unfixed.update(NOT_FITTED)
+        unfixed.update(self.untested)
         return {"logs": self.logs, "cell": self.cell, "fitted": fitted, "not_fixed": unfixed}
 
     def write(self, path: str | Path) -> None:
@@ -527,4 +530,20 @@ def fit_twin(logs: list[str], cell: CellSpec, rounds: int = ROUNDS,
             f"{k} {e.value:.4g}" for k, e in arm.items() if e.fixed))
     est: dict[str, Estimate] = dict(arm)
     est.update(fit_moments(runs, cell, start, rounds, seeds, say, scenario))
-    return Twin(est, [str(p) for p in logs], str(cell.path))
+    return Twin(est, [str(p) for p in logs], str(cell.path), untested(runs, cell))
+
+
+def untested(runs: list[RunLog], cell: CellSpec) -> dict[str, str]:
+    """The model's assumptions a figure rests on that the logs never varied."""
+    out: dict[str, str] = {}
+    speeds = sorted({round(m.speed) for m in moves(runs, cell)})
+    if len(speeds) < 2:
+        out["robot speed %"] = (f"every logged move ran at {speeds[0] if speeds else '?'} %: "
+                                "the arm's times at other speeds rest on the model's 1/speed")
+    lift = [float(d.get("incline_mm_s", 0.0)) for r in runs for _, d in r.speeds
+            if d.get("incline_mm_s")]
+    if lift and max(lift) < 1.2 * min(lift):
+        out["release with lift speed"] = (
+            f"the incline ran only at {min(lift):g}-{max(lift):g} mm/s: the release at other "
+            "lift speeds rests on the model's release per mm of travel")
+    return out
