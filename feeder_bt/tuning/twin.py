@@ -397,6 +397,9 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
     nominal = {m.key: _cell_figure(cell, m.key) for m in MOMENTS}
     fig.update(nominal)
     hist: dict[str, list[tuple[float, float]]] = {m.key: [] for m in MOMENTS}
+    # each round's figure: the last ones averaged, so one round's simulated scatter does
+    # not decide the figure (a stochastic approximation's iterate average)
+    proposals: dict[str, list[float]] = {m.key: [] for m in MOMENTS}
     frozen: dict[str, str] = {}
     for rnd in range(rounds):
         sc = _sum_counts(simulate(runs[0], cell, fig, seeds, scenario))
@@ -417,6 +420,7 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
                                 min(math.log(MAX_STEP), math.log(s_obs / s_sim) / e)))
             fig[m.key] = min(m.hi * nominal[m.key], max(m.lo * nominal[m.key],
                                                          fig[m.key] * step))
+            proposals[m.key].append(fig[m.key])
         if say:
             say(f"round {rnd + 1}: " + ", ".join(f"{k.split('.')[-1]} {fig[k]:.4g}"
                                                  for k in nominal if k not in frozen))
@@ -426,10 +430,14 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
             out[m.key] = Estimate(nominal[m.key], None, frozen[m.key], fixed=False)
             continue
         e = _elasticity(hist[m.key], m.elasticity) if m.measured else m.elasticity
-        # the log's count and the simulated ones (as many per seed) both scatter
-        rel = math.sqrt(1.0 / max(obs[m.count], 1.0) * (1.0 + 1.0 / len(seeds))) \
-            / max(abs(e), 0.05)
+        # the log's count and the simulated ones (as many per seed, averaged over the
+        # rounds after the first) both scatter
+        rounds_avg = max(len(proposals[m.key]) - 1, 1)
+        rel = math.sqrt(1.0 / max(obs[m.count], 1.0)
+                        * (1.0 + 1.0 / (len(seeds) * rounds_avg))) / max(abs(e), 0.05)
         what = m.what.format(early_s=EARLY_S, late_s=LATE_AFTER_S, **obs)
+        tail = proposals[m.key][1:] or proposals[m.key] or [fig[m.key]]
+        fig[m.key] = math.exp(sum(math.log(v) for v in tail) / len(tail))
         if rel > MAX_REL_SD:
             out[m.key] = Estimate(nominal[m.key], None, (
                 f"the log fixes it only to ±{rel:.0%} (its count moves as the figure to the "
