@@ -41,7 +41,8 @@ WORLD_SECTIONS: dict[str, frozenset[str]] = {
                          "width_px", "height_px"}),
     "robot": frozenset({"model", "frame_file", "touch_points_mm", "safe_mm"}),
     "sim": frozenset(),
-    "plate": frozenset({"url", "baud", "timeout_s"}),
+    "plate": frozenset({"url", "baud", "timeout_s", "quiet_s", "echo_probe_s", "commands",
+                        "speeds", "repetitions"}),
 }
 #: a twin's notes: read by people and by ``feeder twin``, never by the simulator
 NOTES_KEY = "fit"
