@@ -402,7 +402,9 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
     proposals: dict[str, list[float]] = {m.key: [] for m in MOMENTS}
     frozen: dict[str, str] = {}
     for rnd in range(rounds):
-        sc = _sum_counts(simulate(runs[0], cell, fig, seeds, scenario))
+        # every logged run again, each with its own settings and length
+        sc = _sum_counts([sim for run in runs
+                          for sim in simulate(run, cell, fig, seeds, scenario)])
         for m in MOMENTS:
             if m.key in frozen:
                 continue
@@ -530,7 +532,8 @@ def fit_twin(logs: list[str], cell: CellSpec, rounds: int = ROUNDS,
     """Fit a twin of ``cell`` from the runs in ``logs`` (see the module); ``scenario``:
     the scenario they ran, when the logs' own path to it does not hold here."""
     runs = read_logs(logs)
-    logged_files(runs[0], scenario)        # before any fitting: a missing file fails now
+    for run in runs:                       # before any fitting: a missing file fails now
+        logged_files(run, scenario)
     arm = fit_arm(runs, cell)
     start = {_flat(k): e.value for k, e in arm.items() if e.fixed}
     if say:

@@ -99,3 +99,20 @@ def test_tune_runs_its_trials_on_a_world() -> None:
     on_plant = evaluate(Job(LENSES, {}, 1, 120.0, world=plant))
     assert on_plant["ppm"] != on_cell["ppm"]
     assert study_name(TuneConfig(LENSES, world=plant)) != study_name(TuneConfig(LENSES))
+
+
+def test_counts_read_only_the_log() -> None:
+    """The counts a fit matches, from a log's events alone: the incline's travel from its
+    logged speed changes, parts located set against it."""
+    from feeder_bt.tuning.twin import RunLog, counts
+    run = RunLog("x.db", 1, {}, t_end=100.0)
+    run.speeds = [(0.0, {"incline_mm_s": 50.0}), (40.0, {"incline_mm_s": 100.0})]
+    run.frames = [(10.0, {"new": 2, "parts": 2, "rejected": [["no class", 4000, 1, 2]]}),
+                  (60.0, {"new": 3, "parts": 4, "rejected": [["touches border", 900, 1, 2]]})]
+    run.picks = [(20.0, {"outcome": "held"}), (30.0, {"outcome": "missed_grab"})]
+    c = counts(run)
+    # the first part came 10 s in: the travel that brought the parts ends 10 s early
+    assert c["travel"] == pytest.approx(40 * 50 + 50 * 100)
+    assert (c["located"], c["no_class"], c["blobs"]) == (5, 1, 8)
+    assert (c["picks"], c["missed"]) == (2, 1)
+    assert c["early"] == 2 and c["early_travel"] == pytest.approx(30 * 50)
