@@ -102,3 +102,19 @@ def test_the_world_schema_takes_world_figures_only() -> None:
                 {"sim": {"clump_prob": 3}}):
         with pytest.raises(jsonschema.ValidationError):
             jsonschema.validate(bad, schema)
+
+
+def test_the_learnt_robot_model_copes_with_a_wrong_description(tmp_path: Path) -> None:
+    """The world's arm 30 % faster than the cell file says: the controller's fitted model
+    learns a shorter cycle than its description's; the description is untouched."""
+    from feeder_bt.robot.scara import arm_figures
+    _, cell = load_scenario(LENSES)
+    fast = {k: v * (1.3 if k.endswith("_s") else 1.69)
+            for k, v in arm_figures(world_arm(cell.robot).scara).items()}
+    w = _world(tmp_path, "sim: {" + ", ".join(f"{k}: {v:.6g}" for k, v in fast.items()) + "}\n")
+    base = run_job(RunOptions(scenario=str(LENSES), duration=120.0, fast=True, seed=1,
+                              view="none"))["robot_model"]
+    quick = run_job(RunOptions(scenario=str(LENSES), duration=120.0, fast=True, seed=1,
+                               view="none", world=str(w)))["robot_model"]
+    assert quick["nominal"] == base["nominal"]
+    assert quick["fitted"]["standard_cycle_s"] < 0.85 * base["fitted"]["standard_cycle_s"]
