@@ -13,6 +13,7 @@ from feeder_bt.analysis.run_report import RunReport, check_written
 from feeder_bt.control.cell import Cell
 from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.outputs import write_or_fallback
 from feeder_bt.core.vocabulary import split
 from feeder_bt.policy.kits import KitTracker, kits_report
 from feeder_bt.policy.supply_bound import (
@@ -162,6 +163,10 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
                                             if total else None)
     if world is not None and world.problems:
         parts["accounting"] = world.problems[:50]      # each part named, id and place
+    if world is not None:
+        mismatch = outcome_mismatch(dict(world.placed_by_type), retrieved)
+        if mismatch:
+            parts["outcomes"] = mismatch
     # the robot bounds priced with the arm as it really moves: the simulated world's SCARA
     # (feeder_bt.robot.scara), or on a real cell the cell's description
     arm = world.robot_model if world is not None else None
@@ -253,8 +258,29 @@ def _no_match(cell: Cell) -> dict[str, Any] | None:
     return watch.summary() if watch is not None else None
 
 
-def write_report(report: RunReport | dict[str, Any], path: str | Path) -> None:
-    """The report's JSON to ``path`` (checked against its schema where the tests ask)."""
+def outcome_mismatch(placed: dict[str, int], counted: dict[str, int]
+                     ) -> dict[str, dict[str, int]]:
+    """Every placement the world saw is one the cell counted, and the reverse: what does
+    not pair off, by type (``world_only``: placed, not counted, as when a PLACED's reply
+    was lost; ``cell_only``: counted, never placed). Empty when they agree."""
+    kinds = sorted(set(placed) | set(counted))
+    world_only = {k: placed.get(k, 0) - counted.get(k, 0) for k in kinds
+                  if placed.get(k, 0) > counted.get(k, 0)}
+    cell_only = {k: counted.get(k, 0) - placed.get(k, 0) for k in kinds
+                 if counted.get(k, 0) > placed.get(k, 0)}
+    return {"world_only": world_only, "cell_only": cell_only} if world_only or cell_only \
+        else {}
+
+
+def write_report(report: RunReport | dict[str, Any], path: str | Path,
+                 fallback_dir: str | Path | None = None) -> Path:
+    """The report's JSON to ``path`` (checked against its schema where the tests ask);
+    with ``fallback_dir``, a report that cannot be written there goes to a file in it,
+    named on standard error (``core.outputs.write_or_fallback``). Returns where it went."""
     data = report.to_json() if isinstance(report, RunReport) else report
     check_written(data)
-    Path(path).write_text(json.dumps(data, indent=2) + "\n")
+    text = json.dumps(data, indent=2) + "\n"
+    if fallback_dir is None:
+        Path(path).write_text(text)
+        return Path(path)
+    return write_or_fallback(path, text, "run report", fallback_dir)

@@ -68,6 +68,9 @@ class Parts:
     scrapped: int = _absent()
     recirculated_per_placed: float | None = _absent()
     accounting: list[Any] = _absent()        # each part the accounting found wrong, named
+    # placements the world saw and the cell did not count (world_only), or the cell
+    # counted and the world did not see (cell_only), by type: absent when they agree
+    outcomes: dict[str, dict[str, int]] = _absent()
 
 
 @dataclass
@@ -129,6 +132,7 @@ class RunReport:
     injected: dict[str, int] = _absent()     # a fault plan's faults, injected
     unseen: dict[str, int] = _absent()       # injected, met by nobody
     watchdog_stops: int = _absent()
+    reconnects: dict[str, int] = _absent()   # the drivers' links, per controller
     fault_plan: str = _absent()
     supply: dict[str, Any] = _absent()
     operator: dict[str, Any] = _absent()     # the dashboard's operators (--ui)

@@ -22,8 +22,22 @@ def summary(report: dict) -> str:
                if p.get("recirculated_per_placed") is not None else "")
             + _ceiling_line(report) + _fit_line(report) + _robot_time_line(report)
             + _kits_line(report)
-            + _robots_line(report) + "\n"
+            + _robots_line(report) + _outcomes_line(report) + "\n"
             + story_text(report))
+
+
+def _outcomes_line(report: dict) -> str:
+    """Placements the world and the cell do not agree on: each a counted mismatch."""
+    out = report["parts"].get("outcomes") or {}
+    said = [f"{sum(n.values())} placed the cell did not count ({_kinds(n)})"
+            for n in [out.get("world_only") or {}] if n]
+    said += [f"{sum(n.values())} counted the world never saw placed ({_kinds(n)})"
+             for n in [out.get("cell_only") or {}] if n]
+    return f"\n  MISMATCH: {'; '.join(said)}" if said else ""
+
+
+def _kinds(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in counts.items())
 
 
 def _fit_line(report: dict) -> str:

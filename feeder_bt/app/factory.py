@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 from feeder_bt.core.clock import Clock, RealClock, SimClock
 from feeder_bt.core.errors import ConfigError, HalError
 from feeder_bt.core.jobs import DoneJob, Job
-from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.model import CellSpec, Scenario, belt_window
 from feeder_bt.hal.interfaces import Hal, IoChange
 
 HAL_KINDS = ("sim", "emulated", "real")
@@ -88,6 +89,20 @@ class DriverHal(Hal):
         if plant is not None:         # the emulated cell refills its hopper like the sim
             plant.changeover(scenario)
 
+    def links(self) -> dict[str, Any]:
+        """What the links to the controllers went through: reconnects per controller and
+        the Galil watchdog's stops found after them (the run report's ``reconnects`` and
+        ``watchdog_stops``), so a real cell's outages leave a trace as the simulated ones do."""
+        galil, adept = self.extras.get("galil"), self.extras.get("adept")
+        out: dict[str, Any] = {"reconnects": {}}
+        if galil is not None:
+            out["reconnects"]["galil"] = max(galil.connects - 1, 0)
+            out["watchdog_stops"] = galil.watchdog_stops
+        if adept is not None:
+            out["reconnects"]["adept"] = sum(max(c.link.connects - 1, 0)
+                                             for c in adept.clients.values())
+        return out
+
     def close(self) -> None:
         for close in reversed(self.closers):
             try:
@@ -135,7 +150,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         adept = AdeptController(cell.adept, clock, inputs=[
             s.bit for s in cell.io.values() if s.controller == "adept" and s.dir == "in"],
             robot=cell.robot, estop=adept_estop(cell),
-            counts_per_mm=cell.encoder.counts_per_mm)
+            counts_per_mm=cell.encoder.counts_per_mm, window=belt_window(cell))
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
@@ -157,6 +172,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
     hal = DriverHal(conveyors=conveyors, robot=adept.robot, robot_position=adept.position,
                     camera=camera, io=io, kind=kind, plate=plate)
     hal.closers = closers
+    hal.extras.update(galil=galil, adept=adept)
     return hal
 
 

@@ -21,6 +21,7 @@ from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.clock import RealClock, SimClock
 from feeder_bt.core.errors import ConfigError, FeederError
 from feeder_bt.core.model import Scenario
+from feeder_bt.core.outputs import check_output_file
 from feeder_bt.records.eventlog import EventLog
 
 STOP_GRACE_S = 30.0        # clock time allowed for the clean-up tree after a stop
@@ -288,6 +289,8 @@ def _prepare(opts: RunOptions) -> _Prepared:
     # with --ui the run lasts until Ctrl-C unless --duration; the operator starts the cell
     duration = 60.0 if opts.duration is None and not (opts.ui or opcua) else opts.duration
     start = (not opts.ui) if opts.start is None else opts.start
+    if opts.report:
+        check_output_file(opts.report, "--report")
     scenario, cell_spec = load_scenario(opts.scenario, opts.cell, overlay=opts.overlay)
     if opts.ui:
         from feeder_bt.ui.app import check_users
@@ -478,6 +481,12 @@ class _Run:
             report.unseen = dict(self.injector.unseen)     # injected, met by nobody
             report.watchdog_stops = self.injector.watchdog_stops   # #WDOG outages
             report.fault_plan = str(opts.faults)
+        links = getattr(self.hal, "links", None)      # the drivers' links (not the sim's)
+        if links is not None:
+            seen = links()
+            report.reconnects = seen["reconnects"]
+            if "watchdog_stops" in seen:
+                report.watchdog_stops = seen["watchdog_stops"]
         if self.supply is not None:
             report.supply = self.supply.report()
         if self.ui:
@@ -485,12 +494,11 @@ class _Run:
         if self.plant is not None:
             report.update(self.plant.report())
         data = report.to_json()
-        if opts.report:
-            Path(opts.report).parent.mkdir(parents=True, exist_ok=True)
-            write_report(data, opts.report)
-        if self.log:
-            self.log.finish(data)
+        if self.log:                    # the run's row first: a report path that fails
+            self.log.finish(data)       # at the end must not leave it unfinished
             self.log.close()
+        if opts.report:
+            write_report(data, opts.report, fallback_dir=Path(DEFAULT_DB).parent)
         return data
 
     # ---------------------------------------------------------------- helpers

@@ -94,6 +94,12 @@ class Stats:
         """A failure of ``kind`` now is an attempt of an episode under way, not a new fault."""
         return kind in self.pending.get(key, ())
 
+    def recovered(self, t: float, kind: str, attempts: int = 0) -> None:
+        """A fault of ``kind`` recovered: counted and logged as one, so that a report rebuilt
+        from the event log (a killed run's) counts the same recoveries as the run's own."""
+        self.recoveries[kind] += 1
+        self.emit(t, "recovered", kind=kind, attempts=attempts)
+
     def succeeded(self, key: str, t: float, kinds: tuple[str, ...] | None = None) -> None:
         """A job reporting to ``key`` succeeded: the faults of ``kinds`` (any, if None)
         the branch was recovering from are recovered; the others stay pending."""
@@ -105,8 +111,7 @@ class Stats:
         if not done:
             return
         for kind in done:
-            self.recoveries[kind] += 1
-            self.emit(t, "recovered", kind=kind, attempts=self.attempts[key])
+            self.recovered(t, kind, self.attempts[key])
         left = [k for k in waiting if k not in done]
         if left:
             self.pending[key] = left

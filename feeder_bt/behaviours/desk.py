@@ -26,8 +26,10 @@ from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx
 from feeder_bt.behaviours.keys import SPEEDS
+from feeder_bt.behaviours.policies import gone_by
 from feeder_bt.behaviours.retrieve import NextPart, count_retrieved
 from feeder_bt.core.clock import Clock
+from feeder_bt.core.model import belt_window
 from feeder_bt.core.part_protocol import (
     USAGE,
     Offer,
@@ -166,6 +168,10 @@ class Handed:
     picked: bool = False
 
 
+# where a part handed out ends: handed_out = the sum of these + outstanding
+LEDGER = ("placed", "missed", "released", "expired", "held_expired", "mismatch")
+
+
 @dataclass
 class DeskCounts:
     """What the desk did, for the report (``part_server``) and STATUS."""
@@ -176,7 +182,11 @@ class DeskCounts:
         keys = ("requests", "handed_out", "picked", "placed", "missed", "released",
                 "expired", "held_expired", "late_reports", "refused", "mismatch",
                 "over_limit", "cut_off")
-        return {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
+        out = {**{k: int(self.counts[k]) for k in keys}, "outstanding": outstanding}
+        # every part handed out ends in one of these, or is still out: 0 when the ledger
+        # balances (docs/part-server.md)
+        out["unaccounted"] = out["handed_out"] - outstanding - sum(out[k] for k in LEDGER)
+        return out
 
 
 class Desk(TrustRules):
@@ -440,7 +450,7 @@ class Desk(TrustRules):
             values["encoder_bits"] = int(enc.robot_bits)
             values["tracking"] = int(ctx.scenario.retrieve.tracking)
             values["types"] = ",".join(ctx.scenario.parts)
-        for k in ("placed", "missed", "released", "expired", "held_expired"):   # the ledger
+        for k in LEDGER:
             values[k] = int(self.counts[k])
         values["wanted"] = int(sum(self.wanted.values()))
         return status_line(values)
@@ -507,8 +517,7 @@ class ServeRobots(NextPart):
         quiet = now - desk.last_request
         if desk.idle_told and (quiet < ROBOT_IDLE_S or desk.queues):
             desk.idle_told = False
-            stats.recoveries["robot_idle"] += 1
-            stats.emit(now, "recovered", kind="robot_idle", attempts=0)
+            stats.recovered(now, "robot_idle")
         elif not desk.idle_told and quiet >= ROBOT_IDLE_S and len(self.ctx.queue) \
                 and not desk.queues and not desk.handed:
             desk.idle_told = True
@@ -527,7 +536,8 @@ class ServeRobots(NextPart):
         y = part.y_mm + oy
         if abs(y - by) >= sp.reach_mm:
             return math.inf
-        x_enter = bx - math.sqrt(sp.reach_mm ** 2 - (y - by) ** 2)
+        x_enter = max(bx - math.sqrt(sp.reach_mm ** 2 - (y - by) ** 2),
+                      belt_window(self.ctx.cell)[0])
         x = self.x_now(part) + ox
         if x >= x_enter:
             return 0.0
@@ -543,7 +553,7 @@ class ServeRobots(NextPart):
         self.v_mm_s = self.policy.belt_mm_s = float(self.bb.get(SPEEDS.HORIZONTAL))
         self.policy.robot_pct = float(self.bb.get(SPEEDS.ROBOT))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
-        gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
+        gone = queue.take(gone_by(self.ctx, self.x_now, lead))
         if gone:
             self.ctx.stats.count("too_far", len(gone))
         wanted = None if ptype is None else {ptype}

@@ -72,7 +72,7 @@ class ResetPlate(JobLeaf):
         return _plate(self.ctx).reset()
 
     def on_success(self, result: object) -> Status:
-        self.ctx.stats.recoveries["plate"] += 1
+        self.ctx.stats.recovered(self.ctx.now(), "plate")
         return Status.SUCCESS
 
 

@@ -16,10 +16,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from feeder_bt.behaviours.base import Ctx
+from feeder_bt.core.model import belt_window
 from feeder_bt.core.parts import Part
 from feeder_bt.robot.fit import pricing_model
 
 XNow = Callable[[Part], float]
+
+
+def gone_by(ctx: Ctx, x_now: XNow, lead_mm: float) -> Callable[[Part], bool]:
+    """Which queued parts no pick can have any more: past ``too_far`` by the time a pick
+    would grip them (``lead_mm`` of belt on), or, tracking, already past the controller's
+    pick limit (``core.model.belt_window``), where it refuses to start the pick."""
+    r = ctx.scenario.retrieve
+    pick_limit = belt_window(ctx.cell)[2] if r.tracking else math.inf
+    parts = ctx.scenario.parts
+
+    def gone(p: Part) -> bool:
+        x = x_now(p)
+        return x + lead_mm > r.too_far_mm or x + parts[p.type].tool_offset[0] > pick_limit
+    return gone
 
 
 class Policy:
@@ -118,17 +133,20 @@ class ShortestCycle(Policy):
         t = np.zeros_like(x0)
         for _ in range(4):                     # intercept on the moving belt
             t = self.model.arch_times(np.hypot(x0 + v * t - sx, b.y - sy), pct)
+        up, _down, pick_limit = belt_window(self.ctx.cell)
         inside = self.model.reachable_mask(x0 + v * t, b.y)
+        if v > 0:                              # the controller tracks only inside its window
+            inside &= x0 + v * t >= up
         if not inside.all():                   # wait for parts still upstream of the reach
             bx, by = sp.base_mm
             half = np.sqrt(np.maximum(sp.reach_mm ** 2 - (b.y - by) ** 2, 0.0))
-            x_enter = bx - half + 1.0
+            x_enter = np.maximum(bx - half, up) + 1.0
             can_wait = (v > 0) & (np.abs(b.y - by) < sp.reach_mm) & (x0 + v * t <= x_enter)
             wait = (x_enter - x0) / v if v > 0 else np.zeros_like(x0)
             t = np.where(inside, t, np.where(can_wait, wait, np.inf))
         t_grip = t + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
         x_grip = x0 + v * t_grip
-        ok = np.isfinite(t_grip) & (x_grip - b.ox <= r.too_far_mm) \
+        ok = np.isfinite(t_grip) & (x_grip - b.ox <= r.too_far_mm) & ((v == 0) | (x0 <= pick_limit)) \
             & self.model.reachable_mask(np.where(np.isfinite(x_grip), x_grip, 0.0), b.y)
         back = self.model.arch_times(np.hypot(x_grip - b.place_x, b.y - b.place_y), pct)
         return np.where(ok, t_grip + back + sp.release_s, np.inf)

@@ -113,7 +113,7 @@ class Shake(JobLeaf):
         return self.ctx.hal.conveyors["horizontal"].shake(self.AMPLITUDE_MM, self.CYCLES)
 
     def on_success(self, result: object) -> Status:
-        self.ctx.stats.recoveries["conveyor"] += 1
+        self.ctx.stats.recovered(self.ctx.now(), "conveyor")
         return Status.SUCCESS
 
 

@@ -12,7 +12,7 @@ from py_trees.common import Status
 
 from feeder_bt.behaviours.base import Ctx, JobLeaf, Leaf
 from feeder_bt.behaviours.keys import RETRIEVE, SPEEDS
-from feeder_bt.behaviours.policies import POLICIES
+from feeder_bt.behaviours.policies import POLICIES, gone_by
 from feeder_bt.core.errors import HalError, UnknownPart
 from feeder_bt.core.geometry import wrap_deg
 from feeder_bt.core.jobs import Job
@@ -56,7 +56,7 @@ class NextPart(Leaf):
         self.policy.belt_mm_s = float(self.bb.get(SPEEDS.HORIZONTAL))
         self.policy.robot_pct = float(self.bb.get(SPEEDS.ROBOT))
         lead = self.policy.belt_mm_s * self.policy.lead_s() if r.tracking else 0.0
-        gone = queue.take(lambda p: self.x_now(p) + lead > r.too_far_mm)
+        gone = queue.take(gone_by(self.ctx, self.x_now, lead))
         if gone:
             self.ctx.stats.count("too_far", len(gone))
         kit = self.ctx.stats.kit

@@ -23,6 +23,11 @@ from feeder_bt.hal.interfaces import Hal
 
 MIN_TOUCHES = 3
 MIN_TRAVEL_MM = 50.0
+# The cell frame's x is the belt's travel (vplus/PROTOCOL.md, "Frames"). A frame turned by
+# this much from it puts a part tracked 600 mm about 1 mm across the belt from where the
+# controller thinks it is: over it, a calibration says so and gives the frame square to the
+# travel.
+TRAVEL_LIMIT_DEG = 0.1
 
 
 @dataclass(frozen=True)
@@ -112,3 +117,23 @@ def belt_procedure(hal: Hal, wait: Waiter, touch_marker: Callable[[], Job],
         touches.append(BeltTouch(pose.x, pose.y, hal.robot_position.belt_encoder()))
     wait(hal.robot.move_safe())
     return fit_belt(touches, robot_bits)
+
+
+def travel_deg(moves_mm: Sequence[tuple[float, float]]) -> float:
+    """The belt's direction of travel in a frame (degrees from its x axis, -90..90): the
+    principal direction of a marker's displacements (each from where it was at rest) as
+    the belt carried it, seen in that frame (a camera's calibration, a robot's)."""
+    d = np.asarray(moves_mm, dtype=float).reshape(-1, 2)
+    if len(d) < 2 or float(np.hypot(d[:, 0], d[:, 1]).max(initial=0.0)) < MIN_TRAVEL_MM:
+        raise CalibrationError(f"the marker must travel at least {MIN_TRAVEL_MM:g} mm in view "
+                               "to give the belt's direction")
+    sxx, syy, sxy = float(d[:, 0] @ d[:, 0]), float(d[:, 1] @ d[:, 1]), float(d[:, 0] @ d[:, 1])
+    deg = math.degrees(0.5 * math.atan2(2.0 * sxy, sxx - syy))
+    return deg
+
+
+def travel_in_cell_deg(fit: BeltFit, base_deg: float) -> float:
+    """The belt's travel in the cell frame, from the belt calibration's direction in the
+    robot frame and the robot's turn in the cell (``robot.base_deg``): 0 when the cell
+    frame's x is the travel, as it must be."""
+    return (fit.direction_deg + base_deg + 180.0) % 360.0 - 180.0

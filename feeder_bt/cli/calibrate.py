@@ -25,6 +25,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import math
 import os
 from pathlib import Path
 
@@ -42,6 +43,7 @@ from feeder_bt.calibration import (
     tool_procedure,
     window_error_mm,
 )
+from feeder_bt.calibration.belt import TRAVEL_LIMIT_DEG, travel_in_cell_deg
 from feeder_bt.calibration.camera import Target, TargetPose, calibration_values, centred_pose
 from feeder_bt.calibration.camera_model import (
     DEFAULT_MAX_BELT_MM,
@@ -160,8 +162,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                            counts_per_mm=args.sim_counts_per_mm, frame_deg=args.sim_frame_deg)
         else:
             fit = driver_belt(cell, kind, seed=args.seed, noise_mm=args.noise)
-        print(format_belt(fit))
-        _write(args, cell, "belt", fit.as_dict())
+        print(format_belt(fit, cell.robot.base_deg))
+        _write(args, cell, "belt", {**fit.as_dict(), **belt_travel(fit, cell.robot.base_deg)})
     else:
         if kind == "sim":
             fit_t = sim_tool(cell, tuple(args.sim_tool), seed=args.seed, noise_mm=args.noise)
@@ -327,7 +329,7 @@ def sim_truth(nominal: CameraCalibration, dx: float = 0.0, dy: float = 0.0,
               deg: float = 0.0, scale_pct: float = 0.0) -> CameraCalibration:
     """The cell's calibration with an error added: how the simulated camera really maps
     (a full calibration's homography gets the same error in the belt frame)."""
-    from feeder_bt.sim.imperfect import shifted
+    from feeder_bt.vision.pixels import shifted
 
     return shifted(nominal, (dx, dy), scale_pct, deg)
 
@@ -520,11 +522,28 @@ def format_result(r: CameraResult, cell: CellSpec, truth: CameraCalibration | No
     return "\n".join(lines)
 
 
-def format_belt(fit: BeltFit) -> str:
-    return (f"belt: counts_per_mm {fit.counts_per_mm:.4f}, direction {fit.direction_deg:.3f} "
-            f"deg in the robot frame ({fit.direction[0]:.6f}, {fit.direction[1]:.6f})\n"
-            f"  residual over {fit.n_touches} touches, {fit.travel_mm:.0f} mm of travel: rms "
-            f"{fit.rms_mm:.3f} mm, max {fit.max_mm:.3f} mm")
+def belt_travel(fit: BeltFit, base_deg: float) -> dict[str, float]:
+    """The travel in the cell frame and the ``robot.base_deg`` that puts it along x."""
+    return {"travel_in_cell_deg": round(travel_in_cell_deg(fit, base_deg), 4),
+            "base_deg_square_to_travel": round(-fit.direction_deg, 4)}
+
+
+def format_belt(fit: BeltFit, base_deg: float = 0.0) -> str:
+    off = travel_in_cell_deg(fit, base_deg)
+    lines = [f"belt: counts_per_mm {fit.counts_per_mm:.4f}, direction {fit.direction_deg:.3f} "
+             f"deg in the robot frame ({fit.direction[0]:.6f}, {fit.direction[1]:.6f})",
+             f"  residual over {fit.n_touches} touches, {fit.travel_mm:.0f} mm of travel: rms "
+             f"{fit.rms_mm:.3f} mm, max {fit.max_mm:.3f} mm"]
+    if abs(off) > TRAVEL_LIMIT_DEG:
+        lines.append(f"  the belt travels {off:.3f} deg off the cell frame's x axis (over "
+                     f"{TRAVEL_LIMIT_DEG:g} deg; robot.base_deg {base_deg:g}): picks drift "
+                     f"across the belt {abs(math.sin(math.radians(off))) * 600:.1f} mm per 600 "
+                     f"mm tracked. Set robot.base_deg: {-fit.direction_deg:.3f} (or teach the "
+                     "frame again with marks square to the travel)")
+    else:
+        lines.append(f"  the belt travels {off:.3f} deg off the cell frame's x axis (within "
+                     f"{TRAVEL_LIMIT_DEG:g} deg)")
+    return "\n".join(lines)
 
 
 def format_tool(fit: ToolFit) -> str:

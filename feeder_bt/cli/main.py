@@ -12,22 +12,17 @@ from pathlib import Path
 
 from feeder_bt.analysis.summary import summary
 from feeder_bt.cli.argtypes import expect_kind, positive
-from feeder_bt.core.errors import ConfigError, FeederError
+from feeder_bt.core.errors import ConfigError, FeederError, UsageError
 
 # feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission", "tune", "replay_cmd", "twin_cmd")
+         "users_cmd", "commission", "tune", "replay_cmd", "teach_cmd", "twin_cmd")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
 #: the world or the trees, never the operator's doing): docs/faults.md
 EXIT_ACCOUNTING = 4
 
-
-class UsageError(FeederError):
-    """A command-line mistake found after parsing (options that do not go together)."""
-
-    exit_code = 2
 
 
 class _Parser(argparse.ArgumentParser):
@@ -183,6 +178,10 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"{nm['example']} (blobs: {why}; see the vision_no_match events)",
               file=sys.stderr)
     problems = p.get("accounting") or []
+    if p.get("outcomes"):               # the world and the cell disagree on placements
+        print(f"ACCOUNTING: placements the world and the cell do not agree on: "
+              f"{p['outcomes']}", file=sys.stderr)
+        return EXIT_ACCOUNTING
     if problems:
         for prob in problems[:10]:
             where = prob.get("last_place") or " and ".join(prob.get("places", []))

@@ -22,17 +22,17 @@ from feeder_bt.cli.inputs import check_size, load_golden, scenario_locator
 from feeder_bt.core.geometry import outer, polygon_area, pose_outline, rings
 from feeder_bt.core.images import BadInput, read_image
 from feeder_bt.core.model import Scenario
+from feeder_bt.tuning.ranges import PREFERRED
+from feeder_bt.tuning.ranges import fmt as _fmt
+from feeder_bt.tuning.ranges import inside as _inside
+from feeder_bt.tuning.ranges import spread as _spread
+from feeder_bt.tuning.ranges import widen as _widen
 from feeder_bt.vision.features import FEATURES
 from feeder_bt.vision.locator import Locator
 
 FEW_SAMPLES = 20            # fewer good blobs than this: say the ranges may be too narrow
 OUTLIER_AREA = 0.20        # good-image blobs further than this from the median area are not samples
-MARGIN_SPAN = 0.25         # widen each range by this fraction of its span ...
-MARGIN_VALUE = 0.03        # ... plus this fraction of its centre
 MAX_EXTRA = 3              # at most this many features besides the area
-#: Shape features in the order they are preferred when several separate equally well.
-PREFERRED = ("circularity", "aspect", "rectangularity", "solidity", "perimeter_mm",
-             "hu1", "hu2", "holes", "hole_area_mm2")
 
 
 @dataclass
@@ -224,33 +224,3 @@ def _part_pose(scenario: Scenario, part: str | None, pose: str | None) -> tuple[
     if pose not in poses:
         raise BadInput(f"--pose {pose!r}: part {part!r} has poses {', '.join(poses)}")
     return part, pose
-
-
-def _widen(values: list[float]) -> tuple[float, float]:
-    lo, hi = min(values), max(values)
-    m = MARGIN_SPAN * (hi - lo) + MARGIN_VALUE * abs(hi + lo) / 2
-    return _round(lo - m, math.floor), _round(hi + m, math.ceil)
-
-
-def _round(v: float, how) -> float:
-    """Three significant figures, rounded outwards so the range only grows."""
-    if v == 0:
-        return 0.0
-    q = 10 ** (math.floor(math.log10(abs(v))) - 2)
-    return how(v / q) * q
-
-
-def _fmt(v: float) -> str:
-    if v == int(v) and abs(v) < 1e6:
-        return str(int(v))
-    return f"{v:.4g}" if abs(v) >= 1e-3 else f"{v:.3e}"
-
-
-def _inside(f: dict[str, float], ranges: dict[str, tuple[float, float]]) -> bool:
-    return all(lo <= f[n] <= hi for n, (lo, hi) in ranges.items())
-
-
-def _spread(samples: list[dict[str, float]], name: str) -> float:
-    """Relative spread (std / |mean|) of a feature over the samples: lower is steadier."""
-    v = np.array([f[name] for f in samples])
-    return float(v.std() / max(abs(v.mean()), 1e-12))

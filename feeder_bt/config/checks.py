@@ -14,7 +14,13 @@ from feeder_bt.config.area_checks import check_class_areas, check_class_rulers
 from feeder_bt.config.special import part_size_mm
 from feeder_bt.config.tables import ADJUST_ORDER, ADJUST_PARAMS, PROBABILITY_TOLERANCE, _num
 from feeder_bt.config.walker import _Ctx, _suggest
-from feeder_bt.core.model import AdjustParams, CellSpec, Scenario
+from feeder_bt.core.model import (
+    AdjustParams,
+    CellSpec,
+    Scenario,
+    belt_window,
+    reach_over_belt,
+)
 from feeder_bt.policy.adjusters import ADJUSTERS, AdjusterParamError
 from feeder_bt.vision.features import FEATURES
 
@@ -26,6 +32,7 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
         ctx.add_problem("robot.inner_reach_mm", f"must be < robot.reach_mm "
                                                 f"({_num(r.reach_mm)}), got "
                                                 f"{_num(r.inner_reach_mm)}")
+    _check_window(cell, ctx)
     t = cell.camera.target
     if t is not None:
         if min(t.board) < 2:
@@ -69,6 +76,32 @@ def _check_cell(cell: CellSpec, ctx: _Ctx) -> None:
                         f"friction is never more than sticking friction, got "
                         f"{_num(s.belt_mu_kinetic)}")
     _check_galil(cell, ctx)
+
+
+def window_problems(cell: CellSpec, up: float, down: float, pick: float) -> list[str]:
+    """What is wrong with a belt window (belt-frame x, mm) on this cell: its order, and a
+    limit outside the arm's reach over the belt (where V+ would answer -610 or -9004 for
+    every part). Shared by the cell's checks and commissioning's taught window."""
+    span = reach_over_belt(cell)
+    out = []
+    if not up < pick <= down:
+        out.append(f"needs upstream < pick limit <= downstream, got {_num(up)}, "
+                   f"{_num(pick)}, {_num(down)} mm")
+    for name, x in (("upstream", up), ("downstream", down)):
+        if not span[0] - 0.5 <= x <= span[1] + 0.5:
+            out.append(f"the {name} limit {_num(x)} mm is outside the arm's reach over the "
+                       f"belt ({_num(round(span[0], 1))}-{_num(round(span[1], 1))} mm, from "
+                       "robot.base_mm, reach_mm and the horizontal belt)")
+    return out
+
+
+def _check_window(cell: CellSpec, ctx: _Ctx) -> None:
+    r = cell.robot
+    if r.belt_window_mm is None and r.pick_limit_mm is None:
+        return
+    key = "robot.belt_window_mm" if r.belt_window_mm is not None else "robot.pick_limit_mm"
+    for problem in window_problems(cell, *belt_window(cell)):
+        ctx.add_problem(key, problem)
 
 
 # Galil wiring (docs/real-cell.md): I/O bits start at 1, the input monitor reports

@@ -161,7 +161,7 @@ class Cell:
         if self.estop_pressed():
             raise CellCommandError("the e-stop is still pressed: release it first")
         if self.fault_reason == "e-stop pressed":
-            self.stats.recoveries["estop"] += 1
+            self.stats.recovered(self.clock.now(), "estop")
         for conv in self.hal.conveyors.values():
             conv.servo(True)            # the operator's reset: motors on again
         self.fault_reason = None

@@ -18,6 +18,13 @@ class FeederError(Exception):
     exit_code = 1
 
 
+class UsageError(FeederError):
+    """A command-line mistake found after parsing (options that do not go together, an
+    output path that cannot be written)."""
+
+    exit_code = 2
+
+
 #: At most this many problems are shown at once; the rest are counted ("... and N more").
 MAX_PROBLEMS = 50
 

@@ -6,6 +6,7 @@ Units are in the names: ``_mm``, ``_mm_s``, ``_s``, ``_pct``, ``_deg``, ``_px``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -380,6 +381,12 @@ class RobotSpec:
     # cell-frame points the person touches for it (empty: three spread over the pick window)
     frame_file: str | None = None
     touch_points_mm: list[tuple[float, float]] = field(default_factory=list)
+    # the belt window (belt-frame x, mm): where the arm may track the belt, and past which no
+    # pick starts; sent to the robot controller at connect (V+ WINDOW), taught with the tool
+    # at commissioning. Unset: ``belt_window`` derives them from the reach over the belt
+    # (the pick limit: the downstream limit).
+    belt_window_mm: tuple[float, float] | None = None
+    pick_limit_mm: float | None = None
     # controller time per pick and per place before the arm moves: command round trips,
     # program start-up (0 for our V+ servers, which get one line per pick or place)
     command_overhead_s: float = 0.0
@@ -538,3 +545,27 @@ class CellSpec:
     sim: SimImperfections = field(default_factory=SimImperfections)   # simulated cell only
     presentation: str = "belt"           # belt | plate (docs/plate-feeders.md)
     plate: PlateSpec = field(default_factory=PlateSpec)
+
+
+def reach_over_belt(cell: CellSpec) -> tuple[float, float]:
+    """The stretch of the horizontal belt (belt-frame x, mm) some point of which, across its
+    width, is inside the arm's reach: the widest belt window the arm can work."""
+    r = cell.robot
+    bx, by = r.base_mm
+    conv = cell.conveyors.get("horizontal")
+    width = conv.width_mm if conv else 610.0
+    length = conv.length_mm if conv else 1219.0
+    dy = 0.0 if 0.0 <= by <= width else min(abs(by), abs(by - width))
+    half = math.sqrt(max(r.reach_mm ** 2 - dy ** 2, 0.0))
+    return max(bx - half, 0.0), min(bx + half, length)
+
+
+def belt_window(cell: CellSpec) -> tuple[float, float, float]:
+    """(upstream, downstream, pick limit), belt-frame x in mm: the cell description's
+    ``robot.belt_window_mm`` and ``robot.pick_limit_mm``, else the reach over the belt, and
+    the downstream limit as the pick limit (a part that would leave the window before its
+    grip fails there, on the controller as in the simulator)."""
+    r = cell.robot
+    up, down = r.belt_window_mm if r.belt_window_mm is not None else reach_over_belt(cell)
+    pick = r.pick_limit_mm if r.pick_limit_mm is not None else down
+    return float(up), float(down), float(pick)

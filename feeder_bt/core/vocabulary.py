@@ -65,7 +65,9 @@ def story(report: dict[str, Any]) -> list[str]:
         kinds = f": {_by_kind(faults)}" if faults else ""
         dog = report.get("watchdog_stops")
         wd = f"; the Galil's watchdog stopped the belts {dog} times" if dog else ""
-        lines.append(f"faults {n}{inj}, recovered {r}{kinds}{wd}")
+        links = {k: v for k, v in (report.get("reconnects") or {}).items() if v}
+        rc = f"; links reconnected: {_by_kind(links)}" if links else ""
+        lines.append(f"faults {n}{inj}, recovered {r}{kinds}{wd}{rc}")
     else:
         lines.append("faults 0")
     if misses:

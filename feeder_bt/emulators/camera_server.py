@@ -17,10 +17,12 @@ from __future__ import annotations
 import math
 import socket
 import threading
+import time
 
 import numpy as np
 
 from feeder_bt.calibration.camera import Target, TargetPose
+from feeder_bt.core.errors import CommsLost, GrabFailed, one_line
 from feeder_bt.emulators.camera import PlantCameraSource
 from feeder_bt.emulators.line_server import LineServer
 from feeder_bt.sim.imperfect import true_calibration
@@ -105,26 +107,63 @@ class CameraServer(LineServer):
 
 
 class CameraClient:
-    """A ``FrameSource`` (``capture``/``close``) on ``emulated-camera://HOST:PORT``."""
+    """A ``FrameSource`` (``capture``/``close``) on ``emulated-camera://HOST:PORT``.
+
+    Every capture has one deadline (``timeout_s``) for the whole frame, so a server that
+    drips a byte every few seconds fails it as surely as a silent one; its header line is
+    capped; every failure is a typed ``CommsLost`` or ``GrabFailed`` naming the server."""
 
     SCHEME = "emulated-camera://"
+    HEAD_CAP = 64                  # "OK <w> <h>\n" is far shorter
+    MAX_PIXELS = 16_000_000
 
     def __init__(self, spec: str, timeout_s: float = 10.0) -> None:
+        self.where = spec
+        self.timeout_s = timeout_s
         host, _, port = spec[len(self.SCHEME):].partition(":")
-        self.sock = socket.create_connection((host, int(port)), timeout=timeout_s)
-        self._file = self.sock.makefile("rb")
+        try:
+            self.sock = socket.create_connection((host, int(port)), timeout=timeout_s)
+        except (OSError, ValueError) as e:
+            raise CommsLost(f"{spec}: cannot connect: {e}") from None
+        self._buf = b""
+
+    def _recv(self, deadline: float) -> bytes:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise CommsLost(f"{self.where}: no whole frame within {self.timeout_s:g} s")
+        self.sock.settimeout(left)
+        try:
+            chunk = self.sock.recv(1 << 20)
+        except TimeoutError:
+            raise CommsLost(f"{self.where}: no whole frame within {self.timeout_s:g} s") \
+                from None
+        except OSError as e:
+            raise CommsLost(f"{self.where}: link lost: {e}") from None
+        if not chunk:
+            raise CommsLost(f"{self.where}: the server closed the link")
+        return chunk
 
     def capture(self) -> np.ndarray:
-        self.sock.sendall(b"GRAB\n")
-        head = self._file.readline().decode("ascii", "replace").split()
-        if len(head) != 3 or head[0] != "OK":
-            raise OSError(f"emulated camera: bad reply {' '.join(head)[:60]!r}")
+        deadline = time.monotonic() + self.timeout_s
+        try:
+            self.sock.sendall(b"GRAB\n")
+        except OSError as e:
+            raise CommsLost(f"{self.where}: link lost: {e}") from None
+        while b"\n" not in self._buf:
+            if len(self._buf) > self.HEAD_CAP:
+                raise CommsLost(f"{self.where}: no reply line in {self.HEAD_CAP} bytes")
+            self._buf += self._recv(deadline)
+        line, _, self._buf = self._buf.partition(b"\n")
+        head = line.decode("ascii", "replace").split()
+        if len(head) != 3 or head[0] != "OK" or not (head[1].isdigit() and head[2].isdigit()):
+            raise GrabFailed(f"{self.where}: bad reply {one_line(' '.join(head))[:60]!r}")
         w, h = int(head[1]), int(head[2])
-        data = self._file.read(w * h)
-        if len(data) != w * h:
-            raise OSError("emulated camera: the image was cut short")
+        if not 0 < w * h <= self.MAX_PIXELS:
+            raise GrabFailed(f"{self.where}: an image of {w} x {h} pixels")
+        while len(self._buf) < w * h:
+            self._buf += self._recv(deadline)
+        data, self._buf = self._buf[:w * h], self._buf[w * h:]
         return np.frombuffer(data, np.uint8).reshape(h, w).copy()
 
     def close(self) -> None:
-        self._file.close()
         self.sock.close()

@@ -78,6 +78,9 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
         faults = dict(conn.execute(
             "SELECT json_extract(data, '$.kind'), count(*) FROM events "
             "WHERE run_id=? AND kind='fault' GROUP BY 1", (run_id,)).fetchall())
+        recovered = dict(conn.execute(
+            "SELECT json_extract(data, '$.kind'), count(*) FROM events "
+            "WHERE run_id=? AND kind='recovered' GROUP BY 1", (run_id,)).fetchall())
     except (sqlite3.Error, json.JSONDecodeError, KeyError, TypeError) as e:
         raise EventLogError(f"run {run_id}: damaged record ({e})") from None
     total = sum(by_type.values())
@@ -87,7 +90,7 @@ def summary(conn: sqlite3.Connection, run_id: int) -> dict[str, Any]:
                retrieved=by_type, located=int(located or 0), missed=None, lost=None,
                misoriented=None, scrapped=None, faults=split(faults)[0],
                misses=split(faults)[1],
-               story=story({"faults": faults}))
+               story=story({"faults": faults, "recoveries": recovered}))
     return out
 
 

@@ -23,7 +23,7 @@ from feeder_bt.core.encoder import diff
 from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab
 from feeder_bt.core.geometry import near, outer, place_outline, rings, wrap_deg
 from feeder_bt.core.jobs import Job
-from feeder_bt.core.model import CellSpec, Scenario
+from feeder_bt.core.model import CellSpec, Scenario, belt_window
 from feeder_bt.hal.interfaces import Held, PickResult, PickTarget, Pose
 from feeder_bt.robot.gripper import footprint, grip_poses
 from feeder_bt.robot.scara import ScaraModel
@@ -85,13 +85,18 @@ class RobotGrips:
         spec = self.cell.robot
         px, py = self.robot_pose.x, self.robot_pose.y
         self.planned_wait_s = 0.0     # at the reach's edge, for a part still upstream
+        up, down, pick_limit = belt_window(self.cell)
+        if target.tracking and self.commanded_xy(target, t0)[0] > pick_limit:
+            raise EnvelopeError(f"part {target.part_id} is past the pick limit "
+                                f"({pick_limit:.0f} mm): outside the belt window")
         t_arr = t0
         for _ in range(6):
             cx, cy = self.commanded_xy(target, t_arr)
             t_arr = t0 + scale * self.robot_model.move_time((px, py), (cx, cy),
                                                             self.robot_speed_pct)
         cx, cy = self.commanded_xy(target, t_arr)
-        if not self.robot_model.reachable(cx, cy):
+        upstream = target.tracking and cx < up       # V+ waits for it to enter the window
+        if upstream or not self.robot_model.reachable(cx, cy):
             t_enter = self._time_entering_reach(target, cy, t0)
             if t_enter is None or t_enter < t_arr:
                 raise EnvelopeError(f"part {target.part_id} at x={cx:.0f} y={cy:.0f} mm "
@@ -102,6 +107,9 @@ class RobotGrips:
         gx, gy = self.commanded_xy(target, t_grip)
         if not self.robot_model.reachable(gx, gy):
             raise EnvelopeError(f"part {target.part_id} leaves the reach before the grip")
+        if target.tracking and gx > down:
+            raise EnvelopeError(f"part {target.part_id} leaves the belt window ({down:.0f} "
+                                "mm) before the grip")
         return t_arr, t_grip
 
     def _time_entering_reach(self, target: PickTarget, cy: float, t0: float) -> float | None:
@@ -109,7 +117,8 @@ class RobotGrips:
         bx, by = spec.base_mm
         if abs(cy - by) >= spec.reach_mm:
             return None
-        x_enter = bx - math.sqrt(spec.reach_mm ** 2 - (cy - by) ** 2) + 1.0
+        x_enter = max(bx - math.sqrt(spec.reach_mm ** 2 - (cy - by) ** 2),
+                      belt_window(self.cell)[0]) + 1.0
         cx, _ = self.commanded_xy(target, t0)
         if cx >= x_enter or not target.tracking:
             return None

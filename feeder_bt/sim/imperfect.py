@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from feeder_bt.core.model import CameraCalibration, CellSpec, SimImperfections
+from feeder_bt.vision.pixels import shifted
 
 _MASK = (1 << 64) - 1
 
@@ -58,27 +59,6 @@ def true_calibration(cell: CellSpec, residual: bool = True) -> CameraCalibration
     if not residual:
         return base
     return shifted(base, s.calib_offset_mm, s.calib_scale_pct, s.calib_rotation_deg)
-
-
-def shifted(cal: CameraCalibration, offset_mm: tuple[float, float], scale_pct: float,
-            rotation_deg: float) -> CameraCalibration:
-    """``cal`` moved in the belt frame by ``offset_mm``, scaled by ``scale_pct`` and turned by
-    ``rotation_deg`` about its origin (a homography gets the same move)."""
-    o = np.array(cal.origin_mm, dtype=float)
-    f = 1.0 + scale_pct / 100.0
-    hom = cal.homography
-    if hom is not None:
-        r = math.radians(rotation_deg)
-        a = f * np.array([[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]])
-        move = np.eye(3)
-        move[:2, :2] = a
-        move[:2, 2] = o + np.asarray(offset_mm, dtype=float) - a @ o
-        h = move @ np.array(hom, dtype=float).reshape(3, 3)
-        hom = [float(v) for v in (h / h[2, 2]).ravel()]
-    return CameraCalibration(
-        origin_mm=(float(o[0] + offset_mm[0]), float(o[1] + offset_mm[1])),
-        mm_per_px=cal.mm_per_px * f, rotation_deg=cal.rotation_deg + rotation_deg,
-        intrinsics=cal.intrinsics, dist=list(cal.dist), homography=hom)
 
 
 def lensed(cal: CameraCalibration, width_px: int, height_px: int, focal_px: float,

@@ -34,6 +34,39 @@ import numpy as np
 from feeder_bt.core.model import CameraCalibration
 
 
+def shifted(cal: CameraCalibration, offset_mm: tuple[float, float], scale_pct: float,
+            rotation_deg: float) -> CameraCalibration:
+    """``cal`` moved in the belt frame by ``offset_mm``, scaled by ``scale_pct`` and turned by
+    ``rotation_deg`` about its origin (a homography gets the same move)."""
+    o = np.array(cal.origin_mm, dtype=float)
+    f = 1.0 + scale_pct / 100.0
+    hom = cal.homography
+    if hom is not None:
+        r = math.radians(rotation_deg)
+        a = f * np.array([[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]])
+        move = np.eye(3)
+        move[:2, :2] = a
+        move[:2, 2] = o + np.asarray(offset_mm, dtype=float) - a @ o
+        h = move @ np.array(hom, dtype=float).reshape(3, 3)
+        hom = [float(v) for v in (h / h[2, 2]).ravel()]
+    return CameraCalibration(
+        origin_mm=(float(o[0] + offset_mm[0]), float(o[1] + offset_mm[1])),
+        mm_per_px=cal.mm_per_px * f, rotation_deg=cal.rotation_deg + rotation_deg,
+        intrinsics=cal.intrinsics, dist=list(cal.dist), homography=hom)
+
+
+def turned_about(cal: CameraCalibration, centre_mm: tuple[float, float],
+                 deg: float) -> CameraCalibration:
+    """``cal`` with every point it maps turned by ``deg`` about ``centre_mm`` (belt frame):
+    a calibration whose target was laid turned, put square to the belt's travel about the
+    one point the person placed for sure, the target's centre."""
+    r = math.radians(deg)
+    rot = np.array([[math.cos(r), -math.sin(r)], [math.sin(r), math.cos(r)]])
+    o, c = np.asarray(cal.origin_mm, dtype=float), np.asarray(centre_mm, dtype=float)
+    off = c + rot @ (o - c) - o
+    return shifted(cal, (float(off[0]), float(off[1])), 0.0, deg)
+
+
 class Calibration:
     """Vectorised pixel <-> mm mapping built from a cell's ``CameraCalibration``."""
 

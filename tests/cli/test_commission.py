@@ -9,6 +9,7 @@ import json
 import math
 import socket
 
+import numpy as np
 import pytest
 import yaml
 
@@ -100,6 +101,41 @@ def test_commission_camera_calibration_and_timing(cell_and_emulator, tmp_path):
     assert abs(timing["delay_ms"]) <= 1.5 and timing["frames"] >= 6
 
 
+def test_commission_camera_finds_a_target_laid_off_the_travel(cell_and_emulator, tmp_path):
+    """The calibration target laid 2 deg off the belt's travel: the calibration fits it (a
+    rigid target fits whatever its angle), the marker crossing the view shows the travel 2
+    deg off the camera's x, the step says so, and the calibration it gives turned square to
+    the travel maps the whole view within 1 mm of a target laid square."""
+    from feeder_bt.core.model import CameraCalibration
+    from feeder_bt.vision.pixels import Calibration
+    cell, emu = cell_and_emulator
+    straight, turned = tmp_path / "straight.json", tmp_path / "turned.json"
+    code, out = commission("camera", cell, straight, Person(emu))
+    assert code == 0, out
+    code, out = commission("camera", cell, turned, Person(emu, target_turn_deg=2.0))
+    assert code == 1, out
+    good, bad = _steps(straight), _steps(turned)
+    assert bad["camera.calibration"]["ok"]                 # the fit alone cannot tell
+    assert abs(good["camera.timing"]["travel_deg"]) <= 0.1
+    timing = bad["camera.timing"]
+    assert not timing["ok"] and not timing["travel_ok"]
+    assert abs(timing["travel_deg"]) == pytest.approx(2.0, abs=0.2)
+    assert "laid turned" in timing["error"]
+
+    def mapping(values: dict) -> np.ndarray:      # the similarity, as the step reports it
+        cal = CameraCalibration(origin_mm=tuple(values["origin_mm"]),
+                                mm_per_px=values["mm_per_px"],
+                                rotation_deg=values["rotation_deg"])
+        u, v = np.meshgrid(np.linspace(0, 639, 9), np.linspace(0, 483, 7))
+        return Calibration(cal).px_to_mm(np.column_stack([u.ravel(), v.ravel()]))
+
+    ref = mapping(good["camera.calibration"]["calibration"])
+    as_fitted = np.hypot(*(mapping(bad["camera.calibration"]["calibration"]) - ref).T)
+    squared = np.hypot(*(mapping(timing["calibration_square_to_travel"]) - ref).T)
+    assert as_fitted.max() > 5.0                   # 2 deg at the corners of the view
+    assert squared.max() <= 1.0, squared.max()
+
+
 def test_commission_camera_finds_a_late_exposure(tmp_path):
     port = free_block()
     cell = write_cell(tmp_path, port)
@@ -150,11 +186,16 @@ def test_commission_adept_fits_the_true_robot_base(tmp_path):
     frame = tmp_path / "calibration" / "robot.yaml"
     try:
         report = tmp_path / "adept.json"
-        code, out = commission("adept", cell, report, Person(emu), "--write", str(frame))
+        # the window's prompt is the one the fitted base (5 mm downstream of the cell
+        # file's) reaches, from 775 mm; the person teaches the upstream limit 10 mm inside
+        person = Person(emu, miss={"window.up": (10.0, 0.0)})
+        code, out = commission("adept", cell, report, person, "--write", str(frame))
     finally:
         emu.stop()
     steps = _steps(report)
     assert code == 0, out
+    assert steps["adept.window"]["ok"] and steps["adept.window"]["sent"]
+    assert steps["adept.window"]["taught_mm"] == pytest.approx([785.0, 1219.0, 1219.0], abs=0.5)
     fit = steps["adept.frame"]
     assert fit["base_mm"] == pytest.approx([1375.0, 302.0], abs=0.5)
     assert fit["base_deg"] == pytest.approx(2.0, abs=0.1)

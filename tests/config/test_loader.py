@@ -544,6 +544,10 @@ CELL_CASES: dict[str, tuple[list[tuple[str, str]], str, str, list[str]]] = {
     "robot_inner_reach": (
         [("inner_reach_mm: 160", "inner_reach_mm: 700")], "inner_reach_mm:",
         "robot.inner_reach_mm", ["< robot.reach_mm"]),
+    "robot_window_outside_reach": (
+        [("grip_tolerance_mm: 4.0", "grip_tolerance_mm: 4.0\n  belt_window_mm: [700, 1150]")],
+        "belt_window_mm:", "robot.belt_window_mm",
+        ["upstream limit 700 mm is outside the arm's reach over the belt (770-1219 mm"]),
     "robot_base_type": (
         [("base_mm: [1370, 305]", "base_mm: 1370")], "base_mm:", "robot.base_mm",
         ["expected a list"]),

@@ -105,7 +105,7 @@ def test_a_fault_run_summary_tells_faults_misses_and_alarms(shift_run):
     assert f"faults {n_faults} (injected {sum(report['injected'].values())})" in text
     assert f"recovered {sum(min(v, report['faults'][k]) for k, v in report['recoveries'].items())}" \
         in text
-    assert f"misses {sum(report['misses'].values())} (missed grab " in text
+    assert f"misses {sum(report['misses'].values())} (" in text and "missed grab" in text
     assert "alarms 1 (e-stop 1)" in text                       # the scripted e-stop
     assert "ceiling" in text and "bound" in text               # what limited the run
     assert all(len(line) <= 80 for line in text.splitlines()), text
@@ -133,3 +133,11 @@ def test_a_run_with_only_misses_had_no_fault_and_says_so(tmp_path, capsys):
     err = capsys.readouterr().err
     n = sum(r["misses"].values())
     assert "had no fault" in err and (n == 0 or f"({n} miss" in err), err
+
+
+def test_the_story_names_the_links_that_reconnected():
+    report = {"faults": {"comms_lost": 2}, "recoveries": {"comms_lost": 2},
+              "watchdog_stops": 1, "reconnects": {"galil": 2, "adept": 0}}
+    line = vocabulary.story(report)[0]
+    assert "watchdog stopped the belts 1 times" in line
+    assert line.endswith("links reconnected: galil 2") and "adept" not in line

@@ -103,7 +103,7 @@ def test_vplus_python_and_docs_have_the_same_command_sets():
 def test_the_sets_are_the_expected_ones():
     cmds = vplus_commands(VPLUS)
     assert cmds["motion"] == {"HELLO", "PICK", "PLACE", "MOVE", "SAFE", "SPEED", "RECOVER",
-                              "HOLDING", "HELD", "FRAME", "DEFSAFE", "ESTOP",
+                              "HOLDING", "HELD", "FRAME", "DEFSAFE", "ESTOP", "WINDOW",
                               "BELTSCALE"}
     assert cmds["position"] == {"HELLO", "WHERE", "BELT", "POLL", "STOP", "HERE"}
     assert cmds["io"] == {"HELLO", "SIG", "SET"}

@@ -214,7 +214,7 @@ def test_requests_ending_in_cr_lf_are_answered(rig):
 def _raw_requests(emu: AdeptEmulator) -> None:
     with socket.create_connection(("127.0.0.1", emu.ports["io"]), timeout=WAIT_S) as s:
         s.sendall(b"HELLO\r\r\n")
-        assert s.recv(100) == b"OK 1 io\r\n"
+        assert s.recv(100) == b"OK 2 io\r\n"
         s.sendall(b"SIG 1001 extra\r\n")                     # error echo as io.decode does
         assert s.recv(100) == b"ERR -9002 *Bad argument*\r\n"
     with socket.create_connection(("127.0.0.1", emu.ports["position"]), timeout=WAIT_S) as s:

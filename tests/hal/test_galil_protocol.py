@@ -308,3 +308,13 @@ def test_download_refuses_more_labels_than_the_card_holds():
     with pytest.raises(DownloadError) as err:
         prepare_download([("many.dmc", text)])
     assert err.value.code == 61 and "labels" in str(err.value)
+
+
+def test_a_cards_text_reaches_logs_without_its_control_characters():
+    """A program message with terminal controls (clear screen, bell) is kept as text with
+    the controls escaped: it cannot clear the operator's terminal or ring through a log."""
+    ev = parse_unsolicited("boom\x1b[2J\x07 done")
+    assert isinstance(ev, Message) and ev.text == "boom\\x1b[2J\\x07 done"
+    assert ev.text.isprintable()
+    err = parse_unsolicited("?\x1b[31mJP #X")
+    assert err.text.isprintable() and "\\x1b" in err.text

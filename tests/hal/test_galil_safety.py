@@ -14,7 +14,7 @@ import pytest
 
 from feeder_bt.config.files import check_files
 from feeder_bt.core.clock import RealClock, SimClock
-from feeder_bt.core.errors import ConveyorFault
+from feeder_bt.core.errors import CommsLost, ConveyorFault
 from feeder_bt.core.jobs import JobState
 from feeder_bt.core.model import GalilSpec, IoSignal
 from feeder_bt.hal.galil import GalilConveyor, make_galil
@@ -240,6 +240,7 @@ class _StubController:
         self.count, self.card_events = 0, []
         self.st: AxisStatus | None = None
         self.card_fault: str | None = None
+        self.connected = True
 
     def on_connect(self, fn) -> None:
         pass
@@ -276,6 +277,12 @@ def test_a_dithering_servo_still_trips_the_stall():
     ctl.st = AxisStatus(False, 2, 0.0, True, False, clock.now())
     ctl.card_events.append(("LIMSWI", "", clock.now()))
     assert "limit switch" in str(belt.fault())
+    ctl.card_events.clear()
+    ctl.connected = False                       # the link is down: a lost link, no stall
+    for _ in range(30):
+        clock.advance(0.1)
+        got = belt.fault()
+    assert isinstance(got, CommsLost) and "link is down" in str(got)
 
 
 # ---------------------------------------------------------------------------- finding 11

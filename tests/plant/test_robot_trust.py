@@ -213,6 +213,9 @@ def test_a_placed_the_world_did_not_see_is_a_mismatch():
     kind, fields = liar.say(f"PLACED {offer.id}")
     assert kind == "ERR" and "counted as a mismatch" in fields[0]
     assert s.desk.counts["mismatch"] == 1 and s.desk.counts["placed"] == 0
+    assert s.desk.counts["handed_out"] == sum(s.desk.counts[k] for k in (
+        "placed", "missed", "released", "expired", "held_expired", "mismatch")) \
+        + len(s.desk.handed)                       # the ledger balances
     assert s.cell.stats.total_retrieved == 0
     assert s.cell.stats.faults["placed_mismatch"] == 1
     s.close()
@@ -224,6 +227,7 @@ def test_the_report_shows_mismatches_and_the_honest_sim_robot_has_none(capsys):
                            db=None, plant=PlantOptions(part_server="127.0.0.1:0")))
     ps = r["part_server"]
     assert ps["mismatch"] == 0 and ps["cut_off"] == 0 and ps["placed"] > 20
+    assert ps["unaccounted"] == 0                  # the ledger balances
     assert "part server:" not in summary(r)
     r["part_server"] = {**ps, "mismatch": 3}
     assert "3 PLACED the world did not see (not counted)" in summary(r)

@@ -63,14 +63,16 @@ def test_docs_have_examples():
 def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
     args = shlex.split(line)[1:]
+    taught = args[0] in ("check", "locate") and any(a.startswith("out/") for a in args)
     if args[0] in ("locate", "recipe", "report", "replay", "twin") or "--images" in args \
-            or "--image" in args:
-        # they read what `render` / `run --db` / `calibrate --save-image` wrote
+            or "--image" in args or taught:
+        # they read what `render` / `teach` / `run --db` / `calibrate --save-image` wrote
         cmds = commands()
-        db = args[2] if args[0] == "twin" else args[1]       # twin fit RUN.db
+        db = (args[2:3] if args[0] == "twin" else args[1:2]) or [""]   # twin fit RUN.db
+        db = db[0]
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
-            if d == doc and ((prev[0] == "render" or "--save-image" in prev)
+            if d == doc and ((prev[0] in ("render", "teach") or "--save-image" in prev)
                              if args[0] not in ("report", "replay", "twin") else db in prev):
                 _run(doc, earlier, tmp_path, monkeypatch)
     _run(doc, line, tmp_path, monkeypatch)
@@ -84,9 +86,13 @@ def _run(doc, line, tmp_path, monkeypatch):
             i = argv.index(flag)
             argv[i + 1] = str(tmp_path / Path(argv[i + 1]).name)
     argv = [str(Path.cwd() / a) if a.startswith(("scenarios/", "cells/", "examples/", "faults/",
-                                                 "supply/"))
+                                                 "supply/", "tests/data/"))
             else a
             for a in argv]
+    # globs over the repository's files (photos in tests/data/) as the shell would
+    argv = [str(p) for a in argv
+            for p in (sorted(Path(a).parent.glob(Path(a).name))
+                      if "*" in a and Path(a).is_absolute() and argv[0] != "check" else [a])]
     if argv[0] == "check":                    # expand globs the shell would expand
         root = str(Path.cwd())
         argv = [argv[0]] + [str(p) for a in argv[1:] for p in (sorted(Path.cwd().glob(

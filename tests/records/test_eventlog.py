@@ -254,3 +254,30 @@ def test_rolling_ppm():
     assert np.isnan(ppm[t < 10.0]).all()
     assert np.allclose(ppm[t >= 60.0], 60.0, atol=1.5)
     assert rolling_ppm(np.zeros(0), np.zeros(0)).size == 0
+
+
+def test_a_killed_runs_summary_counts_the_recoveries_its_log_holds(tmp_path):
+    """A run whose final report never reached the log (killed) is summarised from its
+    events: every recovery the cell made, the e-stop's and the conveyor's included, is an
+    event, so the summary counts as many as the run's own report did."""
+    from feeder_bt.app.run import RunOptions, run_job
+    from feeder_bt.core.vocabulary import story
+    from feeder_bt.records.runs_db import summary
+
+    plan = tmp_path / "plan.yaml"
+    plan.write_text("seed: 1\nrates:\n  servo_timeout: {per_pick: 0.02}\nscripted:\n"
+                    "  - {at_s: 60, kind: estop, release_after_s: 10}\n"
+                    "  - {at_s: 200, kind: comms_lost, device: galil, outage_s: 4}\n")
+    db = tmp_path / "runs.db"
+    report = run_job(RunOptions(scenario=LENSES, duration=400.0, fast=True, seed=3,
+                                view="none", db=str(db), faults=str(plan)))
+    counted = re.compile(r"faults (\d+).*recovered (\d+)")
+    whole = counted.search(story(report)[0]).groups()
+    assert int(whole[1]) >= 3 and report["recoveries"].get("estop"), story(report)
+    with sqlite3.connect(db) as conn:
+        conn.execute("UPDATE runs SET report=NULL")        # as if killed before the end
+    with sqlite3.connect(db) as conn:
+        conn.row_factory = sqlite3.Row
+        rebuilt = summary(conn, 1)
+    assert rebuilt["state"] == "incomplete"
+    assert counted.search(rebuilt["story"][0]).groups() == whole, rebuilt["story"]

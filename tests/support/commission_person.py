@@ -181,9 +181,11 @@ class Person:
     """Plays the person: ``skip`` holds prompt keys the person answers without acting."""
 
     def __init__(self, emulator: Emulator | PlateEmulator, skip: tuple[str, ...] = (),
-                 miss: dict[str, tuple[float, float]] | None = None) -> None:
+                 miss: dict[str, tuple[float, float]] | None = None,
+                 target_turn_deg: float = 0.0) -> None:
         self.emu, self.skip = emulator, skip
         self.miss = miss or {}                          # touch key -> (dx, dy) off the mark
+        self.target_turn_deg = target_turn_deg          # the target laid turned this much
         self.actions: list[tuple[str, str]] = []        # (action, the emulator's answer)
 
     def _do(self, action: str) -> str:
@@ -220,14 +222,15 @@ class Person:
             self._do("part on")
         elif key == "grip.away":
             self._do("part off")
-        elif parts[0] == "touch":
+        elif parts[0] in ("touch", "window"):
             x, y = (float(v) for v in _xy(prompt))
             dx, dy = self.miss.get(key, (0.0, 0.0))
             self._do(f"touch {x + dx} {y + dy}")
         elif key == "target.lay":
             x, y = _xy(prompt)
             deg = re.search(rf"{NUM} deg", prompt)
-            self._do(f"target {x} {y} {deg.group(1) if deg else 0}")
+            turn = float(deg.group(1)) if deg else 0.0
+            self._do(f"target {x} {y} {turn + self.target_turn_deg:g}")
         elif key == "target.remove":
             self._do("target off")
         elif parts[0] == "marker" and len(parts) == 2:

@@ -36,9 +36,10 @@ from feeder_bt.cli.commission.steps import (
     wait,
     wait_for,
 )
+from feeder_bt.config.checks import window_problems
 from feeder_bt.core.clock import RealClock
 from feeder_bt.core.encoder import EncoderSync, FreshAnchor, diff
-from feeder_bt.core.model import CellSpec
+from feeder_bt.core.model import CellSpec, belt_window
 
 JOG_S = 1.0
 DRIFT_TOLERANCE_MM = 0.5
@@ -85,7 +86,8 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
             kwargs: dict[str, Any] = {}
             params = inspect.signature(AdeptController).parameters
             if "robot" in params:         # the driver sends FRAME/DEFSAFE (FRAME_SPEC)
-                kwargs.update(robot=cell.robot, counts_per_mm=cell.encoder.counts_per_mm)
+                kwargs.update(robot=cell.robot, counts_per_mm=cell.encoder.counts_per_mm,
+                              window=belt_window(cell))
             adept = AdeptController(cell.adept, clock,
                                     inputs=[estop_bit] if estop_bit is not None else [],
                                     **kwargs)
@@ -114,6 +116,7 @@ def commission_adept(cell: CellSpec, ask: Asker, report: Report, opts: argparse.
             if not try_step(report, f"adept.corner{i}",
                             lambda i=i, x=x, y=y: _corner(cell, adept, ask, fit["fit"], i, x, y)):
                 break                  # the person said no, or it did not get there
+        try_step(report, "adept.window", lambda: _window(framed, adept, ask, fit["fit"]))
         wait(adept.robot.set_speed(100.0), cell.adept.timeout_s + 1)
         try_step(report, "adept.safe", lambda: {"ok": wait(adept.robot.move_safe(),
                                                            cell.adept.motion_timeout_s + 1)
@@ -256,3 +259,44 @@ def _corner(cell: CellSpec, adept: Any, ask: Asker, fit: FrameFit, i: int, x: fl
     seen = ask.yes(f"corner.{i}.ok", f"Is the tool over corner {i} of the pick window?")
     return {"ok": there and seen, "target": [round(x, 1), round(y, 1)],
             "reached_cell": [round(got[0], 1), round(got[1], 1)], "person_confirms": seen}
+
+
+# ---------------------------------------------------------------------------- window
+
+WINDOW_TOLERANCE_MM = 5.0     # a taught limit this far from the cell file's is news
+
+
+def _window(cell: CellSpec, adept: Any, ask: Asker, fit: FrameFit) -> dict[str, Any]:
+    """The belt window taught as Adept's belt calibration teaches it: the person touches
+    the tool on the belt at the upstream limit, the downstream limit and the pick limit;
+    each touch (``HERE``, through the fitted frame) gives a belt-frame x. Refused when a
+    limit is outside the arm's reach over the belt or out of order; else sent to the
+    controller (WINDOW) and reported with the cell file lines that hold it."""
+    conv = cell.conveyors.get("horizontal")
+    y = (conv.width_mm if conv else 610.0) / 2
+    had = belt_window(cell)
+    names = ("upstream limit (where tracking may begin)",
+             "downstream limit (the arm never follows the belt past it)",
+             "pick limit (no pick starts for a part past it)")
+    taught = []
+    for key, name, x in zip(("up", "down", "pick"), names, had, strict=True):
+        ask(f"window.{key}", f"With the pendant, jog the tool tip onto the belt at the "
+                             f"{name}; the cell file has it at x {x:.1f}, y {y:.1f} mm "
+                             "(belt frame). Then press Enter")
+        taught.append(round(fit.to_cell(_here(adept))[0], 1))
+    up, down, pick = taught
+    found: dict[str, Any] = {
+        "taught_mm": taught, "cell_file_mm": [round(v, 1) for v in had],
+        "change_mm": [round(t - h, 1) for t, h in zip(taught, had, strict=True)]}
+    problems = window_problems(cell, up, down, pick)
+    if problems:
+        found.update(ok=False, error="; ".join(problems) + ": not sent")
+        return found
+    adept.clients["motion"].call("WINDOW", up, down, pick)
+    moved = any(abs(c) > WINDOW_TOLERANCE_MM for c in found["change_mm"])
+    found.update(ok=True, sent=True, cell_file_lines=[
+        f"robot.belt_window_mm: [{up:g}, {down:g}]", f"robot.pick_limit_mm: {pick:g}"],
+        note=("differs from the cell file by over "
+              f"{WINDOW_TOLERANCE_MM:g} mm: put these lines in it") if moved else
+        "agrees with the cell file")
+    return found

@@ -21,12 +21,13 @@ import cv2
 import numpy as np
 
 from feeder_bt.calibration import DEFAULT_TARGETS, calibrate_camera_image
+from feeder_bt.calibration.belt import TRAVEL_LIMIT_DEG, travel_deg
 from feeder_bt.calibration.camera import Target, centred_pose
 from feeder_bt.cli.commission.steps import Asker, Report, ensure_motor_on, try_step, wait
 from feeder_bt.core.clock import RealClock
 from feeder_bt.core.encoder import diff
 from feeder_bt.core.model import CameraCalibration, CellSpec
-from feeder_bt.vision.pixels import Calibration
+from feeder_bt.vision.pixels import Calibration, turned_about
 
 TIMING_SPEEDS_MM_S = (100.0, 200.0)
 FRAME_GAP_S = 0.15           # between triggered frames while the marker crosses the view
@@ -58,6 +59,7 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
                       ) -> None:
     src = None
     cal: dict[str, CameraCalibration] = {"now": cell.camera.calibration}
+    centre: dict[str, tuple[float, float]] = {}      # the target's, once calibrated
 
     def grab() -> dict[str, Any]:
         nonlocal src
@@ -78,6 +80,7 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
                           f"x {pose.x_mm:.1f}, y {pose.y_mm:.1f} mm, {pose.angle_deg:g} deg, "
                           "then press Enter")
         fit = calibrate_camera_image(src.capture(), target, pose, cam.calibration)
+        centre["mm"] = (pose.x_mm, pose.y_mm)
         ask("target.remove", "Take the target away, then press Enter")
         values = fit.as_dict()
         ok = fit.rms_mm <= opts.calibration_limit_mm
@@ -105,7 +108,7 @@ def commission_camera(cell: CellSpec, ask: Asker, report: Report, opts: argparse
             try_step(report, "camera.calibration", calibrate)
         if "timing" in wanted:
             try_step(report, "camera.timing",
-                     lambda: _timing(cell, ask, src, cal["now"], opts))
+                     lambda: _timing(cell, ask, src, cal["now"], opts, centre.get("mm")))
     finally:
         if src is not None:
             src.close()
@@ -133,7 +136,8 @@ def find_marker(img: np.ndarray, calibration: CameraCalibration) -> tuple[float,
 
 
 def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration,
-            opts: argparse.Namespace) -> dict[str, Any]:
+            opts: argparse.Namespace, centre_mm: tuple[float, float] | None = None
+            ) -> dict[str, Any]:
     from feeder_bt.hal.galil import make_galil
     g = cell.galil
     axis = g.latch_axis.upper()
@@ -145,6 +149,7 @@ def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration
     cpm = cell.encoder.counts_per_mm
     t = g.timeout_s + 1
     rows: list[tuple[float, float, float]] = []          # travelled mm, speed, residual mm
+    moves: list[tuple[float, float]] = []                 # the marker's, from where it rested
     try:
         ctl.ready.result(g.timeout_s * 4 + 5)
         if not ensure_motor_on(ctl, conv, name, ask, t):
@@ -178,6 +183,7 @@ def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration
                 seen += 1
                 travelled = diff(c, c0, cell.encoder.conveyor_bits) / cpm
                 rows.append((travelled, v, (m[0] - m0[0]) - travelled))
+                moves.append((m[0] - m0[0], m[1] - m0[1]))
             wait(conv.stop(), 10.0)
             ask(f"marker.{k}.off", "Take the marker off the belt, then press Enter")
             if seen < 2:
@@ -193,7 +199,39 @@ def _timing(cell: CellSpec, ask: Asker, src: Any, calibration: CameraCalibration
     (scale, delay_s), *_ = np.linalg.lstsq(a, b, rcond=None)
     fit_rms = float(np.sqrt(np.mean((a @ np.array([scale, delay_s]) - b) ** 2)))
     delay_ms = 1000.0 * float(delay_s)
-    return {"ok": abs(delay_ms) <= opts.timing_limit_ms, "delay_ms": round(delay_ms, 2),
-            "delay_mm": round(float(delay_s) * max(speeds), 3), "at_mm_s": max(speeds),
-            "limit_ms": opts.timing_limit_ms, "frames": len(rows),
-            "scale_error_pct": round(100.0 * float(scale), 3), "fit_rms_mm": round(fit_rms, 3)}
+    found = {"ok": abs(delay_ms) <= opts.timing_limit_ms, "delay_ms": round(delay_ms, 2),
+             "delay_mm": round(float(delay_s) * max(speeds), 3), "at_mm_s": max(speeds),
+             "limit_ms": opts.timing_limit_ms, "frames": len(rows),
+             "scale_error_pct": round(100.0 * float(scale), 3), "fit_rms_mm": round(fit_rms, 3)}
+    found.update(_travel(cell, calibration, moves, centre_mm))
+    if not found["travel_ok"]:
+        found["ok"] = False
+    return found
+
+
+def _travel(cell: CellSpec, calibration: CameraCalibration, moves: list[tuple[float, float]],
+            centre_mm: tuple[float, float] | None) -> dict[str, Any]:
+    """The belt's travel as the camera's calibration sees it: the cell frame's x must be
+    the travel. Over ``TRAVEL_LIMIT_DEG`` (a target laid turned) the step says so and gives
+    the calibration turned square to the travel about the target's centre (the one point
+    the person placed for sure), to use instead or to check by laying the target again."""
+    deg = travel_deg(moves)
+    out: dict[str, Any] = {"travel_deg": round(deg, 3), "travel_limit_deg": TRAVEL_LIMIT_DEG,
+                           "travel_ok": abs(deg) <= TRAVEL_LIMIT_DEG}
+    if out["travel_ok"]:
+        return out
+    if centre_mm is None:
+        mid = centred_pose(calibration, cell.camera.width_px, cell.camera.height_px)
+        centre_mm = (mid.x_mm, mid.y_mm)
+    square = turned_about(calibration, centre_mm, -deg)
+    out["calibration_square_to_travel"] = {
+        "origin_mm": [round(v, 5) for v in square.origin_mm],
+        "mm_per_px": round(square.mm_per_px, 8), "rotation_deg": round(square.rotation_deg, 5),
+        **({"homography": [float(f"{v:.12g}") for v in square.homography]}
+           if square.homography is not None else {})}
+    out["error"] = (f"the belt travels {deg:.2f} deg off the camera's x axis (over "
+                    f"{TRAVEL_LIMIT_DEG:g} deg): the calibration target was laid turned, so "
+                    "parts drift across the belt as they are tracked. Use "
+                    "calibration_square_to_travel (turned about the target's centre), or lay "
+                    "the target square to the travel and calibrate again")
+    return out

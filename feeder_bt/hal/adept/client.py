@@ -57,6 +57,7 @@ class LineSocket:
         self.name, self.host, self.port, self.timeout_s = name, host, port, timeout_s
         self.backoff = Backoff()
         self.connects = 0                   # successful connections, for tests and logs
+        self.last_reply = 0.0               # monotonic time of the last reply
         self._sock: socket.socket | None = None
         self._buf = b""
         self._lock = threading.RLock()
@@ -224,6 +225,7 @@ class LineSocket:
             self.send(line, deadline)
             reply = self.read_line(deadline, f"reply to {verb}", on_timeout=on_timeout)
             assert reply is not None
+            self.last_reply = time.monotonic()
             try:
                 return protocol.parse_reply(reply, cmd)
             except ProtocolError as e:
@@ -238,6 +240,24 @@ class ServerClient:
         self.name = name
         self.link = LineSocket(name, host, port, timeout_s)
         self.worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"vplus-{name}")
+        self.queued = 0                     # requests submitted and not yet ended
+        self._queued_lock = threading.Lock()
+        self._beat: threading.Thread | None = None
+
+    def keep_alive(self, verb: str, every_s: float) -> None:
+        """While the link is up and nothing else is asked for ``every_s``, ask ``verb`` (a
+        request with no effect) on the worker: a link that died without a FIN (a pulled
+        cable) is found by its time-out within seconds, and the server, which drops a
+        client silent for longer (``link.idle`` in vplus/a_server.v2), can tell a quiet
+        client from a dead one."""
+        def beat() -> None:
+            while not self.link._closed.wait(every_s / 4):
+                idle = time.monotonic() - self.link.last_reply >= every_s
+                if self.link.connected and idle and self.queued == 0:
+                    self.submit(verb).add_done_callback(lambda f: f.exception())
+
+        self._beat = threading.Thread(target=beat, name=f"vplus-{self.name}-beat", daemon=True)
+        self._beat.start()
 
     def call(self, verb: str, *args: object, timeout: float | None = None,
              on_timeout: Callable[[], object] | None = None) -> list[str]:
@@ -248,10 +268,22 @@ class ServerClient:
                then: Callable[[list[str]], object] | None = None) -> Future:
         """Queue a request on the worker; the future's result is ``then(values)``."""
         def run() -> object:
-            values = self.call(verb, *args, timeout=timeout)
-            return then(values) if then is not None else values
+            try:
+                values = self.call(verb, *args, timeout=timeout)
+                return then(values) if then is not None else values
+            finally:
+                self._count(-1)
 
-        return self.worker.submit(run)
+        self._count(1)
+        try:
+            return self.worker.submit(run)
+        except RuntimeError:                # shut down: closed
+            self._count(-1)
+            raise
+
+    def _count(self, n: int) -> None:
+        with self._queued_lock:
+            self.queued += n
 
     def close(self) -> None:
         self.link.close()

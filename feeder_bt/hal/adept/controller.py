@@ -13,6 +13,9 @@ from feeder_bt.hal.adept import protocol
 from feeder_bt.hal.adept.client import LineSocket, ServerClient
 from feeder_bt.hal.adept.robot import AdeptIO, AdeptRobot, AdeptRobotPosition
 
+HEARTBEAT_S = 1.0      # the motion socket's keep-alive; the V+ server drops a client
+                       # silent for link.idle (5 s, vplus/a_server.v2)
+
 
 class AdeptController:
     """Connect to the V+ servers, check each is the server it should be, and start the
@@ -29,13 +32,17 @@ class AdeptController:
     (``protocol.estop_signal``), sent as ESTOP; None leaves the V+ default (input 1001).
     ``counts_per_mm``: the belt encoder's counts per mm, sent (signed by
     ``spec.belt_direction``) as BELTSCALE; None leaves the V+ program's ``belt.scale``.
+    ``window``: the belt window (upstream, downstream, pick limit; belt-frame x, mm;
+    ``core.model.belt_window``), sent as WINDOW; None leaves the V+ program's.
     """
 
     def __init__(self, spec: AdeptSpec, clock: Clock, inputs: Iterable[int] = (),
                  robot: RobotSpec | None = None, estop: int | None = None,
-                 counts_per_mm: float | None = None) -> None:
+                 counts_per_mm: float | None = None,
+                 window: tuple[float, float, float] | None = None) -> None:
         self.spec, self.clock = spec, clock
         self.robot_spec, self.estop, self.counts_per_mm = robot, estop, counts_per_mm
+        self.window = window
         host, t = spec.host, spec.timeout_s
         self.clients = {
             "motion": ServerClient("motion", host, spec.motion_port, t),
@@ -62,6 +69,8 @@ class AdeptController:
             raise
         self.position.start()
         self.io.start()
+        # the motion socket is idle between picks: a heartbeat finds a dead link in seconds
+        self.clients["motion"].keep_alive("HOLDING", HEARTBEAT_S)
 
     def _hello(self, name: str, client: ServerClient, timeout: float | None = None) -> None:
         version, server = protocol.decode_hello(client.call("HELLO", timeout=timeout))
@@ -73,7 +82,8 @@ class AdeptController:
                            f"speaks {protocol.PROTOCOL_VERSION}: load the matching vplus/ programs")
 
     def _set_up_motion(self) -> None:
-        """Every new motion connection: check the server, then FRAME, DEFSAFE and ESTOP,
+        """Every new motion connection: check the server, then FRAME, DEFSAFE, BELTSCALE,
+        WINDOW and ESTOP,
         before any motion (the V+ program may have restarted and forgotten them)."""
         client = self.clients["motion"]
         t = self.spec.motion_timeout_s      # a motion whose link was cut runs on: the
@@ -86,6 +96,8 @@ class AdeptController:
         if self.counts_per_mm:
             sign = -1.0 if self.spec.belt_direction == "reverse" else 1.0
             client.call("BELTSCALE", sign / self.counts_per_mm, timeout=t)
+        if self.window is not None:
+            client.call("WINDOW", *(round(float(v), 3) for v in self.window), timeout=t)
         if self.estop is not None:
             client.call("ESTOP", int(self.estop), timeout=t)
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab, PowerOff, ServoTimeout
 from feeder_bt.hal.interfaces import Held, Pose
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_LINE = 256                       # longest line either side sends (V+ READ buffer)
 ROBOT_COUNT_MIN, ROBOT_COUNT_MAX = -(1 << 23), (1 << 23) - 1   # V+ belt encoders: 24-bit
 
@@ -70,6 +70,7 @@ COMMANDS: dict[str, tuple[Command, ...]] = {
         Command("FRAME", ("x", "y", "rz"), ()),
         Command("DEFSAFE", ("x", "y", "z", "rz"), ()),
         Command("BELTSCALE", ("mm",), ()),
+        Command("WINDOW", ("up", "down", "pick"), ()),
         Command("ESTOP", ("signal",), ()),
         Command("SPEED", ("pct",), ()),
         Command("RECOVER", ("power",), (), motion=True),

@@ -35,13 +35,21 @@ def as_frame(img: np.ndarray) -> np.ndarray:
     return img
 
 
+STREAM_TIMEOUT_S = 5.0
+
+
 class VideoCaptureSource:
     """A device index ("0") or a stream URL, read through ``cv2.VideoCapture``."""
 
-    def __init__(self, spec: str | int) -> None:
+    def __init__(self, spec: str | int, timeout_s: float = STREAM_TIMEOUT_S) -> None:
         self.spec = spec
         target = int(spec) if isinstance(spec, str) and spec.isdigit() else spec
-        self.cap = cv2.VideoCapture(target)
+        # a silent stream server would hold the open (and each read) for OpenCV's own
+        # 30 s: both are bounded (the FFmpeg and GStreamer back-ends honour these)
+        ms = int(timeout_s * 1000)
+        self.cap = cv2.VideoCapture(target, cv2.CAP_ANY,
+                                    [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, ms,
+                                     cv2.CAP_PROP_READ_TIMEOUT_MSEC, ms])
         if not self.cap.isOpened():
             raise ConfigError(f"cannot open camera {spec!r} (no such device or stream)",
                               key="camera.source")

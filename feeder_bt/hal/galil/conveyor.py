@@ -14,7 +14,7 @@ from typing import Any
 
 from feeder_bt.core.clock import Clock
 from feeder_bt.core.encoder import diff
-from feeder_bt.core.errors import CardFault, ConveyorFault, HalError
+from feeder_bt.core.errors import CardFault, CommsLost, ConveyorFault, HalError
 from feeder_bt.core.jobs import DoneJob, FutureJob, Job, JobState
 from feeder_bt.core.model import IoSignal
 from feeder_bt.hal.galil.driver import RETRY, Delay, GalilController
@@ -26,6 +26,7 @@ from feeder_bt.hal.galil.protocol import (
     explicit,
     parse_int,
     positional,
+    stop_text,
 )
 from feeder_bt.hal.interfaces import IoChange, speed_refused, watchdog_stopped
 
@@ -33,15 +34,6 @@ COUNTER_BITS = 32
 STALL_S = 2.0                # jogging with no encoder motion this long: a stall
 SETTLE_MARGIN_S = 3.0        # slack on top of a motion's planned time before it is a fault
 # _SC stop codes (Galil command reference, SC; the emulator uses the same; docs/real-cell.md)
-STOP_CODES = {0: "running", 1: "stopped at the commanded position", 2: "forward limit switch",
-              3: "reverse limit switch", 4: "ST command", 6: "abort input (e-stop chain)",
-              7: "abort command", 8: "off-on-error (position error over ER)"}
-
-
-def stop_text(code: int) -> str:
-    return STOP_CODES.get(code, f"stop code {code}")
-
-
 class GalilConveyor:
     """One conveyor on one Galil axis, implementing ``hal.interfaces.Conveyor``."""
 
@@ -63,6 +55,7 @@ class GalilConveyor:
         self._stall_counts = max(1, round(controller.spec.stall_mm * self.cpm))
         self._commanded_at = 0.0       # clock time of our last motion command
         controller.on_connect(self._configure)
+        controller.on_connect(self._resume)
 
     # ---------------------------------------------------------------- helpers
     def _counts(self, mm: float) -> int:
@@ -73,6 +66,25 @@ class GalilConveyor:
         a = self._counts(self.accel)
         self.ctl.ask(positional("AC", {self.axis: a}))
         self.ctl.ask(positional("DC", {self.axis: a}))
+
+    def _resume(self) -> None:
+        """After a reconnect: a belt we were running that stands still was stopped while
+        the link was down (the card's watchdog, by ST: stop code 4), and the card's message
+        saying so was lost with the link. Note why, and jog again at the speed we had, as
+        the simulated cell does; a motor found off stays off (an operator matter, said by
+        ``fault()``), and nothing moves after a card fault."""
+        if self.ctl.connects == 0 or self._mode != "jog" or abs(self._commanded) < 1.0:
+            return
+        if self._running():
+            return
+        code = parse_int(self.ctl.ask(f"MG _SC{self.axis}"))
+        self.ctl.note_stop_while_away(self.name, code)
+        if self.ctl.card_fault is not None or parse_int(self.ctl.ask(f"MG _MO{self.axis}")):
+            return
+        self.ctl.ask(positional("JG", {self.axis: self._counts(self._commanded)}))
+        self.ctl.ask(f"BG{self.axis}")
+        self._commanded_at = self.clock.now()
+        self._stall_ref = None
 
     def _running(self) -> bool:
         """``_BGx``: 1 while the axis's profiler runs (device worker only)."""
@@ -240,6 +252,9 @@ class GalilConveyor:
         if self._mode == "idle":
             self._stall_ref = None
             return None
+        if not self.ctl.connected:          # nothing is known of the belt: not a stall
+            self._stall_ref = None
+            return CommsLost(f"{self.name}: the Galil link is down; the driver reconnects")
         st = self.ctl.status(self.axis)
         if st is not None and st.t >= self._commanded_at:
             if st.motor_off:

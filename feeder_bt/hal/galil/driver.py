@@ -84,6 +84,7 @@ from feeder_bt.hal.galil.protocol import (
     parse_tell_code,
     parse_unsolicited,
     read_programs,
+    stop_text,
 )
 from feeder_bt.hal.galil.startup import (
     DIST_NOTIFIER,
@@ -169,6 +170,11 @@ class GalilController(CardSetup):
         self.connects = 0                   # successful connects (reconnects = connects - 1)
         self.program_errors: list[str] = []
         self.card_events: list[tuple[str, str, float]] = []    # (kind, detail, t)
+        # belts found stopped after a reconnect, by the card's watchdog (counted once per
+        # outage) or otherwise: (conveyor, why, clock t)
+        self.watchdog_stops = 0
+        self.stopped_while_away: list[tuple[str, str, float]] = []
+        self._dog_counted = -1              # the connect whose watchdog stop was counted
         self.handle: str | None = None      # our Ethernet handle letter (WH), None on serial
         self._held_handles: set[str] = set()
         self.firmware: str | None = None    # the card's answer to ^R^V / CW (commissioning)
@@ -238,6 +244,17 @@ class GalilController(CardSetup):
         self._connect_hooks.append(fn)
         if self._conn is not None and self._conn.alive:
             self.submit(fn).add_done_callback(retrieve)
+
+    def note_stop_while_away(self, conveyor: str, stop_code: int) -> None:
+        """A conveyor found stopped after a reconnect (its ``_SC``): stop code 4 (ST) is
+        the card's watchdog, which stops every axis of ours at once: one stop per outage."""
+        why = "the card's watchdog (ST)" if stop_code == 4 else stop_text(stop_code)
+        self.stopped_while_away.append((conveyor, why, self.clock.now()))
+        if stop_code == 4 and self._dog_counted != self.connects:
+            self._dog_counted = self.connects
+            self.watchdog_stops += 1
+        log.warning("Galil at %s: %s found stopped after the reconnect: %s", self.spec.url,
+                    conveyor, why)
 
     def status(self, axis: str) -> AxisStatus | None:
         """The axis as the health poll last read it (None before the first read)."""

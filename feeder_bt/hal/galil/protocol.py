@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from feeder_bt.core.errors import CommsLost, HalError
+from feeder_bt.core.errors import CommsLost, HalError, one_line
 
 # ---------------------------------------------------------------------------- limits
 
@@ -249,9 +249,10 @@ def parse_unsolicited(line: str) -> Event:
 
     Program errors are recognised in every form the controller may echo them: a leading
     ``?``, a numbered program line with a ``?`` in it (``004 JP #X?``), or a program line
-    ending in ``?``. Output of our programs never contains ``?``.
+    ending in ``?``. Output of our programs never contains ``?``. Control characters are
+    escaped (``\x1b``): a card's text reaches logs and terminals, never their controls.
     """
-    text = line.strip()
+    text = one_line(line.strip())
     if text.startswith("?"):
         return ProgramError(text[1:].strip())
     if "?" in text and _ECHO_ERROR_RE.match(text):
@@ -472,3 +473,13 @@ def read_programs(directory: Path, names: Sequence[str]) -> list[ProgramLine]:
 def download_payload(lines: Sequence[ProgramLine]) -> bytes:
     """The bytes after ``DL<CR>``: every line with CR, then the ``\\`` terminator."""
     return "".join(pl.text + "\r" for pl in lines).encode("ascii") + b"\\"
+
+
+# _SC, the axis's stop code (Galil command reference, SC)
+STOP_CODES = {0: "running", 1: "stopped at the commanded position", 2: "forward limit switch",
+              3: "reverse limit switch", 4: "ST command", 6: "abort input (e-stop chain)",
+              7: "abort command", 8: "off-on-error (position error over ER)"}
+
+
+def stop_text(code: int) -> str:
+    return STOP_CODES.get(code, f"stop code {code}")
