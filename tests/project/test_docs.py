@@ -68,8 +68,7 @@ def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
             or "--image" in args or taught:
         # they read what `render` / `teach` / `run --db` / `calibrate --save-image` wrote
         cmds = commands()
-        db = (args[2:3] if args[0] == "twin" else args[1:2]) or [""]   # twin fit RUN.db
-        db = db[0]
+        db = next(iter(args[2:3] if args[0] == "twin" else args[1:2]), "")  # twin fit RUN.db
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
             if d == doc and ((prev[0] in ("render", "teach") or "--save-image" in prev)

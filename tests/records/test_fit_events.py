@@ -24,7 +24,9 @@ def test_frames_picks_and_places_are_logged(tmp_path: Path) -> None:
     places = [d for _, k, d in ev if k == "place"]
     # every new part located is in a frame's count; every placed part had a timed place
     assert sum(f["new"] for f in frames) == r["parts"]["located"]
-    assert len(places) == sum(r["parts"]["retrieved"].values())
+    # a place the run's stop cut short still counts, but is no timed move
+    retrieved = sum(r["parts"]["retrieved"].values())
+    assert retrieved - 1 <= len(places) <= retrieved
     assert sum(p["outcome"] == "held" for p in picks) >= len(places)
     assert sum(p["outcome"] == "missed_grab" for p in picks) == r["parts"]["missed"]
     assert all(0.2 < p["dt"] < 3.0 for p in places)
