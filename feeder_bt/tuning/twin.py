@@ -233,7 +233,8 @@ def fit_arm(runs: list[RunLog], cell: CellSpec) -> dict[str, Estimate]:
     keys = ("arm_j1_deg_s", "arm_j2_deg_s", "arm_j1_deg_s2", "arm_j2_deg_s2")
     if len(ms) < 3 * MIN_COUNT:
         why = f"only {len(ms)} timed moves in the log (at least {3 * MIN_COUNT} needed)"
-        return {k: Estimate(nominal[k], None, why, fixed=False) for k in keys}
+        return {k: Estimate(nominal[k] if k in nominal else cell.sim.robot_time_cv, None, why,
+                            fixed=False) for k in (*keys, "sim.robot_time_cv")}
     y = np.array([m.t for m in ms])
     theta = np.zeros(3)
     for _ in range(12):                   # Gauss-Newton, numeric Jacobian
@@ -273,6 +274,13 @@ def fit_arm(runs: list[RunLog], cell: CellSpec) -> dict[str, Estimate]:
                               f"(fit error {rel:.0%}): {what}", fixed=False)
         else:
             out[k] = Estimate(fitted[k], fitted[k] * rel, what)
+    # the moves' scatter about the fitted arm: the world's per-move noise (what the arm
+    # model misses would add to it)
+    cv = float(np.std(res / np.maximum(f, 1e-3)))
+    out["sim.robot_time_cv"] = Estimate(cv, cv / math.sqrt(2.0 * len(ms)),
+                                        f"the scatter of {len(ms)} timed moves about the "
+                                        "fitted arm (what the arm model misses would add "
+                                        "to it)")
     return out
 
 
@@ -481,6 +489,9 @@ NOT_FITTED = {
                            "be told apart from one lift speed",
     "arm_z_mm_s": "every arch has the same vertical legs: their time cannot be told from "
                   "the grip and release times",
+    "sim.grip_p_centre": "misses are fitted through the grip curve's width: a log cannot "
+                         "tell a miss over the part's centre from one off it (the cup's "
+                         "offset from the true part is not recorded)",
 }
 
 

@@ -47,6 +47,8 @@ def test_the_fit_finds_the_plant_not_the_cell_file(round_trip) -> None:
         < abs(cell.hopper.release_per_mm - plant["hopper.release_per_mm"]) / 2
     j1 = e["arm_j1_deg_s"]
     assert j1.fixed and j1.value == pytest.approx(plant["sim.arm_j1_deg_s"], rel=0.03)
+    cv = e["sim.robot_time_cv"]        # the world's per-move noise, the cell file's 2 %
+    assert cv.fixed and cv.value == pytest.approx(cell.sim.robot_time_cv, rel=0.15)
 
 
 def test_the_twin_is_a_world_file_that_says_what_fixed_it(round_trip) -> None:
