@@ -99,11 +99,45 @@ def load_world(path: str | Path, cell: CellSpec) -> CellSpec:
     placed by ``sim_truth`` and the ``sim.calib_*`` figures)."""
     import dataclasses
 
+    world, taken = _laid_over(path, _compose(Path(cell.path), _Ctx(str(cell.path))),
+                              str(cell.path), cell.path)
+    return dataclasses.replace(
+        world,
+        camera=dataclasses.replace(world.camera, calibration=cell.camera.calibration),
+        robot=dataclasses.replace(world.robot, base_mm=world.robot.base_mm
+                                  if _from_overlay("robot.base_mm", taken) else cell.robot.base_mm,
+                                  base_deg=world.robot.base_deg
+                                  if _from_overlay("robot.base_deg", taken)
+                                  else cell.robot.base_deg))
+
+
+def looks_like_world(path: str | Path) -> bool:
+    """Whether a file's top-level keys are all a world file's (``feeder check`` reads it as
+    one rather than as a cell file missing its name)."""
+    try:
+        root = _compose(Path(path), _Ctx(str(path)))
+    except ConfigError:
+        return False
+    keys = {_key(k) for k, _ in root.value}
+    return bool(keys) and keys <= {*WORLD_SECTIONS, NOTES_KEY}
+
+
+def check_world(path: str | Path) -> None:
+    """Validate a world file on its own (``feeder check``): over an empty cell, so every
+    key and value is judged as in any cell file (ConfigError: every problem)."""
+    import yaml
+    empty = yaml.compose("name: world\n", Loader=yaml.SafeLoader)
+    _laid_over(path, empty, str(path), Path(path))
+
+
+def _laid_over(path: str | Path, base: MappingNode, base_file: str, cell_path: Path
+               ) -> tuple[CellSpec, set[str]]:
+    """The world file at ``path`` merged over the cell file's root node ``base`` and
+    validated: the cell and the keys the world gave (their problems at the world's lines)."""
     wpath = Path(path)
     wfile = str(wpath)
     wroot = _only_world_figures(_compose(wpath, _Ctx(wfile)), wfile)
-    ctx = _Ctx(str(cell.path))
-    base = _compose(Path(cell.path), ctx)
+    ctx = _Ctx(base_file)
     taken: set[str] = set()
     merged = _merge(base, wroot, "", taken)
     cell_error = ctx.error
@@ -115,18 +149,11 @@ def load_world(path: str | Path, cell: CellSpec) -> CellSpec:
         return ConfigError(e.what, file=wfile, line=e.line, key=e.key)
 
     ctx.error = error                  # type: ignore[method-assign]
-    world = ctx.collect(ctx.dataclass, CellSpec, merged, "", fill={"path": cell.path})
+    world = ctx.collect(ctx.dataclass, CellSpec, merged, "", fill={"path": cell_path})
     if world is not None:
         ctx.collect(_check_cell, world, ctx)
     ctx.raise_problems()
-    return dataclasses.replace(
-        world,
-        camera=dataclasses.replace(world.camera, calibration=cell.camera.calibration),
-        robot=dataclasses.replace(world.robot, base_mm=world.robot.base_mm
-                                  if _from_overlay("robot.base_mm", taken) else cell.robot.base_mm,
-                                  base_deg=world.robot.base_deg
-                                  if _from_overlay("robot.base_deg", taken)
-                                  else cell.robot.base_deg))
+    return world, taken
 
 
 def world_schema() -> dict[str, Any]:

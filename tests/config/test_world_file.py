@@ -118,3 +118,13 @@ def test_the_learnt_robot_model_copes_with_a_wrong_description(tmp_path: Path) -
                                view="none", world=str(w)))["robot_model"]
     assert quick["nominal"] == base["nominal"]
     assert quick["fitted"]["standard_cycle_s"] < 0.85 * base["fitted"]["standard_cycle_s"]
+
+
+def test_check_reads_a_world_file_as_one(tmp_path: Path, capsys) -> None:
+    """`feeder check` tells a world file by its keys and judges it as any cell file."""
+    assert main(["check", str(ROOT / "examples/plant_b.yaml")]) == 0
+    assert "a world file" in capsys.readouterr().out
+    bad = _world(tmp_path, "sim: {grip_width_mm: -1}\nfit: {note: x}\n")
+    assert main(["check", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "world.yaml:1: sim.grip_width_mm: must be >= 0" in err and "Traceback" not in err
