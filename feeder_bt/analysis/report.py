@@ -231,7 +231,8 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
             robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
         if world is not None:             # the simulated arm's truth, for comparison
-            report["robot_model"]["sim_speed_factor"] = cell.cell.robot.sim_speed_factor
+            # the world's own (a world file may set it apart from the cell file)
+            report["robot_model"]["sim_speed_factor"] = world.cell.robot.sim_speed_factor
     if world is not None:
         report["world"] = {"census": world.census(), "released": world.counts["released"],
                            "landed": world.counts["landed"],

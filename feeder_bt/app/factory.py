@@ -176,16 +176,20 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
     return hal
 
 
-def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[Hal, Clock]:
-    """The HAL and the clock for a run."""
+def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int,
+             world: CellSpec | None = None) -> tuple[Hal, Clock]:
+    """The HAL and the clock for a run. ``world`` is the simulated cell's truth (a world
+    file laid over the cell file, ``config/world.py``); None: the cell file's figures serve
+    the world too. The controller is built from ``cell`` alone, by the caller."""
+    truth = world if world is not None else cell
     if kind == "sim" and cell.presentation == "plate":
         from feeder_bt.sim.plate import make_plate_sim_hal
         clock = SimClock()
-        return make_plate_sim_hal(scenario, cell, clock, seed), clock
+        return make_plate_sim_hal(scenario, truth, clock, seed), clock
     if kind == "sim":
         from feeder_bt.sim.devices import make_sim_hal
         clock = SimClock()
-        return make_sim_hal(scenario, cell, clock, seed), clock
+        return make_sim_hal(scenario, truth, clock, seed), clock
     if kind == "real":
         if cell.hal != "real":
             raise ConfigError(f"{cell.path}: describes a {cell.hal} cell (hal: {cell.hal}); "
@@ -194,20 +198,22 @@ def make_hal(kind: str, scenario: Scenario, cell: CellSpec, seed: int) -> tuple[
         clock = RealClock()
         return connect_drivers(cell, clock), clock
     if kind == "emulated":
-        return start_emulated(scenario, cell, seed)
+        return start_emulated(scenario, cell, seed, world=world)
     raise ConfigError(f"unknown HAL {kind!r}; one of: {', '.join(HAL_KINDS)}", key="hal")
 
 
 def start_emulated(scenario: Scenario, cell: CellSpec, seed: int,
-                   faults=None, plate_options: dict | None = None) -> tuple[Hal, Clock]:
+                   faults=None, plate_options: dict | None = None,
+                   world: CellSpec | None = None) -> tuple[Hal, Clock]:
     """Emulators on loopback over the simulated cell in real time, and the real drivers;
-    ``plate_options`` go to the AnyFeeder emulator (echo, motor gap, a late code)."""
+    ``plate_options`` go to the AnyFeeder emulator (echo, motor gap, a late code);
+    ``world`` is the simulated cell's truth (None: the cell's figures)."""
     from feeder_bt.emulators.adept import AdeptEmulator
     from feeder_bt.emulators.camera import PlantCameraSource
     from feeder_bt.emulators.galil.emulator import GalilEmulator
     from feeder_bt.sim.realtime import Plant
 
-    plant = Plant(scenario, cell, seed).start()
+    plant = Plant(scenario, world if world is not None else cell, seed).start()
     galil = GalilEmulator(plant, faults=faults).start()
     adept = AdeptEmulator(plant, faults=faults).start()
     ports = adept.ports

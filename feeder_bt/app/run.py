@@ -47,6 +47,7 @@ class RunOptions:
     supply: str | None = None      # a supply plan (docs/supply.md) for the simulated cell
     plant: Any = None              # PlantOptions: --part-server / --opcua (docs/plant.md)
     overlay: str | None = None     # a partial scenario merged over it (feeder tune --out)
+    world: str | None = None       # the simulated cell's truth (docs/simulator.md, "World")
 
 
 def add_db_options(parser: argparse.ArgumentParser) -> None:
@@ -269,6 +270,7 @@ class _Prepared:
     start: bool
     plan: Any = None            # the fault plan
     supply_plan: Any = None
+    world: Any = None           # the simulated cell's truth (a world file over the cell)
 
 
 def _prepare(opts: RunOptions) -> _Prepared:
@@ -296,6 +298,12 @@ def _prepare(opts: RunOptions) -> _Prepared:
     if opcua:
         _check_opcua(opts)
     prep = _Prepared(scenario, cell_spec, duration, start)
+    if opts.world:
+        from feeder_bt.config.world import load_world
+        if opts.hal == "real":
+            raise ConfigError("a world file is the simulated cell's truth; a real cell is "
+                              "its own", key="world")
+        prep.world = load_world(opts.world, cell_spec)
     if opts.faults:
         from feeder_bt.config.files import load_fault_plan
         prep.plan = load_fault_plan(opts.faults)
@@ -334,7 +342,8 @@ class _Run:
         """The HAL (with the simulated cell's fault and supply plans), the cell, and what
         watches it: the world's accounting, the trees' history, the event log."""
         opts, prep = self.opts, self.prep
-        self.hal, clock = make_hal(opts.hal, prep.scenario, prep.cell_spec, opts.seed)
+        self.hal, clock = make_hal(opts.hal, prep.scenario, prep.cell_spec, opts.seed,
+                                    world=prep.world)
         if prep.plan is not None:
             from feeder_bt.sim.faults import inject_faults
             self.injector = inject_faults(self.hal, prep.plan)  # type: ignore[arg-type]

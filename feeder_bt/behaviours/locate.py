@@ -151,6 +151,13 @@ class Enqueue(Leaf):
             else:
                 stats.count("located_unpickable")
         stats.count("rejected_blobs", len(result.rejected))
+        # what a twin's fit reads (tuning/twin.py): the frame's finds and every rejected
+        # blob with its reason, area and place, as a real cell's log has them
+        stats.emit(frame.t, "frame", n=frame.index, latch=int(frame.latch), new=new,
+                   parts=len(result.parts), rejected=[
+                       [d.reason.split(";")[0].split(" (")[0],
+                        round(d.features.get("area_mm2", 0.0)),
+                        round(d.x_mm, 1), round(d.y_mm, 1)] for d in result.rejected])
         blocked = sum(getattr(d, "reason", "") == "gripper blocked" for d in result.rejected)
         if blocked:                       # not offered: a neighbour where the gripper goes
             stats.count("gripper_blocked", blocked)

@@ -159,6 +159,7 @@ class Pick(PartJob):
         grip_x = getattr(result, "belt_x_mm", None)
         if self.timing is not None and grip_x is not None:
             robot_fit(self.ctx).pick_done(self.timing, self.ctx.now(), float(grip_x))
+        self._log("held", grip_x)
         self.timing = None
         return Status.SUCCESS
 
@@ -167,8 +168,22 @@ class Pick(PartJob):
             self.bb.set(PHASE, None)
         if error.kind == "missed_grab" and self.timing is not None:
             robot_fit(self.ctx).pick_missed(self.timing, self.ctx.now())
+        self._log(error.kind, None)
         self.timing = None
         return super().on_failure(error)
+
+    def _log(self, outcome: str, grip_x: object) -> None:
+        """The pick as the cell timed it (a twin's fit reads it: tuning/twin.py): where the
+        arm was and where it went, at what speed, how long it took and how it ended."""
+        t = self.timing
+        if t is None:
+            return
+        self.ctx.stats.emit(
+            t.t0, "pick", dt=round(self.ctx.now() - t.t0, 4), outcome=outcome,
+            x0=round(t.start[0], 1), y0=round(t.start[1], 1),
+            grip_x=None if grip_x is None else round(float(grip_x), 1),  # type: ignore[arg-type]
+            y=round(t.tool_y, 1), speed=t.speed_pct, belt_mm_s=round(t.belt_mm_s, 1),
+            tracking=t.tracking, usable=t.usable, part=self.part.id if self.part else None)
 
     def terminate(self, new_status: Status) -> None:
         was_running = self.status is Status.RUNNING and self.job is not None and not self.job.done
@@ -200,6 +215,11 @@ class Place(PartJob):
     def on_success(self, result: object) -> Status:
         if self.timing is not None:
             robot_fit(self.ctx).place_done(self.timing, self.ctx.now())
+            t = self.timing
+            assert t.end is not None
+            self.ctx.stats.emit(t.t0, "place", dt=round(self.ctx.now() - t.t0, 4),
+                                x0=round(t.start[0], 1), y0=round(t.start[1], 1),
+                                x=t.end[0], y=t.end[1], speed=t.speed_pct)
             self.timing = None
         self.bb.set(PHASE, None)
         count_retrieved(self.ctx, self.part)

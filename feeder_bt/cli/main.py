@@ -16,7 +16,7 @@ from feeder_bt.core.errors import ConfigError, FeederError, UsageError
 
 # feeder_bt/cli/<module>.py, each with add_parser(subparsers) setting a `handler`
 TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emulate_cmd",
-         "users_cmd", "commission", "tune", "replay_cmd", "teach_cmd")
+         "users_cmd", "commission", "tune", "replay_cmd", "teach_cmd", "twin_cmd")
 
 
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
@@ -103,6 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--overlay", metavar="OVERLAY.yaml",
                    help="a partial scenario merged over SCENARIO before it is checked, e.g. "
                         "the settings `feeder tune --out` found")
+    r.add_argument("--world", metavar="WORLD.yaml",
+                   help="simulated cell: the cell's truth (physical and sim: figures laid "
+                        "over the cell file, e.g. a twin from `feeder twin fit`); the "
+                        "controller still reads only the cell file (docs/simulator.md)")
     add_ui_options(r)
     from feeder_bt.app.run import add_plant_options
     add_plant_options(r)
@@ -128,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("schema", help="print the JSON Schema of a file kind, for an editor "
                        "that checks YAML as you type (docs/getting-started.md), or of "
                        "the run report (--report), the JSON contract for CI")
-    s.add_argument("kind", choices=[*KINDS, "report"])
+    s.add_argument("kind", choices=[*KINDS, "world", "report"])
     s.add_argument("-o", "--output", help="write to this file instead of standard output")
 
     r.set_defaults(handler=cmd_run)
@@ -163,7 +167,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                                 hal=args.hal, view=args.view, skip_idle=args.skip_idle,
                                 db=args.db, ui=args.ui, users=args.users, start=args.start,
                                 faults=args.faults, supply=args.supply,
-                                plant=plant_options(args), overlay=args.overlay))
+                                plant=plant_options(args), overlay=args.overlay,
+                                world=args.world))
     print(summary(report))
     p = report["parts"]
     nm = report["vision"].get("no_match") or {}
@@ -259,7 +264,9 @@ def cmd_check(args: argparse.Namespace) -> int:
 def cmd_schema(args: argparse.Namespace) -> int:
     from feeder_bt.analysis.run_report import report_schema
     from feeder_bt.config.schema import schema
-    doc = report_schema() if args.kind == "report" else schema(args.kind)
+    from feeder_bt.config.world import world_schema
+    doc = (report_schema() if args.kind == "report" else world_schema()
+           if args.kind == "world" else schema(args.kind))
     text = json.dumps(doc, indent=2) + "\n"
     if args.output:
         Path(args.output).parent.mkdir(parents=True, exist_ok=True)     # out/ (README)

@@ -55,6 +55,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--supply", metavar="PLAN.yaml", help="run every trial under this supply "
                    "plan")
     p.add_argument("--cell", help="cell description YAML (default: the scenario's `cell:`)")
+    p.add_argument("--world", metavar="WORLD.yaml",
+                   help="tune on this world (a twin from `feeder twin fit`): the simulated "
+                        "cell's truth, the controller still on the cell file")
     p.add_argument("--grid", action="store_true",
                    help="with --space fixed: a grid over the two speeds and every pick "
                         "policy within --trials points, instead of TPE")
@@ -98,8 +101,12 @@ def cmd_tune(args: argparse.Namespace) -> int:
     from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search, unit_of
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
-                     supply=args.supply, sampler_seed=args.sampler_seed,
+                     supply=args.supply, world=args.world, sampler_seed=args.sampler_seed,
                      max_recirc=args.max_recirc, grid=args.grid)
+    if args.world:                  # a bad world file: one line now, not every trial failed
+        from feeder_bt.config import load_scenario
+        from feeder_bt.config.world import load_world
+        load_world(args.world, load_scenario(args.scenario, args.cell)[1])
     wall0 = time.monotonic()
     with ExitStack() as stack:
         executor, capacity, where = _executor(args, stack)

@@ -35,8 +35,12 @@ def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:
     problem). A scenario is checked with its cell."""
     told = file_kind(path)
     kind = told or "scenario"
+    if kind == "cell":
+        from feeder_bt.config.world import check_world, looks_like_world
+        if looks_like_world(path):         # a world file: no name, only world figures
+            kind = told = "world"
     try:
-        LOADERS[kind](path)
+        (check_world if kind == "world" else LOADERS[kind])(path)
     except ConfigError as e:
         return kind, told, e.problems
     return kind, told, []

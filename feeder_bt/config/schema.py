@@ -68,6 +68,8 @@ def file_kind(path: str | Path) -> str | None:
 
 
 def describe(kind: str) -> str:
+    if kind == "world":            # laid over a cell file (config/world.py), no root class
+        return "a world file"
     return KINDS[kind][1]
 
 

@@ -265,6 +265,12 @@ RANGES: dict[tuple[type, str], Range] = {
     (SimImperfections, "grip_p_centre"): Range(0, 1),
     (SimImperfections, "grip_width_mm"): NON_NEGATIVE,
     (SimImperfections, "robot_time_cv"): Range(0, 0.5),
+    (SimImperfections, "arm_j1_deg_s"): Range(0, 5000),
+    (SimImperfections, "arm_j2_deg_s"): Range(0, 5000),
+    (SimImperfections, "arm_z_mm_s"): Range(0, 10000),
+    (SimImperfections, "arm_j1_deg_s2"): Range(0, 500000),
+    (SimImperfections, "arm_j2_deg_s2"): Range(0, 500000),
+    (SimImperfections, "arm_z_mm_s2"): Range(0, 500000),
     # fault plans (feeder_bt.config.faults)
     (FaultRate, "per_pick"): Range(0, 1),
     (FaultRate, "per_frame"): Range(0, 1),

@@ -533,6 +533,14 @@ class SimImperfections:
     grip_width_mm: float = 0.5
     # robot: each move's time is the nominal one times 1 + N(0, cv)
     robot_time_cv: float = 0.02
+    # the world's arm (robot/scara.py), its true joint limits; 0: the Cobra 600 shape timed
+    # to the cell's robot description (v_max, a_max), as a cell file without a world does
+    arm_j1_deg_s: float = 0.0
+    arm_j2_deg_s: float = 0.0
+    arm_z_mm_s: float = 0.0
+    arm_j1_deg_s2: float = 0.0
+    arm_j2_deg_s2: float = 0.0
+    arm_z_mm_s2: float = 0.0
 
 
 @dataclass

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from feeder_bt.core.model import RobotSpec
+from feeder_bt.core.model import RobotSpec, SimImperfections
 from feeder_bt.robot.model import RobotModel
 
 # Cobra 600 class figures (docs/simulator.md, "Robot", says which are published and which
@@ -223,13 +223,35 @@ class ScaraModel(RobotModel):
         return float(x[i]), float(y[i])
 
 
-def world_arm(spec: RobotSpec, speed_factor: float = 1.0) -> ScaraModel:
+def world_arm(spec: RobotSpec, speed_factor: float = 1.0,
+              joints: SimImperfections | None = None) -> ScaraModel:
     """The simulated world's arm for the cell's robot: a Cobra 600 shaped to the cell's
     reach (both links scaled to sum to ``reach_mm``) and timed so its Adept cycle is the
     one the cell's description was calibrated to (cells/sim.yaml: 0.5 s; the original
     cell's Adept 550: 0.7 s), times ``speed_factor`` (the cell's ``sim_speed_factor``: a
-    study's slower or faster arm)."""
+    study's slower or faster arm).
+
+    ``joints`` (a world's ``sim:`` figures, ``arm_*``): each joint limit it gives (> 0) is
+    the arm's truth, whatever the robot description says; so a world file can hold an arm
+    the cell file describes wrongly."""
     k = spec.reach_mm / (INNER_MM + OUTER_MM)
     shape = ScaraSpec(inner_mm=INNER_MM * k, outer_mm=OUTER_MM * k)
     f = ScaraModel(spec, shape).standard_cycle() / RobotModel(spec).standard_cycle()
-    return ScaraModel(spec, shape.scaled(f * speed_factor))
+    arm = shape.scaled(f)
+    if joints is not None:
+        given = {name: value for name, value in (
+            ("j1_rad_s", math.radians(joints.arm_j1_deg_s)),
+            ("j2_rad_s", math.radians(joints.arm_j2_deg_s)),
+            ("z_mm_s", joints.arm_z_mm_s),
+            ("j1_rad_s2", math.radians(joints.arm_j1_deg_s2)),
+            ("j2_rad_s2", math.radians(joints.arm_j2_deg_s2)),
+            ("z_mm_s2", joints.arm_z_mm_s2)) if value > 0.0}
+        arm = dataclasses.replace(arm, **given)
+    return ScaraModel(spec, arm.scaled(speed_factor))
+
+
+def arm_figures(arm: ScaraSpec) -> dict[str, float]:
+    """The arm's joint limits as a world file's ``sim:`` keys (degrees, mm)."""
+    return {"arm_j1_deg_s": math.degrees(arm.j1_rad_s), "arm_j2_deg_s": math.degrees(arm.j2_rad_s),
+            "arm_z_mm_s": arm.z_mm_s, "arm_j1_deg_s2": math.degrees(arm.j1_rad_s2),
+            "arm_j2_deg_s2": math.degrees(arm.j2_rad_s2), "arm_z_mm_s2": arm.z_mm_s2}

@@ -76,7 +76,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.cpm = cell.encoder.counts_per_mm
         # the arm as it really moves: a SCARA (feeder_bt.robot.scara), sim_speed_factor times a
         # Cobra 600; the trees see only the cell's Cartesian description
-        self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor)
+        self.robot_model = world_arm(cell.robot, cell.robot.sim_speed_factor, cell.sim)
         # every pass along the belt and every pick, for the report's robot bounds
         self.passlog = PassLog(clock.now(), 0.0)
         self.imperfect = Imperfections(cell.sim, self.cpm, cell.robot.grip_tolerance_mm, seed)

@@ -36,6 +36,7 @@ class Job:
     duration: float
     cell: str | None = None
     supply: str | None = None
+    world: str | None = None        # the simulated cell's truth (a twin: feeder twin fit)
 
 
 def evaluate(job: Job) -> dict[str, Any]:
@@ -53,6 +54,8 @@ def evaluate(job: Job) -> dict[str, Any]:
         if "supply" not in {f.name for f in dataclasses.fields(RunOptions)}:
             return {"error": "--supply needs a feeder_bt whose `feeder run` takes supply plans"}
         extra["supply"] = job.supply
+    if job.world:
+        extra["world"] = job.world
     with tempfile.TemporaryDirectory(prefix="feeder-tune-") as d:
         path = Path(d) / "overlay.yaml"
         write_overlay(path, job.overlay)

@@ -41,6 +41,7 @@ class TuneConfig:
     study: str | None = None            # SQLite file; None: in memory
     cell: str | None = None
     supply: str | None = None
+    world: str | None = None            # tune on this world (a twin), not the cell's figures
     sampler_seed: int = 0
     # wear budget: recirculations per placed part a setting may cost; a trial
     # over it is infeasible (TPE's constraints), never the best
@@ -98,7 +99,8 @@ class InlineExecutor(cf.Executor):
 def study_name(cfg: TuneConfig) -> str:
     """One study per scenario, space and supply plan, so one file can hold the baselines."""
     name = f"{Path(cfg.scenario).stem}:{cfg.space}" + (":grid" if cfg.grid else "")
-    return name + (f":{Path(cfg.supply).stem}" if cfg.supply else "")
+    name += f":{Path(cfg.supply).stem}" if cfg.supply else ""
+    return name + (f":world={Path(cfg.world).stem}" if cfg.world else "")
 
 
 def open_study(cfg: TuneConfig, read_only: bool = False, unit: str = "parts/min") -> Any:
@@ -193,6 +195,7 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     scenario_path = str(Path(cfg.scenario).resolve())
     cell_path = str(Path(cfg.cell).resolve()) if cfg.cell else None
     supply = str(Path(cfg.supply).resolve()) if cfg.supply else None
+    world = str(Path(cfg.world).resolve()) if cfg.world else None
     pending: dict[cf.Future, int] = {}
     open_trials: dict[int, tuple[Any, dict[str, Any], list[dict[str, Any]]]] = {}
     asked = 0
@@ -205,7 +208,8 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
                 trial.set_user_attr("overlay", overlay)
                 open_trials[trial.number] = (trial, overlay, [])
                 for seed in range(1, cfg.seeds + 1):
-                    job = Job(scenario_path, overlay, seed, cfg.duration, cell_path, supply)
+                    job = Job(scenario_path, overlay, seed, cfg.duration, cell_path, supply,
+                              world)
                     pending[executor.submit(evaluate, job)] = trial.number
                 asked += 1
             done_now, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)

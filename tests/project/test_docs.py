@@ -64,14 +64,15 @@ def test_documented_command_runs(doc, line, tmp_path, monkeypatch):
     monkeypatch.syspath_prepend(str(ROOT))         # leaf classes: examples.leaves:...
     args = shlex.split(line)[1:]
     taught = args[0] in ("check", "locate") and any(a.startswith("out/") for a in args)
-    if args[0] in ("locate", "recipe", "report", "replay") or "--images" in args \
+    if args[0] in ("locate", "recipe", "report", "replay", "twin") or "--images" in args \
             or "--image" in args or taught:
         # they read what `render` / `teach` / `run --db` / `calibrate --save-image` wrote
         cmds = commands()
+        db = next(iter(args[2:3] if args[0] == "twin" else args[1:2]), "")  # twin fit RUN.db
         for d, earlier in cmds[:cmds.index((doc, line))]:
             prev = shlex.split(earlier)[1:]
             if d == doc and ((prev[0] in ("render", "teach") or "--save-image" in prev)
-                             if args[0] not in ("report", "replay") else args[1] in prev):
+                             if args[0] not in ("report", "replay", "twin") else db in prev):
                 _run(doc, earlier, tmp_path, monkeypatch)
     _run(doc, line, tmp_path, monkeypatch)
 
