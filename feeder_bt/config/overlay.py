@@ -79,16 +79,22 @@ def apply_overlay(root: MappingNode, overlay: str | Path, ctx: Any,
     over = compose(opath, make_ctx(str(opath)))
     taken: set[str] = set()
     merged = _merge(root, over, "", taken)
-    scenario_error = ctx.error
+    blame_overlay(ctx, taken, str(opath))
+    return merged
+
+
+def blame_overlay(ctx: Any, taken: set[str], file: str) -> None:
+    """A problem at a key the overlay (or world file) gave points at that file and its
+    line, not at the file it was laid over: for this load only (the instance's ``error``)."""
+    inner = ctx.error
 
     def error(path: str, what: str, line: int | None = None) -> ConfigError:
-        e = scenario_error(path, what, line)
+        e = inner(path, what, line)
         if not _from_overlay(path, taken):
             return e
-        return ConfigError(e.what, file=str(opath), line=e.line, key=e.key)
+        return ConfigError(e.what, file=file, line=e.line, key=e.key)
 
-    ctx.error = error              # the instance's, for this load only
-    return merged
+    ctx.error = error
 
 
 def write_overlay(path: str | Path, data: dict[str, Any], header: str = "") -> None:

@@ -27,7 +27,7 @@ from yaml.nodes import MappingNode, ScalarNode
 
 from feeder_bt.config.checks import _check_cell
 from feeder_bt.config.loader import _compose
-from feeder_bt.config.overlay import _from_overlay, _merge
+from feeder_bt.config.overlay import _from_overlay, _merge, blame_overlay
 from feeder_bt.config.walker import _Ctx, _suggest
 from feeder_bt.core.errors import ConfigError
 from feeder_bt.core.model import CellSpec
@@ -140,15 +140,7 @@ def _laid_over(path: str | Path, base: MappingNode, base_file: str, cell_path: P
     ctx = _Ctx(base_file)
     taken: set[str] = set()
     merged = _merge(base, wroot, "", taken)
-    cell_error = ctx.error
-
-    def error(p: str, what: str, line: int | None = None) -> ConfigError:
-        e = cell_error(p, what, line)
-        if not _from_overlay(p, taken):
-            return e
-        return ConfigError(e.what, file=wfile, line=e.line, key=e.key)
-
-    ctx.error = error                  # type: ignore[method-assign]
+    blame_overlay(ctx, taken, wfile)
     world = ctx.collect(ctx.dataclass, CellSpec, merged, "", fill={"path": cell_path})
     if world is not None:
         ctx.collect(_check_cell, world, ctx)

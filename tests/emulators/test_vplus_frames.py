@@ -17,6 +17,7 @@ import pytest
 from feeder_bt.config import load_scenario
 from feeder_bt.core.clock import RealClock
 from feeder_bt.core.errors import EnvelopeError, MissedGrab, PowerOff
+from feeder_bt.core.model import belt_window
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.vplus.check import VPLUS_DIR
 from feeder_bt.hal.adept import AdeptController, VplusError
@@ -48,7 +49,7 @@ def _rig(robot: dict | None = None, true_base=None, seed: int = 4, programs=VPLU
                                notify_port=p["notify"], timeout_s=TIMEOUT_S,
                                motion_timeout_s=MOTION_TIMEOUT_S)
     ctrl = AdeptController(spec, RealClock(), robot=cell.robot,
-                           counts_per_mm=cell.encoder.counts_per_mm)
+                           counts_per_mm=cell.encoder.counts_per_mm, window=belt_window(cell))
     plant.jog("A", BELT_COUNTS_S)
     plant.jog("B", BELT_COUNTS_S)
     plant.run_ahead(PARTS_AHEAD_S)

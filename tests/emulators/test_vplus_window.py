@@ -14,19 +14,16 @@ import time
 import pytest
 
 from feeder_bt.config import load_scenario
-from feeder_bt.core.clock import RealClock
 from feeder_bt.core.errors import EnvelopeError, MissedGrab
 from feeder_bt.core.model import belt_window
 from feeder_bt.emulators.adept import AdeptEmulator
 from feeder_bt.emulators.vplus.trans import BeltLoc
-from feeder_bt.hal.adept import AdeptController
 from feeder_bt.hal.interfaces import PickTarget, Pose
 from feeder_bt.sim.realtime import Plant
+from tests.emulators.test_vplus_frames import _close, _rig
 from tests.hal.test_adept_driver import (
     BELT_COUNTS_S,
-    MOTION_TIMEOUT_S,
     PARTS_AHEAD_S,
-    TIMEOUT_S,
     WAIT_S,
     pickable_target,
     wait_for,
@@ -90,26 +87,16 @@ def _still(emu, seconds: float = 0.4) -> float:
 
 @pytest.fixture(scope="module")
 def rig():
-    scenario, cell, plant, emu = _cell_and_plant()
-    p = emu.ports
-    spec = dataclasses.replace(cell.adept, host="127.0.0.1", motion_port=p["motion"],
-                               position_port=p["position"], io_port=p["io"],
-                               notify_port=p["notify"], timeout_s=TIMEOUT_S,
-                               motion_timeout_s=MOTION_TIMEOUT_S)
-    ctrl = AdeptController(spec, RealClock(), robot=cell.robot,
-                           counts_per_mm=cell.encoder.counts_per_mm, window=belt_window(cell))
+    plant, emu, ctrl, scenario = _rig(ROBOT, seed=3)
     try:
-        yield scenario, cell, plant, emu, ctrl
+        yield scenario, load_scenario("scenarios/lenses.yaml")[1], plant, emu, ctrl
     finally:
-        ctrl.close()
-        emu.stop()
-        plant.stop()
-        assert plant.error is None
+        _close(plant, emu, ctrl)
 
 
 def test_the_cell_files_window_reaches_the_controller(rig):
-    _scenario, cell, _plant, emu, _ctrl = rig
-    assert belt_window(cell) == (700.0, 1150.0, 1090.0)
+    _scenario, _cell, _plant, emu, ctrl = rig
+    assert ctrl.window == (700.0, 1150.0, 1090.0)
     g = emu.rt.globals
     assert (g["belt.upx"].v, g["belt.downx"].v, g["pick.margin"].v) == (700.0, 1150.0, 60.0)
 
