@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 from py_trees.common import Status
 
@@ -66,7 +68,9 @@ def test_recipe_result_is_enqueued_with_robot_latch(tree):
     ctx, root = tree
     res = result(detection(150.0, 40.0, 12.5, area_mm2=2000.0),
                  detection(300.0, -60.0, pose="on_edge", pickable=False),
-                 rejected=("blob",), ms=7.5)
+                 rejected=(SimpleNamespace(reason="outline does not match (0.61 < 0.75)",
+                                           x_mm=90.0, y_mm=5.0,
+                                           features={"area_mm2": 1500.0}),), ms=7.5)
     latch = CONV0 + 300 * CPM
     assert run_frame(ctx, root, latch, res, t=1.25, index=4) is Status.SUCCESS
     assert len(ctx.queue) == 1

@@ -56,6 +56,8 @@ GIGE_CLASS = "BaslerGigE"
 #: without ``WaitForFrameTriggerReady``: how long a stray frame may still be on its way
 #: after its exposure (readout and transfer) before the drain looks for it
 SETTLE_S = 0.05
+TRANSFER_MS = 20      # longest a finished frame takes to reach the host (GigE: a 640 x 484
+                      # mono frame is 0.3 MB, 3 ms at 1 Gbit/s; the rest is host latency)
 
 
 def block_id_follows(last: int, block: int, gige: bool) -> bool:
@@ -317,7 +319,10 @@ class PylonSource:
             n = 0
             try:
                 while n < 1000:              # bounded: a free-running camera never empties
-                    r = cam.RetrieveResult(0, self.pylon.TimeoutHandling_Return)
+                    # the first wait covers a frame the camera has finished but is still
+                    # sending (ready for a trigger is not yet delivered to the host)
+                    wait_ms = TRANSFER_MS if n == 0 else 0
+                    r = cam.RetrieveResult(wait_ms, self.pylon.TimeoutHandling_Return)
                     if not r.IsValid():
                         break
                     self.last_id = r.GetBlockID()
