@@ -206,7 +206,8 @@ def side_by_side(args: argparse.Namespace) -> dict:
                 for code, tree in (("before", before), ("after", ROOT)):
                     print(f"pass {n}/{args.passes}: {code}", file=sys.stderr, flush=True)
                     report = _child(tree, args, Path(tmp) / f"{code}{n}.json")
-                    passes.append({"code": code, "pass": n, **report})
+                    passes.append({**report, "rev": report.get("code"), "code": code,
+                                   "pass": n})
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                             str(before)], capture_output=True)
