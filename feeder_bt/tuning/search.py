@@ -183,10 +183,17 @@ def open_study(cfg: TuneConfig, read_only: bool = False, unit: str = "parts/min"
 
 def _sampler(cfg: TuneConfig, done: int) -> Any:
     """TPE, seeded so that a search is repeatable; a resumed one draws new points."""
+    import warnings
+
     import optuna
     startup = max(3, min(10, cfg.trials // 3))
-    return optuna.samplers.TPESampler(seed=cfg.sampler_seed + done, constant_liar=True,
-                                      n_startup_trials=startup)
+    with warnings.catch_warnings():     # multivariate and group are "experimental"
+        warnings.simplefilter("ignore")
+        # multivariate, grouped by the adjuster's own parameters: the speeds' joint effect
+        # (the wear budget is a ridge in belt x incline) is what a search must find
+        return optuna.samplers.TPESampler(seed=cfg.sampler_seed + done, constant_liar=True,
+                                          n_startup_trials=startup, multivariate=True,
+                                          group=True)
 
 
 def finished(study: Any) -> list[Any]:
