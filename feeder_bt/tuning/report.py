@@ -37,10 +37,11 @@ def load_studies(path: str | Path) -> list[Any]:
     return [optuna.load_study(study_name=n, storage=storage) for n in names]
 
 
-#: completed trials before an importance is printed: PED-ANOVA compares the parameters'
-#: spread in the best 10 % of the trials with all of them, so with fewer than 20 the "best
-#: 10 %" is one trial, and any parameter that trial happens to differ in looks important
-MIN_IMPORTANCE_TRIALS = 20
+#: completed trials before an importance is printed: PED-ANOVA judges a parameter by how
+#: the best 10 % of the trials spread in it against all of them, and Optuna advises at least
+#: 5 trials in that best 10 % (its PedAnovaImportanceEvaluator's notes); with fewer, the
+#: "best 10 %" is a trial or two, and whatever they happen to differ in looks important
+MIN_IMPORTANCE_TRIALS = 50
 
 
 def importance_note(study: Any) -> str | None:
@@ -48,8 +49,8 @@ def importance_note(study: Any) -> str | None:
     from optuna.trial import TrialState
     n = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
     if n < MIN_IMPORTANCE_TRIALS:
-        return (f"importance: not shown, {n} completed trials (PED-ANOVA compares the best "
-                f"10 % with the rest: it needs {MIN_IMPORTANCE_TRIALS} at least)")
+        return (f"importance: not shown, {n} completed trials (PED-ANOVA judges by the best "
+                f"10 %, which should hold 5 trials: {MIN_IMPORTANCE_TRIALS} at least)")
     return None
 
 

@@ -14,7 +14,10 @@ far (the rule of Optuna's ``SuccessiveHalvingPruner``), else it is pruned. Most 
 are judged on a quarter of a run, so many more are tried in the same time; only the trials
 that reach the last rung have a value, and the best is one of them. A setting over the wear
 budget scores below every setting within it (its score is minus its excess), so the rungs
-spend nothing on settings that flood the belt.
+spend nothing on settings that flood the belt. With halving, a new study's first trials are
+the scenario as written and then the same settings with each other pick policy: of all the
+settings, the pick policy moved lenses' parts/min most (docs/performance.md), and these
+cost a quarter run each where they do not pay.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from feeder_bt.config.loader import RETRIEVE_POLICIES
 from feeder_bt.core.errors import FeederError
 from feeder_bt.tuning.objective import Job, evaluate
 from feeder_bt.tuning.space import GRID_MIN_TRIALS, Limits, grid_space, start_params, suggest
@@ -56,7 +60,7 @@ class TuneConfig:
     # over it is infeasible (TPE's constraints), never the best
     max_recirc: float | None = None
     grid: bool = False                  # the fixed space as a grid (space.grid_space), not TPE
-    halving: bool = True                # short trials first (``rungs``); False: every trial whole
+    halving: bool = False               # short trials first (``rungs``; the CLI's default)
     eta: int = 3                        # a rung keeps the best 1/eta
     minutes: float | None = None        # wall-clock budget: no run starts after it
 
@@ -256,6 +260,10 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
             start = start_params(scenario, cfg.space, limits)
             if start is not None:
                 study.enqueue_trial(start, user_attrs={"start": "scenario"})
+                if cfg.halving:     # then its neighbours in the pick policy (see the module)
+                    for policy in RETRIEVE_POLICIES:
+                        if policy != start.get("policy"):
+                            study.enqueue_trial({**start, "policy": policy})
     if on_start:
         complete = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
         best = max(complete, key=lambda t: t.value, default=None)
@@ -275,15 +283,27 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
     asked = 0
     stop = False
 
-    def out_of_time() -> bool:
-        return deadline is not None and time.monotonic() >= deadline
+    took: dict[float, float] = {}      # duration -> the longest wall time a run of it took
+    started: dict[cf.Future, tuple[float, float]] = {}
+
+    def out_of_time(rung: int = 0) -> bool:
+        """No time left to run ``rung``'s runs: they would end after the deadline (judged
+        by the longest such run so far, behind the runs already in flight)."""
+        if deadline is None:
+            return False
+        now = time.monotonic()
+        duration, seeds = ladder[rung]
+        need = took.get(duration, 0.0) * (1.0 + (len(pending) + len(seeds) - 1) // capacity)
+        return now + need >= deadline
 
     def submit(ot: _Open) -> None:
         duration, seeds = ladder[ot.rung]
         ot.waiting = len(seeds)
         for seed in seeds:
             job = Job(scenario_path, ot.overlay, seed, duration, cell_path, supply)
-            pending[executor.submit(evaluate, job)] = ot.trial.number
+            fut = executor.submit(evaluate, job)
+            pending[fut] = ot.trial.number
+            started[fut] = (duration, time.monotonic())
 
     try:
         while (asked < todo and not stop and not out_of_time()) or pending:
@@ -298,6 +318,8 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
             done_now, _ = cf.wait(list(pending), return_when=cf.FIRST_COMPLETED)
             for fut in done_now:
                 number = pending.pop(fut)
+                duration, t_start = started.pop(fut)
+                took[duration] = max(took.get(duration, 0.0), time.monotonic() - t_start)
                 try:
                     res = fut.result()
                 except Exception as e:  # noqa: BLE001 - a worker died: the trial failed
@@ -310,7 +332,8 @@ def run_search(cfg: TuneConfig, executor: cf.Executor, capacity: int,
                 if ot.waiting:
                     continue
                 result = _rung_done(study, ot, ladder, scores, cfg,
-                                    cut=stop or out_of_time())
+                                    cut=stop or (ot.rung + 1 < len(ladder)
+                                                 and out_of_time(ot.rung + 1)))
                 if result is None:          # promoted: the next rung's runs
                     ot.rung += 1
                     submit(ot)
