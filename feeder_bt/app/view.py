@@ -326,22 +326,29 @@ class Progress:
         self.next_tenth = 1
 
     def update(self, force: bool = False) -> None:
+        """Called after every tick; the line is formatted only when it is shown (5 times a
+        second on a terminal, every tenth of the run otherwise): formatting it every tick
+        cost about 5 % of a fast run."""
         frac = min(1.0, max(0.0, self.cell.clock.now() / self.duration))
-        f = figures(self.cell, self.feed_seconds() if self.feed_seconds else None)
-        text = (f"{frac * 100:5.1f}%  sim {self.cell.clock.now():5.0f}/{self.duration:.0f} s  "
-                f"retrieved {f['retrieved']}  {f['ppm']:.1f} parts/min  queue {f['queue']}")
         if self.tty:
             wall = time.monotonic()
-            if force or wall >= self.next_wall:
-                self.next_wall = wall + 0.2
-                width = shutil.get_terminal_size((80, 24)).columns
-                bar_w = max(0, min(30, width - len(text) - 4))
-                bar = f"[{'#' * int(frac * bar_w):<{bar_w}}] " if bar_w >= 5 else ""
-                self.out.write(f"\r{_fit(bar + text, width - 1)}\x1b[K")
-                self.out.flush()
+            if not (force or wall >= self.next_wall):
+                return
+            self.next_wall = wall + 0.2
+            text = self._text(frac)
+            width = shutil.get_terminal_size((80, 24)).columns
+            bar_w = max(0, min(30, width - len(text) - 4))
+            bar = f"[{'#' * int(frac * bar_w):<{bar_w}}] " if bar_w >= 5 else ""
+            self.out.write(f"\r{_fit(bar + text, width - 1)}\x1b[K")
+            self.out.flush()
         elif force or frac * 10 >= self.next_tenth:
             self.next_tenth = int(frac * 10) + 1
-            print(text, file=self.out, flush=True)
+            print(self._text(frac), file=self.out, flush=True)
+
+    def _text(self, frac: float) -> str:
+        f = figures(self.cell, self.feed_seconds() if self.feed_seconds else None)
+        return (f"{frac * 100:5.1f}%  sim {self.cell.clock.now():5.0f}/{self.duration:.0f} s  "
+                f"retrieved {f['retrieved']}  {f['ppm']:.1f} parts/min  queue {f['queue']}")
 
     def close(self, spare: int = 0) -> None:
         if self.tty:

@@ -46,7 +46,8 @@ class Board:
     def client(self, owner: py_trees.behaviour.Behaviour, read: Iterable[str] = (),
                write: Iterable[str] = ()) -> Client:
         """The leaf's client, registering exactly the keys it declares, on this board."""
-        bb = owner.attach_blackboard_client(name=owner.name)
+        bb = _Client(name=owner.name)     # what attach_blackboard_client makes, quicker
+        owner.blackboards.append(bb)
         for key in read:
             bb.register_key(key=key, access=Access.READ, remap_to=self.where(key))
         for key in write:
@@ -86,6 +87,38 @@ class Board:
         if self.prefix:
             return stored.startswith(self.prefix + "/")
         return not _in_a_cell(stored)
+
+
+class _Client(Client):
+    """py_trees' client, whose ``get`` of a plain key it has read before goes straight to
+    the store: py_trees checks the client's access and resolves the remapping on every
+    read (a few microseconds, about 200,000 reads in a simulated hour of lenses). The first
+    read of each key takes py_trees' way, with its checks and errors; a key unregistered
+    is forgotten, and with py_trees' activity stream on every read takes py_trees' way."""
+
+    def get(self, name: str) -> Any:
+        if Blackboard.activity_stream is None:
+            where = super().__getattribute__("_fast").get(name)
+            if where is not None:
+                try:
+                    return Blackboard.storage[where]
+                except KeyError:
+                    pass                    # py_trees' own error, below
+        value = super().get(name)
+        if "." not in name:
+            absolute = Blackboard.absolute_name(super().__getattribute__("namespace"), name)
+            super().__getattribute__("_fast")[name] = \
+                super().__getattribute__("remappings")[absolute]
+        return value
+
+    def unregister_key(self, key: str, clear: bool = True,
+                       update_namespace_cache: bool = True) -> None:
+        super().__getattribute__("_fast").clear()
+        super().unregister_key(key, clear=clear, update_namespace_cache=update_namespace_cache)
+
+    def __init__(self, *, name: str) -> None:
+        super().__init__(name=name)
+        object.__setattr__(self, "_fast", {})
 
 
 def _in_a_cell(stored: str) -> bool:

@@ -21,6 +21,8 @@ class RunConveyors(Leaf):
         super().__init__(name, ctx)
         self.jobs: list[Job] = []
         self.commanded: tuple[float, float] | None = None
+        self._message_of: tuple[float, float] | None = None
+        self._message = ""
 
     def initialise(self) -> None:
         self.commanded = None
@@ -43,7 +45,11 @@ class RunConveyors(Leaf):
             jam = conv.fault()
             if jam is not None:
                 return self._failed(jam)
-        self.feedback_message = f"horizontal {h:.0f} mm/s, incline {i:.0f} mm/s"
+        if self._message_of != (h, i) or self.feedback_message is not self._message:
+            # formatted when the speeds change, not every tick: the same text
+            self._message_of = (h, i)
+            self._message = f"horizontal {h:.0f} mm/s, incline {i:.0f} mm/s"
+            self.feedback_message = self._message
         return Status.RUNNING
 
     def _failed(self, error) -> Status:

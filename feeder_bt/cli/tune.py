@@ -10,11 +10,13 @@ import multiprocessing
 import os
 import sys
 import time
+from collections import Counter
 from contextlib import ExitStack
 from typing import Any
 
 from feeder_bt.cli.argtypes import non_negative, positive, positive_int
 from feeder_bt.core.errors import FeederError
+from feeder_bt.tuning.search import DEFAULT_MAX_RECIRC
 from feeder_bt.tuning.space import SPACES
 
 DEFAULT_STUDY = "runs/tune.db"
@@ -61,13 +63,30 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--grid", action="store_true",
                    help="with --space fixed: a grid over the two speeds and every pick "
                         "policy within --trials points, instead of TPE")
-    p.add_argument("--max-recirc", type=non_negative, default=None, metavar="R",
-                   help="wear budget: a setting may recirculate at most R parts per placed "
-                        "part (the mean of its seeds); those over it are never the best")
+    p.add_argument("--max-recirc", type=_budget, default=DEFAULT_MAX_RECIRC, metavar="R",
+                   help=f"wear budget: a setting may recirculate at most R parts per placed "
+                        f"part (the mean of its seeds); those over it are never the best "
+                        f"(default {DEFAULT_MAX_RECIRC:g}; 'off' for none)")
+    p.add_argument("--halving", action=argparse.BooleanOptionalAction, default=True,
+                   help="short trials first: a quarter run on seed 1, then the whole run, "
+                        "then the other seeds, each rung keeping the best 1/--eta of the "
+                        "trials (default on; --no-halving runs every trial whole)")
+    p.add_argument("--eta", type=positive_int, default=3,
+                   help="with halving: each rung keeps the best 1/ETA (default 3)")
+    p.add_argument("--minutes", type=positive, default=None,
+                   help="wall-clock budget: no run starts after this many minutes; trials "
+                        "cut short are pruned (with --trials as the most to try)")
     p.add_argument("--sampler-seed", type=int, default=0,
                    help="seed of the search itself (default 0)")
     p.set_defaults(handler=cmd_tune)
     return p
+
+
+def _budget(text: str) -> float | None:
+    """``--max-recirc``: a number >= 0, or off/none for no wear budget."""
+    if text.strip().lower() in ("off", "none"):
+        return None
+    return non_negative(text)
 
 
 def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, int, str]:
@@ -102,7 +121,8 @@ def cmd_tune(args: argparse.Namespace) -> int:
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
                      supply=args.supply, world=args.world, sampler_seed=args.sampler_seed,
-                     max_recirc=args.max_recirc, grid=args.grid)
+                     max_recirc=args.max_recirc, grid=args.grid, halving=args.halving,
+                     eta=args.eta, minutes=args.minutes)
     if args.world:                  # a bad world file: one line now, not every trial failed
         from feeder_bt.config import load_scenario
         from feeder_bt.config.world import load_world
@@ -120,7 +140,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
     unit = unit_of(study)
     print(f"best: trial {best.number}, {best.value:.2f} {unit} (seeds {per_seed}{wear}): "
           f"{describe(overlay)}")
-    print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials, "
+    states = Counter(t.state.name.lower() for t in study.trials)
+    how = ", ".join(f"{n} {k}" for k, n in sorted(states.items()))
+    print(f"study: {args.study} ({study.study_name}, {len(study.trials)} trials: {how}; "
           f"{time.monotonic() - wall0:.0f} s wall)")
     if args.out:
         from feeder_bt.config.overlay import write_overlay

@@ -29,7 +29,7 @@ from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.core.parts import PartsQueue
 from feeder_bt.hal.interfaces import Hal
 from feeder_bt.policy.adjusters import AdjustInputs, Speeds, make_adjuster
-from feeder_bt.trees import build_cleanup, build_feeding, build_setup
+from feeder_bt.trees import build_cleanup, build_feeding, build_setup, fast
 from feeder_bt.trees.leaves import leaf_class
 from feeder_bt.vision.locator import Locator
 from feeder_bt.vision.pixels import Calibration
@@ -203,7 +203,7 @@ class Cell:
         root = self.root
         if root is None:
             return
-        root.tick_once()
+        fast.tick_once(root)     # py_trees' tick, without its generators
         if self.state is CellState.RUNNING:
             reason = self.board.get(FAULTS.ESCALATE)
             if reason:

@@ -114,6 +114,7 @@ class ScaraModel(RobotModel):
         self._sign = 1.0 if self.scara.elbow == "righty" else -1.0
         th = math.radians(spec.base_deg)
         self._cos, self._sin = math.cos(th), math.sin(th)
+        self._starts: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
 
     def arch_time(self, d_xy: float, speed_pct: float) -> float:
         raise TypeError("a SCARA's move time needs both ends: use move_time(a, b, speed)")
@@ -132,9 +133,23 @@ class ScaraModel(RobotModel):
         s = self.scara
         l1, l2 = s.inner_mm, s.outer_mm
         c2 = (rx * rx + ry * ry - l1 * l1 - l2 * l2) / (2.0 * l1 * l2)
-        q2 = self._sign * np.arccos(np.clip(c2, -1.0, 1.0))
+        # np.minimum/np.maximum: np.clip's values (NaN too) without its dispatch overhead
+        q2 = self._sign * np.arccos(np.minimum(np.maximum(c2, -1.0), 1.0))
         q1 = np.arctan2(ry, rx) - np.arctan2(l2 * np.sin(q2), l1 + l2 * np.cos(q2))
         return q1, q2
+
+    def _start_joints(self, start: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """``joints`` of a move's start, kept: a run's moves start from a few poses (the
+        place poses, the safe pose), and the replay of ``analysis.robot_bounds`` asks
+        thousands of times."""
+        key = (float(start[0]), float(start[1]))
+        cache = self._starts
+        got = cache.get(key)
+        if got is None:
+            if len(cache) > 256:
+                cache.clear()
+            got = cache[key] = self.joints(start[0], start[1])
+        return got
 
     def _joint(self, x: float, y: float) -> tuple[float, float]:
         """``joints`` for one point, in plain floats (the simulated robot's every move)."""
@@ -189,7 +204,7 @@ class ScaraModel(RobotModel):
         s = max(speed_pct, 1e-3) / 100.0
         tz, rz = self._z(s)
         q1, q2 = self.joints(x, y)
-        p1, p2 = self.joints(start[0], start[1])
+        p1, p2 = self._start_joints(start)
         d1 = np.abs(np.remainder(q1 - p1 + math.pi, math.tau) - math.pi)
         sc = self.scara
         t1, r1 = _trapezoids(d1, sc.j1_rad_s * s, sc.j1_rad_s2 * s * s)

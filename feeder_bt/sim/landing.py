@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from feeder_bt.core.geometry import (
+    circumradius,
     is_convex,
     near,
     outer,
@@ -50,6 +51,7 @@ class Landing:
     _last_landed: int | None
     _outlines: dict[tuple[str, str], np.ndarray]
     _areas: dict[tuple[str, str], float]
+    _radii: dict[tuple[str, str], float]
 
     def outline(self, ptype: str, pose: str) -> np.ndarray:
         """A part's outline in a pose (part frame; with holes, NaN rows part its rings: see
@@ -58,6 +60,14 @@ class Landing:
         if key not in self._outlines:
             self._outlines[key] = pose_outline(self.scenario.parts[ptype], pose)
         return self._outlines[key]
+
+    def radius(self, ptype: str, pose: str) -> float:
+        """``circumradius`` of ``outline(ptype, pose)``, made once (every landing asks)."""
+        key = (ptype, pose)
+        r = self._radii.get(key)
+        if r is None:
+            r = self._radii[key] = circumradius(self.outline(ptype, pose))
+        return r
 
     def part_xy(self, part: SimPart, t: float) -> tuple[float, float]:
         if t < part.settle_end:                 # still sliding to its rest pose

@@ -28,7 +28,7 @@ import numpy as np
 
 from feeder_bt.core.clock import EPS, SimClock
 from feeder_bt.core.encoder import wrap
-from feeder_bt.core.geometry import circumradius, place_outline
+from feeder_bt.core.geometry import place_outline
 from feeder_bt.core.jobs import Job
 from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.hal.interfaces import Pose
@@ -96,6 +96,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         self.rng.shuffle(order)
         self._outlines: dict[tuple[str, str], np.ndarray] = {}
         self._areas: dict[tuple[str, str], float] = {}
+        self._radii: dict[tuple[str, str], float] = {}
         self._poses: dict[str, tuple[list[str], np.ndarray]] = {}
         for ptype in order:
             pid = next(ids)
@@ -264,7 +265,7 @@ class World(PartAccounting, Landing, RobotGrips, BeltSlip):
         pid = self.on_incline.popleft()
         part = self.parts[pid]
         part.outline = self.outline(part.type, part.pose)
-        part.radius = circumradius(part.outline)
+        part.radius = self.radius(part.type, part.pose)
         land_x = part.x0
         part.x0 = land_x - self.horizontal.pos(t)
         self._relocate(part, "incline", "horizontal")

@@ -63,7 +63,9 @@ class TrialProgress:
         if r.value is not None and r.recirc is not None:
             name += f"; recirculated {r.recirc:.2f} per placed" + (
                 "" if r.feasible else ", over --max-recirc")
-        if (r.value is not None and r.feasible
+        if r.pruned_at is not None:         # a rung's score, not a value: never the best
+            name += f"; pruned after {r.duration:g} s x {len(r.per_seed)} seed"
+        elif (r.value is not None and r.feasible
                 and (self.best is None or r.value > self.best[0])):
             self.best = (r.value, r.number)
         best = (f"best {self.best[0]:.2f} {r.unit} (trial {self.best[1]})"

@@ -37,15 +37,33 @@ def load_studies(path: str | Path) -> list[Any]:
     return [optuna.load_study(study_name=n, storage=storage) for n in names]
 
 
+#: completed trials before an importance is printed: PED-ANOVA judges a parameter by how
+#: the best 10 % of the trials spread in it against all of them, and Optuna advises at least
+#: 5 trials in that best 10 % (its PedAnovaImportanceEvaluator's notes); with fewer, the
+#: "best 10 %" is a trial or two, and whatever they happen to differ in looks important
+MIN_IMPORTANCE_TRIALS = 50
+
+
+def importance_note(study: Any) -> str | None:
+    """Why no importance is given for ``study`` (None: it is)."""
+    from optuna.trial import TrialState
+    n = len(study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)))
+    if n < MIN_IMPORTANCE_TRIALS:
+        return (f"importance: not shown, {n} completed trials (PED-ANOVA judges by the best "
+                f"10 %, which should hold 5 trials: {MIN_IMPORTANCE_TRIALS} at least)")
+    return None
+
+
 def importances(study: Any) -> dict[str, float]:
-    """Parameter importance (PED-ANOVA) over the completed trials; empty when too few or when
+    """Parameter importance (PED-ANOVA) over the completed trials (pruned ones ran shorter:
+    their scores are not values); empty with fewer than ``MIN_IMPORTANCE_TRIALS`` or when
     the parameters never varied."""
     import warnings
 
     from optuna.importance import PedAnovaImportanceEvaluator, get_param_importances
     from optuna.trial import TrialState
     done = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-    if len(done) < 2:
+    if len(done) < MIN_IMPORTANCE_TRIALS:
         return {}
     # the parameters every trial has (an adjuster's own exist only in its trials)
     shared = sorted(set.intersection(*(set(t.params) for t in done)))
@@ -63,21 +81,34 @@ def importances(study: Any) -> dict[str, float]:
 def summary_lines(study: Any) -> list[str]:
     from optuna.trial import TrialState
 
-    from feeder_bt.tuning.search import describe
+    from feeder_bt.tuning.search import TuneError, best_overlay, describe
     trials = study.get_trials(deepcopy=False)
     done = [t for t in trials if t.state is TrialState.COMPLETE]
     failed = sum(t.state is TrialState.FAIL for t in trials)
+    pruned = sum(t.state is TrialState.PRUNED for t in trials)
     a = study.user_attrs
-    head = (f"{study.study_name}: {len(done)} trials completed, {failed} failed; "
-            f"{a.get('duration_s', '?')} s x {a.get('seeds', '?')} seeds each")
+    head = (f"{study.study_name}: {len(done)} trials completed"
+            + (f", {pruned} pruned (successive halving)" if pruned else "")
+            + f", {failed} failed; {a.get('duration_s', '?')} s x {a.get('seeds', '?')} "
+              f"seeds each")
     if not done:
         return [head]
-    best = study.best_trial
-    lines = [head, f"  best: trial {best.number}, {best.value:.2f} {unit_of(study)}: "
-                   f"{describe(best.user_attrs.get('overlay', {}))}"]
+    budget = a.get("max_recirc")
+    try:
+        _, best = best_overlay(study, budget)
+    except TuneError:
+        return [head, f"  best: no trial within the wear budget of {budget:g} "
+                      f"recirculations per placed part"]
+    within = f" (within {budget:g} recirculations per placed part)" if budget is not None \
+        else ""
+    lines = [head, f"  best{within}: trial {best.number}, {best.value:.2f} "
+                   f"{unit_of(study)}: {describe(best.user_attrs.get('overlay', {}))}"]
     imp = importances(study)
     if imp:
         lines.append("  importance: " + ", ".join(f"{k} {v:.2f}" for k, v in imp.items()))
+    else:
+        lines.append("  " + (importance_note(study) or "importance: none (no parameter "
+                                                        "every trial has varied)"))
     return lines
 
 
@@ -115,8 +146,8 @@ def plot_studies(studies: list[Any]) -> Any:
         ax_i.set_title("parameter importance (PED-ANOVA)")
         ax_i.set_xlabel("importance (normalised to sum 1)")
         if not imp:
-            ax_i.text(0.5, 0.5, "needs two or more completed trials", ha="center",
-                      transform=ax_i.transAxes)
+            ax_i.text(0.5, 0.5, f"not shown: needs {MIN_IMPORTANCE_TRIALS} completed trials",
+                      ha="center", transform=ax_i.transAxes)
     return fig
 
 

@@ -18,7 +18,8 @@ from feeder_bt.core.errors import ConfigError
 ROOT = Path(__file__).resolve().parents[2]
 LENSES = str(ROOT / "scenarios" / "lenses.yaml")
 SQUARES = str(ROOT / "scenarios" / "squares.yaml")
-TINY = ["--duration", "20", "--seeds", "1"]
+TINY = ["--duration", "20", "--seeds", "1", "--max-recirc", "off"]   # 20 s: nothing recirculates
+WHOLE = ["--no-halving"]          # every trial run whole: values the tests can compare
 
 
 def _write(path: Path, text: str) -> str:
@@ -100,11 +101,11 @@ def study_file(tmp_path_factory):
     """A two-trial search in this process, then continued to three."""
     d = tmp_path_factory.mktemp("tune")
     db, out = d / "s.db", d / "o.yaml"
-    assert main(["tune", LENSES, "--trials", "2", *TINY, "--workers", "1",
+    assert main(["tune", LENSES, "--trials", "2", *TINY, *WHOLE, "--workers", "1",
                  "--study", str(db), "--out", str(out)]) == 0
     first = _values(db)
     first_overlay = yaml.safe_load(out.read_text())
-    assert main(["tune", LENSES, "--trials", "3", *TINY, "--workers", "1",
+    assert main(["tune", LENSES, "--trials", "3", *TINY, *WHOLE, "--workers", "1",
                  "--study", str(db), "--out", str(out)]) == 0
     return db, out, first, first_overlay
 
@@ -211,7 +212,7 @@ def test_same_search_on_a_local_dask_cluster(study_file, tmp_path):
     db = tmp_path / "d.db"
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
                                   host="127.0.0.1", dashboard_address=None) as cluster:
-        assert main(["tune", LENSES, "--trials", "2", *TINY, "--dask",
+        assert main(["tune", LENSES, "--trials", "2", *TINY, *WHOLE, "--dask",
                      cluster.scheduler_address, "--study", str(db)]) == 0
     assert _values(db) == study_file[2]
 
@@ -230,7 +231,7 @@ def test_ctrl_c_fails_the_open_trial_without_spending_the_budget(tmp_path, monke
 
     monkeypatch.setattr(search, "evaluate", fake)
     cfg = search.TuneConfig(scenario=LENSES, trials=2, duration=20, seeds=1,
-                            study=str(tmp_path / "i.db"))
+                            study=str(tmp_path / "i.db"), halving=False)
     with pytest.raises(KeyboardInterrupt):
         search.run_search(cfg, search.InlineExecutor(), 1)
     study = search.run_search(cfg, search.InlineExecutor(), 1)
@@ -246,7 +247,7 @@ def test_a_wear_budget_keeps_the_best_within_it(tmp_path, capsys):
     import optuna
     db, out = tmp_path / "s.db", tmp_path / "o.yaml"
     run = ["tune", LENSES, "--trials", "4", "--duration", "60", "--seeds", "1", "--workers",
-           "1", "--study", str(db)]
+           "1", "--study", str(db), *WHOLE, "--max-recirc", "off"]
     assert main(run) == 0
     trials = optuna.load_study(study_name="lenses:ours", storage=f"sqlite:///{db}").trials
     recirc = {t.number: t.user_attrs["recirc_per_placed"] for t in trials
@@ -335,3 +336,110 @@ def test_a_kit_scenario_is_tuned_for_kits_per_minute(tmp_path, capsys):
     study.set_user_attr("unit", "parts/min")
     assert main(search_cfg) == 2
     assert "unit" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- short trials first
+
+def _fake_runs(monkeypatch, clock=None):
+    """``search.evaluate`` replaced by a deterministic function of the setting: parts/min
+    rise with the belt speed and the wear with the incline speed (over the budget above
+    about 110 mm/s); a run of a quarter duration reads lower, as a short run's start-up
+    does. ``clock``: a list whose first item each run advances by the run's length / 100."""
+    from feeder_bt.tuning import search
+    jobs = []
+
+    def fake(job):
+        jobs.append(job)
+        if clock is not None:
+            clock[0] += job.duration / 100.0
+        p = job.overlay["present"]
+        belt = p["horizontal_mm_s"]
+        incline = belt * p["incline_pct"] / 100.0
+        short = 0.8 if job.duration < 20 else 1.0
+        return {"ppm": round(short * (40 + belt / 20 + job.seed / 10), 3), "seed": job.seed,
+                "recirc_per_placed": round(incline / 75.0, 3)}
+
+    monkeypatch.setattr(search, "evaluate", fake)
+    return jobs
+
+
+def test_halving_runs_short_trials_first_and_the_best_is_a_whole_one(tmp_path, monkeypatch):
+    """A quarter run on seed 1, then the whole run, then the other seeds; most trials stop
+    at the first rung, and the best within the budget is a trial that ran every rung."""
+    from optuna.trial import TrialState
+
+    from feeder_bt.tuning import search
+    jobs = _fake_runs(monkeypatch)
+    cfg = search.TuneConfig(scenario=LENSES, trials=24, duration=20, seeds=2, space="fixed",
+                            study=None, max_recirc=1.5, sampler_seed=3, halving=True)
+    assert search.rungs(cfg) == [(5.0, (1,)), (20.0, (1,)), (20.0, (2,))]
+    study = search.run_search(cfg, search.InlineExecutor(), 1)
+    states = [t.state for t in study.trials]
+    assert len(states) == 24 and states.count(TrialState.PRUNED) >= 8
+    assert sum(j.duration == 5.0 for j in jobs) == 24          # every trial's first rung
+    assert sum(j.duration == 20.0 for j in jobs) < 2 * 24      # whole runs: fewer than 24 x 2
+    for t in study.trials:
+        if t.state is TrialState.COMPLETE:          # its value: the whole runs, both seeds
+            assert len(t.user_attrs["per_seed_ppm"]) == 2
+    _, best = search.best_overlay(study, 1.5)
+    assert best.state is TrialState.COMPLETE and best.user_attrs["recirc_per_placed"] <= 1.5
+    whole = [t for t in study.trials if t.state is TrialState.COMPLETE
+             and t.user_attrs["recirc_per_placed"] <= 1.5]
+    assert best.value == max(t.value for t in whole)
+    # the same search again: the same trials (a seeded sampler, one worker)
+    again = search.run_search(cfg, search.InlineExecutor(), 1)
+    assert [t.params for t in again.trials] == [t.params for t in study.trials]
+
+
+def test_a_rung_keeps_the_best_third_and_the_budget_ranks_first():
+    from feeder_bt.tuning.search import promoted, score
+    assert promoted(5.0, [5.0], 3)                      # the first is the best so far
+    assert not promoted(4.0, [5.0, 4.0], 3)             # fewer than 2 x eta: the best only
+    scores = [9.0, 8.0, 7.0, 6.0, 5.0, 4.0]
+    assert promoted(8.0, scores, 3) and not promoted(7.0, scores, 3)   # the best 6 // 3
+    assert score(70.0, 1.4, 1.5) == 70.0
+    assert score(90.0, 2.0, 1.5) == -0.5 < score(1.0, 0.2, 1.5)       # over: below any within
+    assert score(90.0, 2.0, None) == 90.0
+
+
+def test_a_wall_clock_budget_stops_starting_runs(tmp_path, monkeypatch):
+    """--minutes M: no run starts after M minutes (here a clock each run moves on); trials
+    cut short are pruned, and the search ends with the trials it finished."""
+    from optuna.trial import TrialState
+
+    from feeder_bt.tuning import search
+    clock = [0.0]
+    _fake_runs(monkeypatch, clock)
+    monkeypatch.setattr(search.time, "monotonic", lambda: clock[0])
+    cfg = search.TuneConfig(scenario=LENSES, trials=1000, duration=600, seeds=2,
+                            space="fixed", study=None, max_recirc=1.5, minutes=1.0,
+                            halving=True)
+    study = search.run_search(cfg, search.InlineExecutor(), 1)
+    assert 5 <= len(study.trials) < 1000
+    assert all(t.state in (TrialState.COMPLETE, TrialState.PRUNED) for t in study.trials)
+    assert clock[0] <= 60.0 + 6.0                       # the last run started before 60 s
+
+
+def test_the_wear_budget_is_on_by_default(tmp_path, capsys):
+    """Unless told otherwise, `feeder tune` keeps 1.5 recirculations per placed part;
+    'off' searches without; the report names the budget its best is within."""
+    from feeder_bt.cli.tune import _budget
+    from feeder_bt.tuning.search import DEFAULT_MAX_RECIRC
+    assert DEFAULT_MAX_RECIRC == 1.5
+    assert _budget("off") is None and _budget("2") == 2.0
+    db = tmp_path / "b.db"
+    assert main(["tune", LENSES, "--trials", "1", "--duration", "60", "--seeds", "1",
+                 "--workers", "1", "--study", str(db)]) == 0
+    assert main(["report", "--study", str(db)]) == 0
+    out = capsys.readouterr().out
+    assert "best (within 1.5 recirculations per placed part): trial 0" in out
+
+
+def test_importance_is_printed_only_with_enough_trials(study_file, capsys):
+    """Three trials: PED-ANOVA's best 10 % would be less than one trial, so no importance
+    is shown, and the report says why."""
+    from feeder_bt.tuning.report import MIN_IMPORTANCE_TRIALS
+    assert main(["report", "--study", str(study_file[0])]) == 0
+    out = capsys.readouterr().out
+    assert (f"importance: not shown, 3 completed trials (PED-ANOVA judges by the best 10 %, "
+            f"which should hold 5 trials: {MIN_IMPORTANCE_TRIALS} at least)") in out
