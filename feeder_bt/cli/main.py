@@ -22,6 +22,9 @@ TOOLS = ("report_cmd", "calibrate", "locate_cmd", "render_cmd", "suggest", "emul
 #: ``feeder run``'s exit code when the simulated cell lost or duplicated a part (a bug in
 #: the world or the trees, never the operator's doing): docs/faults.md
 EXIT_ACCOUNTING = 4
+#: ``feeder run``'s exit code when it placed nothing although parts came, or fewer parts/min
+#: than ``--min-ppm`` asks: a CI job must tell such a run from a good one (docs/faults.md)
+EXIT_FED_TOO_LITTLE = 5
 
 
 
@@ -95,6 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fast runs: tick every tick even when nothing can change")
     from feeder_bt.app.run import add_db_options, add_ui_options
     add_db_options(r)
+    r.add_argument("--min-ppm", type=float, metavar="PPM",
+                   help=f"exit {EXIT_FED_TOO_LITTLE} when the run fed fewer parts/min than "
+                        "this (a run that places nothing while parts came always does)")
     r.add_argument("--faults", metavar="PLAN.yaml",
                    help="simulated cell: inject the faults of a plan (docs/faults.md)")
     r.add_argument("--supply", metavar="PLAN.yaml",
@@ -193,9 +199,33 @@ def cmd_run(args: argparse.Namespace) -> int:
     if report["fault"]:
         print(f"FAULT: {report['fault']}", file=sys.stderr)
         return 3
+    too_little = fed_too_little(report, args.min_ppm)
+    if too_little:
+        print(f"FED TOO LITTLE: {too_little}", file=sys.stderr)
+        return EXIT_FED_TOO_LITTLE
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def fed_too_little(report: dict, min_ppm: float | None) -> str | None:
+    """Why the run fed too little to pass for a good one, or None: nothing placed while
+    parts came (named by the commonest reason the recipe gave), or under ``min_ppm``."""
+    p = report["parts"]
+    placed = sum(p["retrieved"].values())
+    came = p["located"] + p["located_unpickable"] + (report["vision"].get("no_match") or {}
+                                                      ).get("frames_no_match", 0)
+    if placed == 0 and came and report["feed_seconds"] > 0:
+        nm = report["vision"].get("no_match") or {}
+        reasons = nm.get("reasons") or {}
+        why = (f"the commonest rejection: {max(reasons, key=reasons.get)} "
+               f"({reasons[max(reasons, key=reasons.get)]} blobs)" if reasons else
+               f"{p['located']} located, {p['missed']} picks missed, "
+               f"{p['too_far']} too far")
+        return f"no part placed in {report['feed_seconds']:.0f} s although parts came; {why}"
+    if min_ppm is not None and report["parts_per_minute"] < min_ppm:
+        return (f"{report['parts_per_minute']:.1f} parts/min, under --min-ppm {min_ppm:g}")
+    return None
 
 
 def cmd_tree(args: argparse.Namespace) -> int:
