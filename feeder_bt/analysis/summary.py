@@ -19,11 +19,23 @@ def summary(report: dict) -> str:
             f"{sum(p['retrieved'].values())} ({kinds})\n"
             f"  located {p['located']}, missed {p['missed']}, lost {p['lost']}"
             + (f", recirculated {p['recirculated_per_placed']:.2f} per placed"
-               if p.get("recirculated_per_placed") is not None else "")
+               if p.get("recirculated_per_placed") is not None and not report.get("plate")
+               else "")
+            + _plate_line(report)
             + _ceiling_line(report) + _fit_line(report) + _robot_time_line(report)
             + _kits_line(report)
             + _robots_line(report) + _outcomes_line(report) + "\n"
             + story_text(report))
+
+
+def _plate_line(report: dict) -> str:
+    """A plate cell's actions (a plate does not recirculate: it flips, feeds, dispenses)."""
+    plate = report.get("plate") or {}
+    if not plate:
+        return ""
+    done = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in plate.items()
+                     if k != "decisions" and v)
+    return f"\n  plate: {done or 'no action'} ({plate.get('decisions', 0)} decisions)"
 
 
 def _outcomes_line(report: dict) -> str:
