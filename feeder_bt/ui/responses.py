@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from starlette.requests import HTTPConnection, Request
+from starlette.requests import ClientDisconnect, HTTPConnection, Request
 from starlette.responses import JSONResponse, Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -43,6 +43,8 @@ class SecurityHeaders:
 
         try:
             await self.app(scope, receive, send_with_headers)
+        except ClientDisconnect:               # the client hung up mid-request: no bug,
+            return                             # and nobody is left to answer
         except Exception as e:                 # a bug: one line, never a traceback
             print(f"feeder: operator UI: {str(scope.get('method'))[:16]} "
                   f"{short_path(scope.get('path'))}: internal error: {type(e).__name__}",
