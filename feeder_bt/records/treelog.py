@@ -140,11 +140,14 @@ def summarise(value: Any, depth: int = 0) -> Any:
     if hasattr(value, "item") and getattr(value, "ndim", 1) == 0:       # numpy scalar
         return summarise(value.item(), depth)
     if dataclasses.is_dataclass(value) and not isinstance(value, type) and depth == 0:
+        # for people, not Python: "Frame: latch 8012345, t 12.3, index 4"; fields that are
+        # not plain values (an image, a list) and empty ones are left out
         fields = {f.name: summarise(getattr(value, f.name), 1)
                   for f in dataclasses.fields(value)}
-        inner = ", ".join(f"{k}={v}" for k, v in fields.items()
-                          if v is None or isinstance(v, bool | int | float | str))
-        return f"{type(value).__name__}({inner})"[:160]
+        inner = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in fields.items()
+                          if isinstance(v, bool | int | float)
+                          or (isinstance(v, str) and v and not v.startswith("<")))
+        return f"{type(value).__name__}: {inner}"[:160] if inner else type(value).__name__
     if isinstance(value, list | tuple) and depth == 0:
         return f"[{len(value)} items]"
     return f"<{type(value).__name__}>"

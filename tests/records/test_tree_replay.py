@@ -176,3 +176,16 @@ def test_the_dashboards_memory_is_bounded_and_agrees_with_the_log(tmp_path, monk
     for t in (t0, (t0 + t1) / 2, t1 - 5.0):
         assert live.at(t).statuses == logged.at(t).statuses
         assert live.at(t).board == logged.at(t).board
+
+
+def test_the_blackboard_panel_shows_values_for_people_not_python_reprs():
+    """A frame on the blackboard reads as its figures; its image is never shown (nor
+    copied), and no Python repr (``Frame(image=<ndarray>...``) reaches the panel."""
+    import numpy as np
+
+    from feeder_bt.hal.interfaces import Frame
+    from feeder_bt.records.treelog import summarise
+
+    shown = summarise(Frame(image=np.zeros((4, 4), np.uint8), latch=8012345, t=12.3, index=4))
+    assert shown == "Frame: latch 8012345, t 12.3, index 4"
+    assert "<" not in shown and "=" not in shown and "image" not in shown
