@@ -92,6 +92,9 @@ def test_replay_opens_a_second_before_the_first_fault_unfolded(replay, page):
     expect(page.locator("#tv-time")).to_contain_text("1 s before the first fault")
     want = json.loads(cli("replay", str(db), "--before-fault", "--json"))
     assert float(page.locator("#tv-time").get_attribute("data-t")) == round(want["t"], 3)
+    # the slider stands where the time shown is, not at 0 until End is pressed
+    slider = float(page.locator("#tv-slider").input_value())
+    assert abs(slider - round(want["t"], 3)) < 0.01, (slider, want["t"])
     expect(node(page, "feeder")).to_have_attribute("data-status", "running")
     running = [n["id"] for n in want["nodes"] if n["status"] == "running"]
     assert len(running) > 3

@@ -238,7 +238,9 @@
       if (st.tree) this.lastTree = st.tree;
       this.slider.min = String(st.span[0]);
       this.slider.max = String(st.span[1]);
-      if (this.following) this.slider.value = String(st.span[1]);
+      // the slider shows the time shown: a value set before its range was known (a replay
+      // opening before the first fault) was clamped to 0 by the browser
+      this.slider.value = String(this.following ? st.span[1] : st.t);
       const when = this.following ? (this.live ? "live" : "end of the run")
         : this.opened && Math.abs(this.opened.t - st.t) < 1e-3 ? this.opened.why
         : `${(st.span[1] - st.t).toFixed(2)} s before the ${this.live ? "latest" : "end"}`;
