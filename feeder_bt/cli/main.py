@@ -25,6 +25,7 @@ EXIT_ACCOUNTING = 4
 #: ``feeder run``'s exit code when it placed nothing although parts came, or fewer parts/min
 #: than ``--min-ppm`` asks: a CI job must tell such a run from a good one (docs/faults.md)
 EXIT_FED_TOO_LITTLE = 5
+NOTHING_FED_S = 60.0     # feeding time after which placing nothing fails a run
 
 
 
@@ -215,7 +216,9 @@ def fed_too_little(report: dict, min_ppm: float | None) -> str | None:
     placed = sum(p["retrieved"].values())
     came = p["located"] + p["located_unpickable"] + (report["vision"].get("no_match") or {}
                                                       ).get("frames_no_match", 0)
-    if placed == 0 and came and report["feed_seconds"] > 0:
+    # after a minute of feeding: a short run whose first parts have not yet reached a robot
+    # (or whose robots come later, outside it) is not a failure
+    if placed == 0 and came and report["feed_seconds"] >= NOTHING_FED_S:
         nm = report["vision"].get("no_match") or {}
         reasons = nm.get("reasons") or {}
         why = (f"the commonest rejection: {max(reasons, key=reasons.get)} "

@@ -35,7 +35,7 @@ def test_a_servo_error_in_an_emulated_run_is_reset_and_feeding_goes_on(monkeypat
     plan = FaultPlan()
     plan.add("servo_timeout", "plate", "", nth=3)
     monkeypatch.setattr(run_mod, "make_hal",
-                        lambda kind, scenario, cell, seed: start_emulated(scenario, cell, seed,
+                        lambda kind, scenario, cell, seed, world=None: start_emulated(scenario, cell, seed,
                                                                           faults=plan))
     r = run_job(RunOptions(scenario="scenarios/plate_lenses.yaml", hal="emulated",
                            duration=60.0, seed=1, view="none", db=None))
@@ -57,7 +57,7 @@ def test_a_plate_that_echoes_reports_its_motors_apart_and_a_late_no_sync_feeds(m
 
     emulators = []
 
-    def make_hal(kind, scenario, cell, seed):
+    def make_hal(kind, scenario, cell, seed, world=None):
         hal, clock = start_emulated(scenario, cell, seed, plate_options={
             "echo": True, "motor_gap_s": 0.4, "late_error_at": 4})
         emulators.append(hal.extras["plate_emulator"])

@@ -159,7 +159,7 @@ def _run_with_camera_dropped(monkeypatch, unplugged: bool) -> dict:
     monkeypatch.setattr(pylon_camera.PylonPlantCamera, "_inject", inject_and_unplug)
     plan = FaultPlan()
     plan.add("drop", "camera", "TRIGGER", nth=5)
-    monkeypatch.setattr(run_mod, "make_hal", lambda kind, scenario, cell, seed:
+    monkeypatch.setattr(run_mod, "make_hal", lambda kind, scenario, cell, seed, world=None:
                         start_emulated(scenario, cell, seed, faults=plan))
     r = run_job(RunOptions(scenario="scenarios/lenses.yaml", hal="emulated", duration=20.0,
                            seed=1, view="none", db=None, cell=CELL))

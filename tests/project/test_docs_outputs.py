@@ -37,7 +37,8 @@ def test_an_edited_quote_fails_and_the_wall_clock_does_not(tmp_path):
     doc = tmp_path / "adding-a-part.md"
     text = (ROOT / "docs/adding-a-part.md").read_text()
     for old, new, stale in [("finds 4 part(s)", "finds 6 part(s)", True),    # the docs'
-                            (" rejected, ", " rejected, 12.5 ms;", True),
+                            ("frame_002.png: 0 part(s), 0 rejected, ",
+                             "frame_002.png: 0 part(s), 0 rejected, 12.5 ms;", True),
                             (" ms\n", " ms\n", False)]:
         assert old in text
         doc.write_text(text.replace(old, new, 1))

@@ -227,7 +227,7 @@ def test_the_emulated_cell_survives_a_robot_link_cut_at_each_step(tmp_path, monk
     plan.add("drop_during", "adept", "PLACE", nth=6, after_s=0.15)
     plan.add("drop_after", "adept", "PLACE", nth=8)
     monkeypatch.setattr(run_mod, "make_hal",
-                        lambda kind, scenario, cell, seed: start_emulated(scenario, cell, seed,
+                        lambda kind, scenario, cell, seed, world=None: start_emulated(scenario, cell, seed,
                                                                           faults=plan))
     db = tmp_path / "run.db"
     # the ideal cell: the four cuts must come within the first eight picks and places in
