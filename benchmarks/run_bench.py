@@ -43,6 +43,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from side_by_side import git_rev  # noqa: E402, I001 - a sibling script's: one way to name a checkout
+
 SCENARIOS = ("lenses", "squares", "lenses_and_squares")
 
 
@@ -156,19 +159,6 @@ def measure(args: argparse.Namespace) -> dict:
         print(f"components ({name} seed 1, CPU s per simulated hour): {parts}",
               file=sys.stderr)
     return out
-
-
-def git_rev(tree: Path) -> str:
-    """The checkout's commit (and "+" if it has changes), or "?" outside git."""
-    try:
-        rev = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain",
-                                "--untracked-files=no"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
-    return rev + ("+" if dirty else "")
 
 
 def _child(code: Path, args: argparse.Namespace, out: Path) -> dict:
