@@ -12,10 +12,10 @@ import time
 from feeder_bt.config import load_scenario
 from feeder_bt.core.clock import RealClock
 from feeder_bt.emulators.adept import AdeptEmulator
+from feeder_bt.emulators.linkproxy import LinkProxy
 from feeder_bt.hal.adept import AdeptController
 from feeder_bt.sim.realtime import Plant
 from tests.hal.test_adept_driver import WAIT_S, wait_for
-from tests.support.linkproxy import LinkProxy
 
 
 def test_a_half_open_motion_link_is_found_and_the_server_takes_the_new_client():

@@ -7,9 +7,9 @@ fault: not a jam, as it did when the stop was read as a stall."""
 from __future__ import annotations
 
 from feeder_bt.core.clock import RealClock
+from feeder_bt.emulators.linkproxy import LinkProxy
 from feeder_bt.hal.galil import make_galil
 from tests.support.galil_fixtures import WAIT_S, plant_and_emulator, wait_job, wait_until
-from tests.support.linkproxy import LinkProxy
 
 
 def test_a_silent_link_past_the_watchdog_resumes_the_belts_and_is_counted():
