@@ -241,6 +241,10 @@ class _StubController:
         self.st: AxisStatus | None = None
         self.card_fault: str | None = None
         self.connected = True
+        self.age: float | None = 0.0
+
+    def position_age(self, axis: str) -> float | None:
+        return self.age
 
     def on_connect(self, fn) -> None:
         pass
@@ -283,6 +287,24 @@ def test_a_dithering_servo_still_trips_the_stall():
         clock.advance(0.1)
         got = belt.fault()
     assert isinstance(got, CommsLost) and "link is down" in str(got)
+
+
+def test_a_count_that_is_not_news_is_no_stall():
+    """A link that answers garbage, or is silent and not yet timed out, leaves the count
+    as it was: the belt the card's watchdog stopped meanwhile is not a jam to shake."""
+    clock = SimClock()
+    ctl = _StubController(clock)
+    belt = GalilConveyor(ctl, "horizontal", "B", 20.0, clock=clock)   # type: ignore[arg-type]
+    belt._mode, belt._commanded = "jog", 100.0
+    ctl.age = 1.0                               # the last read is a second old
+    for _ in range(40):
+        clock.advance(0.1)
+        assert belt.fault() is None
+    ctl.age = 0.05                              # fresh reads again, the belt still stopped
+    for _ in range(30):
+        clock.advance(0.1)
+        got = belt.fault()
+    assert isinstance(got, ConveyorFault) and "stalled" in str(got)
 
 
 # ---------------------------------------------------------------------------- finding 11

@@ -31,6 +31,7 @@ from feeder_bt.hal.galil.protocol import (
 from feeder_bt.hal.interfaces import IoChange, speed_refused, watchdog_stopped
 
 COUNTER_BITS = 32
+FRESH_S = 0.5                # a count older than this tells nothing of a stall
 STALL_S = 2.0                # jogging with no encoder motion this long: a stall
 SETTLE_MARGIN_S = 3.0        # slack on top of a motion's planned time before it is a fault
 # _SC stop codes (Galil command reference, SC; the emulator uses the same; docs/real-cell.md)
@@ -273,6 +274,13 @@ class GalilConveyor:
             self._stall_ref = None
             return None
         now, pos = self.clock.now(), self.position()
+        age = self.ctl.position_age(self.axis)
+        if age is None or age > FRESH_S:
+            # no fresh count: a link that answers garbage, or silent and not yet timed out,
+            # says nothing of the belt. Judged on a stale count, a belt the card's watchdog
+            # stopped meanwhile would be called a jam and shaken.
+            self._stall_ref = None
+            return None
         ref = self._stall_ref
         if ref is None or abs(diff(pos, ref[1], COUNTER_BITS)) > self._stall_counts:
             self._stall_ref = (now, pos)
