@@ -483,7 +483,9 @@ class AdeptSpec:
     io_port: int = 1403
     notify_port: int = 1404
     timeout_s: float = 5.0               # connect/reply time-out for short commands
-    motion_timeout_s: float = 20.0       # longest a pick/place/move may take
+    # the longest a pick, place or move may take at 100 % speed (longer in proportion at
+    # a lower speed): past it the reply is lost, as in a half-open link (a pulled cable)
+    motion_timeout_s: float = 6.0
     # may RECOVER turn arm power on after a servo fault (else: the operator); never after
     # an e-stop or a guard took it (PowerOff: always a person)
     recover_power_on: bool = False

@@ -269,8 +269,10 @@ def test_garbage_reply_raises_protocol_error_and_the_client_resyncs(server):
     srv = server([b"OK 17 871.25 extra\r\n", b"OK 18 900.5\r\n"])
     link = LineSocket("motion", "127.0.0.1", srv.port, timeout_s=TIMEOUT_S)
     try:
-        with pytest.raises(ProtocolError, match="expected 2 values"):
+        with pytest.raises(ProtocolError, match="expected 2 values") as got:
             link.request("motion", "PICK", 17, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0, 0.0)
+        # a garbled reply is a lost reply: the trees' link recovery asks what is held
+        assert isinstance(got.value, CommsLost) and got.value.kind == "comms_lost"
         assert not link.connected                    # dropped: can't trust the stream
         values = link.request("motion", "PICK", 18, 1.0, 2.0, 3.0, 4, True, 0.0, 0.0, 0.0, 0.0)
         assert P.decode_pick(values) == (18, 900.5)
@@ -283,8 +285,8 @@ def test_overlong_reply_is_a_protocol_error(server):
     srv = server([b"OK " + b"9" * 1000 + b"\r\n"])
     link = LineSocket("position", "127.0.0.1", srv.port, timeout_s=TIMEOUT_S)
     try:
-        with pytest.raises(ProtocolError, match="longer than"):
-            link.request("position", "BELT")
+        with pytest.raises(CommsLost, match="longer than"):      # a flood: the link is
+            link.request("position", "BELT")                      # dropped, as if cut
     finally:
         link.close()
 
@@ -383,3 +385,24 @@ def test_a_pick_needs_a_positive_part_id():
         assert client.link.connects == 0
     finally:
         client.close()
+
+
+def test_a_motions_deadline_grows_as_the_robot_slows():
+    """``motion_timeout_s`` is the longest motion at full speed: a lost reply (a half-open
+    link) is found that soon, and a robot run at 25 % gets four times as long."""
+    from feeder_bt.hal.adept.robot import AdeptRobot
+
+    class _Motion:
+        worker = None
+
+        def call(self, verb, *args, timeout=None, on_timeout=None):
+            self.last = (verb, timeout)
+            return []
+
+    robot = AdeptRobot(_Motion(), None, motion_timeout_s=6.0, timeout_s=2.0)  # type: ignore[arg-type]
+    assert robot.motion_deadline_s() == 6.0
+    robot._call("SPEED", 25.0, motion=False)
+    robot._speed_pct = 25.0
+    assert robot.motion_deadline_s() == 24.0
+    robot._call("SAFE")
+    assert robot.motion.last == ("SAFE", 24.0)

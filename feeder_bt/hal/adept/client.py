@@ -19,7 +19,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 from feeder_bt.core.errors import CommsLost
 from feeder_bt.hal.adept import protocol
-from feeder_bt.hal.adept.protocol import Command, ProtocolError
+from feeder_bt.hal.adept.protocol import Command, GarbledReply, ProtocolError
 
 BACKOFF_MIN_S = 0.1
 BACKOFF_MAX_S = 2.0
@@ -184,7 +184,7 @@ class LineSocket:
         while b"\n" not in self._buf:
             if len(self._buf) > protocol.MAX_LINE:
                 self.drop()
-                raise ProtocolError(f"{self.where}: {what}: line longer than "
+                raise GarbledReply(f"{self.where}: {what}: line longer than "
                                     f"{protocol.MAX_LINE} characters")
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -212,7 +212,7 @@ class LineSocket:
             return raw.decode("ascii").rstrip("\r")
         except UnicodeDecodeError:
             self.drop()
-            raise ProtocolError(f"{self.where}: {what}: not ASCII: {raw[:60]!r}") from None
+            raise GarbledReply(f"{self.where}: {what}: not ASCII: {raw[:60]!r}") from None
 
     def request(self, socket_name: str, verb: str, *args: object,
                 timeout: float | None = None,
@@ -230,7 +230,7 @@ class LineSocket:
                 return protocol.parse_reply(reply, cmd)
             except ProtocolError as e:
                 self.drop()                 # out of step with the server: start afresh
-                raise ProtocolError(f"{self.where}: {e}") from None
+                raise GarbledReply(f"{self.where}: {e}") from None
 
 
 class ServerClient:

@@ -15,7 +15,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from feeder_bt.core.errors import EnvelopeError, HalError, MissedGrab, PowerOff, ServoTimeout
+from feeder_bt.core.errors import (
+    CommsLost,
+    EnvelopeError,
+    HalError,
+    MissedGrab,
+    PowerOff,
+    ServoTimeout,
+)
 from feeder_bt.hal.interfaces import Held, Pose
 
 PROTOCOL_VERSION = 2
@@ -38,6 +45,14 @@ class ProtocolError(HalError):
     the link can no longer be trusted, so the client drops and re-opens the socket."""
 
     kind = "protocol"
+
+
+class GarbledReply(CommsLost, ProtocolError):
+    """What came back on the link is no reply: bytes that are not ASCII, a line past
+    ``MAX_LINE``, a line that does not parse. Noise on a cable or a flood look like this,
+    so the link is dropped and the reply counted lost, as when the link dies (the cell
+    then asks the controller what the gripper holds); a server that keeps answering so is
+    a link that keeps dying, and the trees' retry limit ends it."""
 
 
 @dataclass(frozen=True)

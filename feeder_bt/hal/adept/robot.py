@@ -47,6 +47,7 @@ class AdeptRobot:
         self.motion_timeout_s, self.timeout_s = motion_timeout_s, timeout_s
         self.stopper, self.recover_power_on, self.belt_sign = stopper, recover_power_on, belt_sign
         self._holding = False
+        self._speed_pct = 100.0                 # as last set: motions slow down with it
         self.stops = 0                          # STOPs sent on time-outs (tests, logs)
 
     def refresh_holding(self) -> bool:
@@ -63,7 +64,7 @@ class AdeptRobot:
         return cls(name, future, self.clock)
 
     def _call(self, verb: str, *args: object, motion: bool = True) -> list[str]:
-        timeout = self.motion_timeout_s if motion else self.timeout_s
+        timeout = self.motion_deadline_s() if motion else self.timeout_s
         stop = self._stop_now if motion and verb != "HELD" else None
         try:
             return self.motion.call(verb, *args, timeout=timeout, on_timeout=stop)
@@ -73,6 +74,12 @@ class AdeptRobot:
                 # what the gripper holds as soon as the link is back, before anything else
                 self.motion.worker.submit(self._refresh_after_link_loss)
             raise
+
+    def motion_deadline_s(self) -> float:
+        """How long a motion's reply may take: ``motion_timeout_s`` at full speed, longer
+        in proportion at a lower speed. A reply lost in a half-open link (a pulled cable,
+        no FIN) is found by this deadline, so it is the longest a motion may take, no more."""
+        return self.motion_timeout_s * max(1.0, 100.0 / max(self._speed_pct, 1.0))
 
     def _refresh_after_link_loss(self) -> None:
         try:
@@ -159,6 +166,7 @@ class AdeptRobot:
     def set_speed(self, pct: float) -> Job:
         def run() -> None:
             self._call("SPEED", float(pct), motion=False)
+            self._speed_pct = float(pct)
 
         return self._submit("robot.set_speed", run)
 
