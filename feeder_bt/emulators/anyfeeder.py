@@ -55,10 +55,12 @@ STANDARD = ("m11", "m21", "m20", "m10")
 
 
 class AnyFeederEmulator(LineServer):
-    """One client at a time on ``port`` (0: any free port, see ``.port``)."""
+    """One client at a time on ``port`` (0: any free port, see ``.port``); a newer one
+    takes the line, as on the feeder's serial port, which hears whoever writes."""
 
     terminator = CR
     thread_name = "anyfeeder-emulator"
+    displace = True
 
     def __init__(self, plant: Plant, host: str = "127.0.0.1", port: int = 0,
                  servo_error_at: int | None = None, no_sync_at: int | None = None,

@@ -9,6 +9,7 @@ thread (Linux), so without the poll ``stop`` would wait out its whole join time-
 
 from __future__ import annotations
 
+import select
 import socket
 import threading
 from typing import Self
@@ -23,6 +24,9 @@ class LineServer:
 
     terminator = b"\n"
     thread_name = "line-server"
+    #: a new client takes the line from the one being served: a serial line behind a
+    #: socket has no sessions, the device hears whoever writes (the AnyFeeder's RS-232)
+    displace = False
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
         self.host = host
@@ -72,6 +76,8 @@ class LineServer:
             try:
                 data = conn.recv(4096)
             except TimeoutError:
+                if self.displace and select.select([self._sock], [], [], 0)[0]:
+                    return                   # a newer client is waiting: it has the line
                 continue
             except OSError:
                 return

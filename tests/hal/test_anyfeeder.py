@@ -223,6 +223,31 @@ def test_no_feeder_is_a_lost_link():
         feeder.close()
 
 
+def test_a_silent_line_is_a_lost_link_not_a_stuck_feeder(quick_plant):
+    """A pulled serial cable answers nothing, not even the action's busy codes: the
+    driver says the line is down (a lost link the trees wait out), not that the feeder is
+    stuck, and the port opened afresh owes nothing of the action it never heard end."""
+    from feeder_bt.emulators.linkproxy import LinkProxy
+    plant = quick_plant
+    emu = emulator(plant)
+    proxy = LinkProxy(emu.port)
+    spec = dataclasses.replace(plant.cell.plate, url=f"socket://127.0.0.1:{proxy.port}",
+                               timeout_s=0.5)
+    feeder = AnyFeeder(spec, RealClock())
+    try:
+        assert wait(feeder.init()).ok
+        proxy.silence()
+        err = wait(feeder.flip(1)).error
+        assert isinstance(err, CommsLost) and "line is down" in str(err), err
+        proxy.restore()
+        job = wait(feeder.dispense(1))
+        assert job.ok, job.error                # nothing owed: the next action runs
+    finally:
+        feeder.close()
+        proxy.close()
+        emu.stop()
+
+
 def test_feeder_emulate_plate_serves_the_feeder_on_loopback(capsys):
     import io
     import re

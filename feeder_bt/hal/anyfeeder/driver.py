@@ -353,7 +353,8 @@ class AnyFeeder:
         if cancel.is_set():
             raise JobCancelled(f"{name} cancelled")
         self._write(line)
-        deadline = time.monotonic() + duration + self.spec.timeout_s
+        written = time.monotonic()
+        deadline = written + duration + self.spec.timeout_s
         busy: set[int] = set()
         ended: set[int] = set()
         errors: list[Reply] = []
@@ -365,6 +366,12 @@ class AnyFeeder:
                 self._write(command_line(self.spec.commands.stop))
                 deadline = time.monotonic() + self.spec.timeout_s
             if time.monotonic() > deadline:
+                if self._last_rx < written:
+                    # not a byte since the command, not even its busy codes: the line is
+                    # dead (a pulled cable, the feeder off), not the feeder stuck. What
+                    # the motors owe is unknown: the port is opened afresh.
+                    raise self._drop(f"nothing came back in {duration + self.spec.timeout_s:g}"
+                                     f" s after {name}: the line is down or the feeder off")
                 self._owed = {m: name for m in busy - ended}
                 if errors:
                     break
