@@ -33,7 +33,7 @@ RATE_UNITS: dict[str, str] = {
 RATE_KEYS: tuple[str, ...] = ("per_pick", "per_frame", "per_hour")
 
 #: Which link a ``comms_lost`` drops; ``alternate`` takes galil, adept, galil, ... in turn.
-COMMS_DEVICES: tuple[str, ...] = ("galil", "adept", "camera", "alternate")
+COMMS_DEVICES: tuple[str, ...] = ("galil", "adept", "camera", "plate", "alternate")
 
 #: The steps of a pick-and-place at which a scripted ``comms_lost`` may cut a link: the
 #: first such step after ``at_s``. ``before_pick``: the pick command is never sent;
@@ -65,7 +65,7 @@ class FaultRate:
     per_pick: float | None = None        # probability per pick the robot starts
     per_frame: float | None = None       # probability per camera grab
     per_hour: float | None = None        # mean arrivals per hour of virtual time (Poisson)
-    device: str = "alternate"            # comms_lost: galil | adept | camera | alternate
+    device: str = "alternate"            # comms_lost: galil | adept | camera | plate | alternate
     outage_s: float = 2.0                # comms_lost: how long the link stays down
     # comms_lost: how it dies. refused: every call fails at once (the controller gone, a
     # cable unplugged at a switch that resets the connection); silent: a pulled cable, no

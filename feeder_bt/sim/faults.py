@@ -318,6 +318,41 @@ class FaultyConveyor(_Tracking):
         return self._fail_jobs(err, lambda job: isinstance(job, TimedJob))
 
 
+class FaultyPlate(_Tracking):
+    """The plate feeder on its serial line: while the line is down an action is not sent
+    (at once, or after the driver's time-out on a silent line), and the reply of an action
+    in flight is lost while the plate goes on to its end, as the AnyFeeder does; asked
+    again meanwhile, it answers busy."""
+
+    def _action(self, name: str, *args: Any) -> Job:
+        refused = self._inj.refused("plate", f"plate.{name}")
+        if refused is not None:
+            return refused
+        job = getattr(self._inner, name)(*args)
+        return job if job.done else self._track(ReplyJob(job))
+
+    def init(self) -> Job:
+        return self._action("init")
+
+    def reset(self) -> Job:
+        return self._action("reset")
+
+    def dispense(self, reps: int) -> Job:
+        return self._action("dispense", reps)
+
+    def feed(self, direction: int, reps: int) -> Job:
+        return self._action("feed", direction, reps)
+
+    def flip(self, reps: int, direction: int = 0) -> Job:
+        return self._action("flip", reps, direction)
+
+    def purge(self, reps: int) -> Job:
+        return self._action("purge", reps)
+
+    def fail_in_flight(self, err: HalError) -> bool:
+        return self._fail_jobs(err)
+
+
 class FaultyCamera(_Tracking):
     """The camera on its own link; a grab may come back with no image (``GrabFailed``)."""
 
@@ -385,9 +420,9 @@ def plan_rng(plan_seed: int, seed: int, stream: int) -> np.random.Generator:
     return np.random.default_rng([plan_seed & _MASK64, seed & _MASK64, stream])
 
 
-_LINKS = ("galil", "adept", "camera")
+_LINKS = ("galil", "adept", "camera", "plate")
 _LINK_NAMES = {"galil": "conveyor controller (Galil)", "adept": "robot controller (Adept)",
-               "camera": "camera"}
+               "camera": "camera", "plate": "plate feeder (AnyFeeder)"}
 
 
 class FaultInjector:
@@ -415,6 +450,7 @@ class FaultInjector:
         self._jam_entry: dict[str, Any] | None = None
         self._pending: dict[int, tuple[float, Callable[[float], None], int]] = {}
         self._keys = itertools.count()
+        self.hal = hal
         self._check_cell(hal.world)             # before anything is wrapped
         self._attach(hal)
         self.t0 = self.world.now()
@@ -432,6 +468,9 @@ class FaultInjector:
         self.io = FaultyIO(hal.io, self)
         hal.robot, hal.robot_position, hal.camera = self.robot, self.position, self.camera
         hal.conveyors, hal.io = dict(self.conveyors), self.io
+        self.plate = FaultyPlate(hal.plate, self) if hal.plate is not None else None
+        if self.plate is not None:
+            hal.plate = self.plate
         hal.extras["fault_injector"] = self
         hal.changeover = self._changeover       # type: ignore[method-assign]
 
@@ -447,7 +486,17 @@ class FaultInjector:
             self._at(t, fn)
 
     def _check_cell(self, world: World) -> None:
+        plate = getattr(self.hal, "plate", None) is not None
+        for kind, rate in self.plan.rates.items():
+            if kind == "comms_lost" and rate.device == "plate" and not plate:
+                raise ConfigError(f"the plan drops the plate's link but cell "
+                                  f"{world.cell.name!r} has no plate feeder",
+                                  file=str(self.plan.path), key=f"rates.{kind}.device")
         for i, sf in enumerate(self.plan.scripted):
+            if sf.kind == "comms_lost" and sf.device == "plate" and not plate:
+                raise ConfigError(f"the plan drops the plate's link but cell "
+                                  f"{world.cell.name!r} has no plate feeder",
+                                  file=str(self.plan.path), key=f"scripted[{i}].device")
             if sf.kind == "estop" and "estop" not in world.io:
                 raise ConfigError(f"the plan presses an e-stop but cell {world.cell.name!r} "
                                   "has no 'estop' input (add one under io:)",
@@ -607,6 +656,8 @@ class FaultInjector:
                 lost = self.robot.lose_replies(err)
             elif link == "galil":
                 lost = any([conv.fail_in_flight(err) for conv in self.conveyors.values()])
+            elif link == "plate":
+                lost = self.plate is not None and self.plate.fail_in_flight(err)
             else:
                 lost = self.camera.fail_in_flight(err)
             if lost:
@@ -661,6 +712,8 @@ class FaultInjector:
             return cell.galil.timeout_s
         if link == "adept":
             return cell.adept.timeout_s
+        if link == "plate":
+            return cell.plate.timeout_s
         return cell.camera.grab_s + 1.0
 
     # ------------------------------------------------------------------ conveyor, e-stop

@@ -115,7 +115,7 @@ BAD = [
     ("rates:\n  conveyor_jam: {device: galil}\n", 2, "rates.conveyor_jam",
      "missing required key 'per_hour'"),
     ("rates:\n  comms_lost: {per_hour: 1, device: robot}\n", 2, "rates.comms_lost.device",
-     "must be one of galil, adept, camera, alternate", "'robot'"),
+     "must be one of galil, adept, camera, plate, alternate", "'robot'"),
     ("rates:\n  comms_lost: {per_hour: 1, outage_s: 0}\n", 2, "rates.comms_lost.outage_s",
      "must be > 0"),
     ("rates:\n  grab_failed:\n    per_frame: 0.1\n    outage_s: 3\n", 4,

@@ -469,6 +469,49 @@ def test_estop_needs_an_estop_input(lenses):
         hal.close()
 
 
+def test_a_plate_link_cut_needs_a_plate(lenses):
+    scenario, cell = lenses
+    hal = make_sim_hal(scenario, cell, SimClock(), 1)
+    try:
+        with pytest.raises(ConfigError, match="no plate feeder"):
+            inject_faults(hal, plan(scripted=[ScriptedFault(at_s=1.0, kind="comms_lost",
+                                                            device="plate")]))
+    finally:
+        hal.close()
+
+
+def test_a_plate_link_cut_loses_the_reply_not_the_action():
+    """The plate's line drops during a flip: the cell's job fails with the lost link,
+    the plate finishes the flip, and an action sent while the line is down is refused."""
+    from feeder_bt.sim.plate import make_plate_sim_hal
+    scenario, cell = load_scenario("scenarios/plate_lenses.yaml")
+    clock = SimClock()
+    hal = make_plate_sim_hal(scenario, cell, clock, 1)
+    try:
+        inj = inject_faults(hal, plan(scripted=[ScriptedFault(
+            at_s=3.0, kind="comms_lost", device="plate", outage_s=2.0, link="refused")]))
+        init = hal.plate.init()
+        while not init.done:
+            clock.advance(0.05)
+            hal.world.now()
+        assert init.ok, init.error
+        clock.advance(3.0 - clock.now() - 0.01)
+        flip = hal.plate.flip(4)
+        clock.advance(0.02)
+        hal.world.now()
+        assert flip.done and isinstance(flip.error, CommsLost)
+        assert isinstance(hal.plate.dispense(1).error, CommsLost)
+        flipping = hal.plate._inner.busy           # the plate's own flip goes on
+        clock.advance(3.0)
+        hal.world.now()
+        assert flipping is not None and flipping.ok
+        assert inj.injected["comms_lost"] == 1
+        again = hal.plate.feed(1, 1)            # the line is back: the action is sent
+        assert again.error is None
+    finally:
+        hal.close()
+
+
 def test_only_the_simulated_cell_takes_a_plan_and_only_one(rig):
     with pytest.raises(FeederError, match="simulated cell only"):
         inject_faults(MockHal(), plan())
