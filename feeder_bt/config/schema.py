@@ -94,8 +94,13 @@ def wrong_kind(root: Any, expected: str) -> str | None:
     if not isinstance(root, MappingNode):
         return None
     keys = _top(root)
-    found = ("world" if keys and keys <= {*WORLD_SECTIONS, NOTES_KEY} else root_kind(root))
-    return None if found is None or found == expected else found
+    world = {*WORLD_SECTIONS, NOTES_KEY}
+    found = "world" if keys and keys <= world else root_kind(root)
+    if found is None or found == expected:
+        return None
+    if expected == "world" and not keys & (top_keys(found) - world):
+        return None        # world figures and a misspelt one: the loader says which
+    return found
 
 
 def wrong_kind_error(root: Any, expected: str, path: str | Path, how: str = "",

@@ -62,3 +62,13 @@ def test_a_scenario_whose_cell_key_names_a_scenario(tmp_path, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "this is a scenario, not a cell description" in err[0], err
+
+
+def test_a_world_file_with_a_misspelt_section_is_still_a_world_file(tmp_path, capsys):
+    # its other sections are a cell's too: the misspelt key is named, not "a cell description"
+    world = tmp_path / "plant.yaml"
+    world.write_text("camra:\n  fps: 10\nconveyors:\n  horizontal: {max_mm_s: 300}\n")
+    code = main(["run", "scenarios/lenses.yaml", "--world", str(world), *RUN])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camra: not a world figure (did you mean 'camera'?)" in err[0], err
