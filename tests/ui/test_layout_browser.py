@@ -3,7 +3,8 @@ real `feeder run scenarios/lenses.yaml --ui` on loopback, the cell running and t
 user holding control.
 
 What must be shown: at 1366x768 the page does not scroll, and the control panel, the
-state, the tree and the camera each lie inside the viewport; at 1920x1080 too. And the
+state, the tree and the camera each lie inside the viewport; at 1920x1080 too, and at
+1366x657 (what a browser's tabs and address bar leave of a 1366x768 screen). And the
 buttons say what applies: while the cell runs and you hold control, Start, Resume and
 Take control are disabled (someone without control keeps them, to be told why not).
 
@@ -21,7 +22,7 @@ from tests.support.uiutil import FeederUi, make_users
 pytestmark = pytest.mark.browser
 
 PASSWORDS = {"alice": "alice-secret-1", "bob": "bob-secret-22"}
-SIZES = [(1366, 768), (1920, 1080)]
+SIZES = [(1366, 768), (1920, 1080), (1366, 657)]   # the last: 1366x768 less a browser's bars
 #: what an operator must see without scrolling: control, state, the tree, the camera
 MUST_SEE = {"control": "#control-panel", "state": "#state-badge",
             "tree": "#tv-scroll", "camera": "#camera-img"}
