@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
-
-from feeder_bt.core.errors import ConfigError
+from pathlib import Path
 
 
 def _number(text: str, ok, what: str) -> float:
@@ -43,18 +42,14 @@ def positive_int(text: str) -> int:
 def expect_kind(path: str, kind: str, how: str, hint: str | None = None) -> None:
     """A file given where another kind was expected is named as what it is, in one line
     (not a line per key the other kind does not have); ``hint`` says what to give instead."""
-    from feeder_bt.config.schema import describe, file_kind
-    found = file_kind(path)
-    if found is None or found == kind:
-        return                    # the loader reports anything else in its own words
-    if hint is not None:
-        raise ConfigError(f"this is {describe(found)}, not {describe(kind)}: {hint}", file=path)
-    where = {"scenario": "give it as the first argument of `feeder run`",
-             "cell": f"give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
-             "faults": f"give it with --faults after a scenario "
-                       f"(feeder run SCENARIO --faults {path})",
-             "supply": f"give it with --supply after a scenario "
-                       f"(feeder run SCENARIO --supply {path})"}
-    how = f" ({how})" if how else ""
-    raise ConfigError(f"this is {describe(found)}, not {describe(kind)}{how}: "
-                      f"{where[found]}", file=path)
+    import yaml
+
+    from feeder_bt.config.loader import read_yaml_text
+    from feeder_bt.config.schema import wrong_kind_error
+    try:
+        root = yaml.compose(read_yaml_text(Path(path), path), Loader=yaml.SafeLoader)
+    except Exception:  # noqa: BLE001 - the real load reports it in one line
+        return
+    err = wrong_kind_error(root, kind, path, how, hint)
+    if err is not None:
+        raise err

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from feeder_bt.config.faults import FaultPlanSpec, check_fault_plan
 from feeder_bt.config.loader import _compose, _Ctx, load_cell, load_scenario
-from feeder_bt.config.schema import file_kind
+from feeder_bt.config.schema import check_kind, file_kind
 from feeder_bt.config.supply import load_supply_plan
 from feeder_bt.core.errors import ConfigError
 
@@ -18,6 +18,7 @@ def load_fault_plan(path: str | Path) -> FaultPlanSpec:
     path = Path(path)
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
+    check_kind(root, "faults", path)
     plan = ctx.collect(ctx.dataclass, FaultPlanSpec, root, "", fill={"path": path})
     if plan is not None:
         ctx.collect(check_fault_plan, plan, ctx)

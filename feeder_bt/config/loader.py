@@ -157,9 +157,17 @@ def _compose(path: Path, ctx: _Ctx) -> MappingNode:
     return root
 
 
+def _check_kind(root: MappingNode, kind: str, path: Path) -> None:
+    """A file of another kind (a cell description given as a scenario, say) is one line
+    saying what it is, not a line for each key (``schema.wrong_kind``)."""
+    from feeder_bt.config.schema import check_kind
+    check_kind(root, kind, path)
+
+
 def _load_cell(path: Path, calibration_files: bool = True) -> tuple[CellSpec, _Ctx]:
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
+    _check_kind(root, "cell", path)
     cell = ctx.collect(ctx.dataclass, CellSpec, root, "", fill={"path": path})
     if cell is not None:
         ctx.collect(_check_cell, cell, ctx)
@@ -192,6 +200,7 @@ def load_scenario(path: str | Path, cell: str | Path | None = None,
     path = Path(path)
     ctx = _Ctx(str(path))
     root = _compose(path, ctx)
+    _check_kind(root, "scenario", path)
     if overlay is not None:
         from feeder_bt.config.overlay import apply_overlay
         root = apply_overlay(root, overlay, ctx, _compose, _Ctx)

@@ -26,6 +26,7 @@ from yaml.nodes import MappingNode, ScalarNode
 from feeder_bt.config import loader as L
 from feeder_bt.config.faults import _ONLY_FOR, RATE_UNITS, FaultPlanSpec, FaultRate
 from feeder_bt.config.supply import SupplyPlanSpec, Totes
+from feeder_bt.core.errors import ConfigError
 from feeder_bt.core.model import CellSpec, ConveyorSpec, Scenario, Shape, VisionClass
 from feeder_bt.vision.features import FEATURES
 
@@ -57,14 +58,71 @@ def file_kind(path: str | Path) -> str | None:
         root = yaml.compose(L.read_yaml_text(Path(path), str(path)), Loader=yaml.SafeLoader)
     except Exception:  # noqa: BLE001 - the real load reports it in one line
         return None
+    return root_kind(root)
+
+
+def _top(root: MappingNode) -> set[str]:
+    return {k.value for k, _ in root.value if isinstance(k, ScalarNode)}
+
+
+def root_kind(root: Any) -> str | None:
+    """``file_kind`` of a file already composed (its root node)."""
     if not isinstance(root, MappingNode):
         return None
-    keys = {k.value for k, _ in root.value if isinstance(k, ScalarNode)}
+    keys = _top(root)
     score = {kind: len(keys & top_keys(kind) - {"name"}) for kind in KINDS}
     best = max(score.values())
     if best == 0:
         return "scenario" if "name" in keys else None
     return next(kind for kind in KINDS if score[kind] == best)
+
+
+#: where each kind of file goes, for the line that names a file given in the wrong place
+WHERE = {"scenario": "give it as the first argument (feeder run {path})",
+         "cell": "give it with --cell after a scenario (feeder run SCENARIO --cell {path})",
+         "faults": "give it with --faults after a scenario (feeder run SCENARIO --faults {path})",
+         "supply": "give it with --supply after a scenario (feeder run SCENARIO --supply {path})",
+         "world": "give it with --world after a scenario (feeder run SCENARIO --world {path})"}
+
+
+def wrong_kind(root: Any, expected: str) -> str | None:
+    """The kind a file's top-level keys say it is, when that is another kind than
+    ``expected`` (``scenario``, ``cell``, ``faults``, ``supply`` or ``world``); None when it
+    is that kind or its keys say nothing (the loader then lists what is wrong). A file of
+    world figures alone (no name, nothing the controller owns) is a world file."""
+    from feeder_bt.config.world import NOTES_KEY, WORLD_SECTIONS
+    if not isinstance(root, MappingNode):
+        return None
+    keys = _top(root)
+    world = {*WORLD_SECTIONS, NOTES_KEY}
+    found = "world" if keys and keys <= world else root_kind(root)
+    if found is None or found == expected:
+        return None
+    if expected == "world" and not keys & (top_keys(found) - world):
+        return None        # world figures and a misspelt one: the loader says which
+    return found
+
+
+def wrong_kind_error(root: Any, expected: str, path: str | Path, how: str = "",
+                     hint: str | None = None) -> ConfigError | None:
+    """The one line for a file of another kind than ``expected`` ("this is a scenario, not
+    a cell description: ..."), instead of a line for each key the expected kind lacks;
+    ``how`` names the option it was given with, ``hint`` says what to give instead."""
+    found = wrong_kind(root, expected)
+    if found is None:
+        return None
+    if hint is None:
+        hint = WHERE[found].format(path=path)
+    how = f" ({how})" if how else ""
+    return ConfigError(f"this is {describe(found)}, not {describe(expected)}{how}: {hint}",
+                       file=str(path))
+
+
+def check_kind(root: Any, expected: str, path: str | Path) -> None:
+    """Raise ``wrong_kind_error`` when there is one: the loaders call it on the root."""
+    err = wrong_kind_error(root, expected, path)
+    if err is not None:
+        raise err
 
 
 def describe(kind: str) -> str:

@@ -95,6 +95,7 @@ def load_supply_plan(path: str | Path) -> SupplyPlanSpec:
     path = Path(path)
     ctx = L._Ctx(str(path))
     root = L._compose(path, ctx)
+    L._check_kind(root, "supply", path)
     plan = ctx.collect(ctx.dataclass, SupplyPlanSpec, root, "", fill={"path": path})
     if plan is not None:
         plan.lines = dict(ctx.key_lines)

@@ -136,7 +136,10 @@ def _laid_over(path: str | Path, base: MappingNode, base_file: str, cell_path: P
     validated: the cell and the keys the world gave (their problems at the world's lines)."""
     wpath = Path(path)
     wfile = str(wpath)
-    wroot = _only_world_figures(_compose(wpath, _Ctx(wfile)), wfile)
+    wroot = _compose(wpath, _Ctx(wfile))
+    from feeder_bt.config.schema import check_kind
+    check_kind(wroot, "world", wpath)
+    wroot = _only_world_figures(wroot, wfile)
     ctx = _Ctx(base_file)
     taken: set[str] = set()
     merged = _merge(base, wroot, "", taken)

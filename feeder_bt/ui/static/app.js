@@ -149,6 +149,28 @@ function renderSession(s) {
   $("force").hidden = !(s.admin && c.state === "other");
   $("st-users").textContent = (s.users || []).join(", ") || "-";
   document.body.dataset.control = c.state || "";
+  controlState = c.state || "";
+  applyButtons();
+}
+
+// With control, a button that does not apply in the cell's state is disabled (Start while
+// it runs, Take control while you hold it). Without control they stay enabled: a click is
+// refused with who holds control, which is the answer the operator needs.
+let controlState = "";
+const APPLIES = {
+  start: (s) => s === "STOPPED",
+  pause: (s) => s === "RUNNING",
+  resume: (s) => s === "PAUSED",
+  stop: (s) => s === "STARTING" || s === "RUNNING" || s === "PAUSED",
+  reset: (s) => s === "FAULT",
+  load: (s) => s === "STOPPED" || s === "FAULT",
+};
+
+function applyButtons() {
+  const you = controlState === "you";
+  const state = lastStatus ? lastStatus.state : "";
+  for (const [id, ok] of Object.entries(APPLIES)) $(id).disabled = you && state !== "" && !ok(state);
+  $("take").disabled = you;
 }
 
 function renderStatus(st) {
@@ -192,6 +214,7 @@ function renderStatus(st) {
   if (document.activeElement !== sel && st.scenario_file) sel.value = st.scenario_file;
   $("tree-part").textContent = st.tree_part ? `(${st.tree_part})` : "(no tree is ticked)";
   renderTree(st.tree);
+  applyButtons();
 }
 
 // py_trees' unicode drawing, with each node's [status] coloured
