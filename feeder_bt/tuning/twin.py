@@ -25,6 +25,9 @@ Two kinds of fit:
 
 A figure is left at the cell file's value, with the reason, when the log cannot fix it:
 a count too small, a speed never varied, an effect the cell never reached.
+
+A plate cell (``presentation: plate``) fits its plate's figures instead of the belt's
+(``tuning/twin_plate.py``); the arm is fitted the same way.
 """
 
 from __future__ import annotations

@@ -54,7 +54,7 @@ PLATE_NOT_FITTED = {
     "plate.flip_prob": "a flip's re-draw changes a lens's class seldom (85 % land flat "
                        "either way) and most flips part touching lenses: the unpickable "
                        "parts classed after flips against before them did not fix it in "
-                       "the round trip (docs/tuning.md)",
+                       "the round trip (docs/plate-feeders.md)",
 }
 
 def _before(frames: list[tuple[float, dict]], t: float) -> dict | None:
