@@ -4,9 +4,9 @@ settings against the plant's own mean over seeds; the uncalibrated defaults besi
 
     python benchmarks/twin_bench.py [--plants 5] [--duration 600] [--plant-seeds 11 12 13]
         [--out benchmarks/results/twin.json]
+    python benchmarks/twin_bench.py --plate     # the plate cell: 3 plants, 3 settings
 
-Plants: ``feeder_bt.tuning.roundtrip.PLANT_RANGES`` drawn with ``--seed``. The fit's log is
-the plant running scenarios/lenses.yaml as shipped for ``--duration`` s (plant i: seed
+Plants: ``feeder_bt.tuning.roundtrip.PLANT_RANGES`` drawn with ``--seed``. The fit's log isthe plant running scenarios/lenses.yaml as shipped for ``--duration`` s (plant i: seed
 ``--log-seed`` + i). The
 settings predicted are five others: a fixed slow belt, a fixed fast belt with a higher
 lift, a fixed belt under a low lift, the shortest-cycle pick policy, and the
@@ -47,6 +47,16 @@ SETTINGS = [
     Setting("shortest-cycle picks", LENSES, {"retrieve": {"policy": "shortest_cycle"}}),
     Setting("kit: 3 lenses + 1 square", KIT),
 ]
+#: ``--plate``: plants from ``PLATE_RANGES``, the log of scenarios/plate_lenses.yaml as
+#: shipped, and three other settings of the plate policy and the arm
+PLATE = str(ROOT / "scenarios/plate_lenses.yaml")
+PLATE_FIT_SETTING = Setting("as shipped (the fit's log)", PLATE)
+PLATE_SETTINGS = [
+    Setting("dispense below 12 parts", PLATE, {"present": {"plate": {"min_parts": 12}}}),
+    Setting("dispense x1, flip x2, feed x1", PLATE,
+            {"present": {"plate": {"dispense_reps": 1, "flip_reps": 2, "feed_reps": 1}}}),
+    Setting("robot speed 50 %", PLATE, {"retrieve": {"robot_speed_pct": 50}}),
+]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,21 +68,30 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--predict-seeds", type=int, nargs="+", default=[21, 22])
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--log-seed", type=int, default=31, help="plant i's log: this seed + i")
-    ap.add_argument("--out", default=str(ROOT / "benchmarks/results/twin.json"))
+    ap.add_argument("--plate", action="store_true",
+                    help="the plate cell (scenarios/plate_lenses.yaml): 3 plants, 3 settings")
+    ap.add_argument("--out", default=None, help="default benchmarks/results/twin.json "
+                    "(--plate: twin_plate.json)")
     args = ap.parse_args(argv)
+    if args.plate and "--plants" not in (argv if argv is not None else sys.argv):
+        args.plants = 3
+    args.out = args.out or str(ROOT / "benchmarks/results" /
+                               ("twin_plate.json" if args.plate else "twin.json"))
     t_start = time.time()
-    _, cell = load_scenario(LENSES)
+    fit_setting, others = ((PLATE_FIT_SETTING, PLATE_SETTINGS) if args.plate
+                           else (FIT_SETTING, SETTINGS))
+    _, cell = load_scenario(fit_setting.scenario)
     runner = Runner(args.duration)
     plants = draw_plants(cell, args.plants, args.seed)
     ps, qs = tuple(args.plant_seeds), tuple(args.predict_seeds)
-    settings = [FIT_SETTING, *SETTINGS]
+    settings = [fit_setting, *others]
     defaults = {s.name: runner.ppm(s, None, qs) for s in settings}
     rows = []
     for i, fig in enumerate(plants):
         world = runner.world(fig)
         db = str(runner.tmp / f"plant{i}.db")
         # each plant's log its own seed: one seed's draws are alike across plants
-        logged = runner.ppm(FIT_SETTING, world, (args.log_seed + i,), db=db)
+        logged = runner.ppm(fit_setting, world, (args.log_seed + i,), db=db)
         twin = fit_twin([db], cell, rounds=args.rounds,
                         say=lambda s, i=i: print(f"plant {i}: {s}", file=sys.stderr))
         tw = runner.world(twin.figures())
@@ -105,10 +124,12 @@ def _write(args: argparse.Namespace, settings: list[Setting], rows: list[dict],
             "twin_mae_pct": 100 * statistics.mean(r["settings"][s.name]["twin_err"] for r in rows),
             "defaults_mae_pct": 100 * statistics.mean(r["settings"][s.name]["defaults_err"]
                                                       for r in rows)}
-    others = [s.name for s in SETTINGS]
+    others = [s.name for s in settings[1:]]
     overall = {k: statistics.mean(summary[n][k] for n in others)
                for k in ("twin_mae_pct", "defaults_mae_pct")}
-    out = {"benchmark": "twin round trip", "plants": args.plants, "plants_done": len(rows),
+    out = {"benchmark": "twin round trip" + (", plate" if args.plate else ""),
+           "scenario": str(Path(settings[0].scenario).relative_to(ROOT)),
+           "plants": args.plants, "plants_done": len(rows),
            "seed": args.seed,
            "duration_s": args.duration, "plant_seeds": ps, "predict_seeds": qs,
            "rounds": args.rounds, "settings": summary, "other_settings_mae_pct": overall,
@@ -119,7 +140,7 @@ def _write(args: argparse.Namespace, settings: list[Setting], rows: list[dict],
         return
     for name, v in summary.items():
         print(f"{name:34s} twin {v['twin_mae_pct']:5.1f} %  defaults {v['defaults_mae_pct']:5.1f} %")
-    print(f"{'five other settings':34s} twin {overall['twin_mae_pct']:5.1f} %  "
+    print(f"{f'{len(others)} other settings':34s} twin {overall['twin_mae_pct']:5.1f} %  "
           f"defaults {overall['defaults_mae_pct']:5.1f} %")
     print(f"json: {args.out}")
 

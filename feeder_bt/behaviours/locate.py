@@ -153,8 +153,10 @@ class Enqueue(Leaf):
         stats.count("rejected_blobs", len(result.rejected))
         # what a twin's fit reads (tuning/twin.py): the frame's finds and every rejected
         # blob with its reason, area and place, as a real cell's log has them
+        xs = [d.x_mm for d in result.parts] + [d.x_mm for d in result.rejected]
         stats.emit(frame.t, "frame", n=frame.index, latch=int(frame.latch), new=new,
-                   parts=len(result.parts), rejected=[
+                   parts=len(result.parts), pickable=sum(d.pickable for d in result.parts),
+                   x_mm=round(sum(xs) / len(xs), 1) if xs else None, rejected=[
                        [d.reason.split(";")[0].split(" (")[0],
                         round(d.features.get("area_mm2", 0.0)),
                         round(d.x_mm, 1), round(d.y_mm, 1)] for d in result.rejected])

@@ -89,6 +89,7 @@ class ServePlate(Leaf):
         super().__init__(name, ctx)
         self.job: Job | None = None
         self.todo: list[tuple[str, int]] = []
+        self.running: tuple[str, int, float] | None = None
 
     def initialise(self) -> None:
         self.job, self.todo = None, []
@@ -97,6 +98,7 @@ class ServePlate(Leaf):
         plate = _plate(self.ctx)
         self.ctx.stats.count(f"plate_{action}")
         self.ctx.stats.emit(self.ctx.now(), "plate", action=action, reps=reps)
+        self.running = (action, reps, self.ctx.now())
         if action == "dispense":
             return plate.dispense(reps)
         if action in ("feed_forward", "feed_backward"):
@@ -128,6 +130,13 @@ class ServePlate(Leaf):
                 self.job, self.todo = None, []
                 return Status.FAILURE
             self.job = None
+            if self.running is not None:
+                # what a twin's fit reads (tuning/twin.py): each action's time, start to
+                # the feeder's done, as a real cell's log has it
+                action, reps, t0 = self.running
+                self.ctx.stats.emit(self.ctx.now(), "plate_done", action=action, reps=reps,
+                                    dt=round(self.ctx.now() - t0, 4))
+                self.running = None
             if not self.todo:
                 self.ctx.stats.succeeded(PRESENT.ERROR, self.ctx.now(), None)
                 self.bb.set(PRESENT.REQUEST, None)

@@ -36,9 +36,11 @@ def check_file(path: str | Path) -> tuple[str, str | None, list[ConfigError]]:
     problem). A scenario is checked with its cell."""
     told = file_kind(path)
     kind = told or "scenario"
-    if kind == "cell":
+    if kind in ("cell", "scenario"):
         from feeder_bt.config.world import check_world, looks_like_world
-        if looks_like_world(path):         # a world file: no name, only world figures
+        # a world file: no name, only world figures (one with only ``hopper:`` ties with
+        # a scenario's keys, but a scenario has a name)
+        if looks_like_world(path):
             kind = told = "world"
     try:
         (check_world if kind == "world" else LOADERS[kind])(path)

@@ -34,9 +34,32 @@ PLANT_RANGES: tuple[tuple[str, str, float, float], ...] = (
 )
 
 
+#: a plate cell's plants (docs/plate-feeders.md, "Physics": every plate figure is an
+#: assumption): the dispense count ×0.6–1.5, the flip's re-draw probability ×0.75–1.15
+#: (0.6–0.92), its scatter ×0.5–2, the feed distance ±30 %, the repetition's time
+#: ×0.75–1.3 and the settling ×0.7–1.4, the arm's joint speeds ±15 % each
+PLATE_RANGES: tuple[tuple[str, str, float, float], ...] = (
+    ("plate.dispense_per_rep", "uniform", 0.6, 1.5),
+    ("plate.flip_prob", "uniform", 0.75, 1.15),
+    ("plate.flip_scatter_mm", "log", 0.5, 2.0),
+    ("plate.feed_mm_per_rep", "uniform", 0.7, 1.3),
+    ("plate.rep_s", "uniform", 0.75, 1.3),
+    ("plate.settle_s", "uniform", 0.7, 1.4),
+    ("sim.arm_j1_deg_s", "uniform", 0.85, 1.15),
+    ("sim.arm_j2_deg_s", "uniform", 0.85, 1.15),
+)
+
+
 def nominal_figures(cell: CellSpec) -> dict[str, float]:
     """The cell file's value of every figure a plant moves."""
     arm = arm_figures(world_arm(cell.robot).scara)
+    if cell.presentation == "plate":
+        p = cell.plate
+        return {"plate.dispense_per_rep": p.dispense_per_rep, "plate.flip_prob": p.flip_prob,
+                "plate.flip_scatter_mm": p.flip_scatter_mm,
+                "plate.feed_mm_per_rep": p.feed_mm_per_rep, "plate.rep_s": p.rep_s,
+                "plate.settle_s": p.settle_s, "sim.arm_j1_deg_s": arm["arm_j1_deg_s"],
+                "sim.arm_j2_deg_s": arm["arm_j2_deg_s"]}
     return {"hopper.release_per_mm": cell.hopper.release_per_mm,
             "return_transit_s": cell.return_transit_s,
             "sim.clump_cover_scale": cell.sim.clump_cover_scale,
@@ -45,13 +68,15 @@ def nominal_figures(cell: CellSpec) -> dict[str, float]:
 
 
 def draw_plants(cell: CellSpec, n: int, seed: int) -> list[dict[str, float]]:
-    """``n`` plants' figures, drawn from ``PLANT_RANGES`` with a fixed seed."""
+    """``n`` plants' figures, drawn from ``PLANT_RANGES`` (a plate cell's:
+    ``PLATE_RANGES``) with a fixed seed."""
     rng = np.random.default_rng(seed)
     nominal = nominal_figures(cell)
+    ranges = PLATE_RANGES if cell.presentation == "plate" else PLANT_RANGES
     plants = []
     for _ in range(n):
         fig = {}
-        for key, how, lo, hi in PLANT_RANGES:
+        for key, how, lo, hi in ranges:
             f = (rng.uniform(lo, hi) if how == "uniform"
                  else math.exp(rng.uniform(math.log(lo), math.log(hi))))
             fig[key] = nominal[key] * f

@@ -25,6 +25,9 @@ Two kinds of fit:
 
 A figure is left at the cell file's value, with the reason, when the log cannot fix it:
 a count too small, a speed never varied, an effect the cell never reached.
+
+A plate cell (``presentation: plate``) fits its plate's figures instead of the belt's
+(``tuning/twin_plate.py``); the arm is fitted the same way.
 """
 
 from __future__ import annotations
@@ -81,6 +84,7 @@ class RunLog:
     picks: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
     places: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
     speeds: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
+    plate: list[tuple[float, dict[str, Any]]] = field(default_factory=list)  # actions done
     t_end: float = 0.0
 
     @property
@@ -103,9 +107,11 @@ def read_logs(paths: list[str]) -> list[RunLog]:
                 run = RunLog(path, row["id"], json.loads(row["options"] or "{}"))
                 for t, kind, data in conn.execute(
                         "SELECT t, kind, data FROM events WHERE run_id=? AND kind IN "
-                        "('frame', 'pick', 'place', 'speeds') ORDER BY t", (row["id"],)):
+                        "('frame', 'pick', 'place', 'speeds', 'plate_done') ORDER BY t",
+                        (row["id"],)):
                     getattr(run, {"frame": "frames", "pick": "picks", "place": "places",
-                                  "speeds": "speeds"}[kind]).append((t, json.loads(data)))
+                                  "speeds": "speeds", "plate_done": "plate"}[kind]).append(
+                        (t, json.loads(data)))
                 end = conn.execute("SELECT MAX(t) FROM samples WHERE run_id=?",
                                    (row["id"],)).fetchone()[0]
                 run.t_end = float(end or 0.0)
@@ -398,22 +404,26 @@ def _not_fixed(m: Moment, obs: dict[str, float], sim: dict[str, float]) -> str |
 def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
                 rounds: int = ROUNDS, seeds: tuple[int, ...] = SEEDS,
                 say: Callable[[str], None] | None = None,
-                scenario: str | None = None) -> dict[str, Estimate]:
-    """The simulated-moments figures (``MOMENTS``), from ``start`` (the arm's already)."""
-    obs = _sum_counts(runs)
+                scenario: str | None = None,
+                moments: tuple[Moment, ...] = MOMENTS,
+                count: Callable[[list[RunLog]], dict[str, float]] | None = None
+                ) -> dict[str, Estimate]:
+    """The simulated-moments figures (``moments``, the belt's ``MOMENTS`` unless given,
+    matched on ``count``'s counts), from ``start`` (the arm's already)."""
+    count = count or _sum_counts
+    obs = count(runs)
     fig = dict(start)
-    nominal = {m.key: _cell_figure(cell, m.key) for m in MOMENTS}
+    nominal = {m.key: _cell_figure(cell, m.key) for m in moments}
     fig.update(nominal)
-    hist: dict[str, list[tuple[float, float]]] = {m.key: [] for m in MOMENTS}
+    hist: dict[str, list[tuple[float, float]]] = {m.key: [] for m in moments}
     # each round's figure: the last ones averaged, so one round's simulated scatter does
     # not decide the figure (a stochastic approximation's iterate average)
-    proposals: dict[str, list[float]] = {m.key: [] for m in MOMENTS}
+    proposals: dict[str, list[float]] = {m.key: [] for m in moments}
     frozen: dict[str, str] = {}
     for rnd in range(rounds):
         # every logged run again, each with its own settings and length
-        sc = _sum_counts([sim for run in runs
-                          for sim in simulate(run, cell, fig, seeds, scenario)])
-        for m in MOMENTS:
+        sc = count([sim for run in runs for sim in simulate(run, cell, fig, seeds, scenario)])
+        for m in moments:
             if m.key in frozen:
                 continue
             why = _not_fixed(m, obs, sc)
@@ -435,7 +445,7 @@ def fit_moments(runs: list[RunLog], cell: CellSpec, start: dict[str, float],
             say(f"round {rnd + 1}: " + ", ".join(f"{k.split('.')[-1]} {fig[k]:.4g}"
                                                  for k in nominal if k not in frozen))
     out: dict[str, Estimate] = {}
-    for m in MOMENTS:
+    for m in moments:
         if m.key in frozen:
             out[m.key] = Estimate(nominal[m.key], None, frozen[m.key], fixed=False)
             continue
@@ -503,6 +513,7 @@ class Twin:
     logs: list[str]
     cell: str
     untested: dict[str, str] = field(default_factory=dict)   # assumptions the log never tried
+    not_fitted: dict[str, str] = field(default_factory=lambda: dict(NOT_FITTED))
 
     def figures(self) -> dict[str, float]:
         """The world file's figures: every estimate the log fixed."""
@@ -514,7 +525,7 @@ class Twin:
                       "fixed_by": e.fixed_by}
                   for k, e in self.estimates.items() if e.fixed}
         unfixed = {k: e.fixed_by for k, e in self.estimates.items() if not e.fixed}
-        unfixed.update(NOT_FITTED)
+        unfixed.update(self.not_fitted)
         unfixed.update(self.untested)
         return {"logs": self.logs, "cell": self.cell, "fitted": fitted, "not_fixed": unfixed}
 
@@ -545,6 +556,9 @@ def fit_twin(logs: list[str], cell: CellSpec, rounds: int = ROUNDS,
     runs = read_logs(logs)
     for run in runs:                       # before any fitting: a missing file fails now
         logged_files(run, scenario)
+    if cell.presentation == "plate":
+        from feeder_bt.tuning.twin_plate import fit_plate_twin
+        return fit_plate_twin(runs, logs, cell, rounds, seeds, say, scenario)
     arm = fit_arm(runs, cell)
     start = {_flat(k): e.value for k, e in arm.items() if e.fixed}
     if say:
