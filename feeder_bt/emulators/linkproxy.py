@@ -139,6 +139,9 @@ class LinkProxy:
                 elif mode == "drip":
                     pair.drip_one(self.drip_s)
                 ready, _, _ = select.select(ends, [], [], 0.02 if mode == "flood" else 0.05)
+                # the mode of the moment the bytes came, not of before the wait: a cut made
+                # while waiting must drop them
+                mode = "silent" if pair.dead or device is None else self.mode
                 for s in ready:
                     try:
                         data = s.recv(65536)

@@ -242,6 +242,13 @@ def test_a_silent_line_is_a_lost_link_not_a_stuck_feeder(quick_plant):
         proxy.restore()
         job = wait(feeder.dispense(1))
         assert job.ok, job.error                # nothing owed: the next action runs
+        proxy.silence()                         # a short pull: the command is lost,
+        job = feeder.flip(1)                    # the line is back before its deadline
+        time.sleep(0.2)
+        proxy.restore()
+        err = wait(job).error
+        assert isinstance(err, CommsLost) and "answers idle" in str(err), (err, list(feeder.log)[-8:])
+        assert wait(feeder.flip(1)).ok
     finally:
         feeder.close()
         proxy.close()

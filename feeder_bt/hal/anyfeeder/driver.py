@@ -353,8 +353,7 @@ class AnyFeeder:
         if cancel.is_set():
             raise JobCancelled(f"{name} cancelled")
         self._write(line)
-        written = time.monotonic()
-        deadline = written + duration + self.spec.timeout_s
+        deadline = time.monotonic() + duration + self.spec.timeout_s
         busy: set[int] = set()
         ended: set[int] = set()
         errors: list[Reply] = []
@@ -366,15 +365,11 @@ class AnyFeeder:
                 self._write(command_line(self.spec.commands.stop))
                 deadline = time.monotonic() + self.spec.timeout_s
             if time.monotonic() > deadline:
-                if self._last_rx < written:
-                    # not a byte since the command, not even its busy codes: the line is
-                    # dead (a pulled cable, the feeder off), not the feeder stuck. What
-                    # the motors owe is unknown: the port is opened afresh.
-                    raise self._drop(f"nothing came back in {duration + self.spec.timeout_s:g}"
-                                     f" s after {name}: the line is down or the feeder off")
-                self._owed = {m: name for m in busy - ended}
                 if errors:
+                    self._owed = {m: name for m in busy - ended}
                     break
+                self._judge_silence(name, duration)
+                self._owed = {m: name for m in busy - ended}
                 raise PlateFault(f"AnyFeeder {name}: no completion in "
                                  f"{duration + self.spec.timeout_s:g} s (motors done: "
                                  f"{sorted(ended) or 'none'})")
@@ -406,6 +401,35 @@ class AnyFeeder:
         if stopped:
             raise JobCancelled(f"{name} cancelled (stopped: x={self.spec.commands.stop})")
         return codes
+
+    def _judge_silence(self, name: str, duration: float) -> None:
+        """An action's end did not come: a dead line, an end lost on the line, or a stuck
+        feeder. Ask with the stop command, harmless on an idle feeder: nothing back is a
+        dead line (a pulled cable, the feeder off: the port is opened afresh and owes
+        nothing); both motors done is an idle feeder whose end of ``name`` the line lost
+        (a lost link, not a plate fault). Any other answer returns: the feeder is stuck."""
+        self._write(command_line(self.spec.commands.stop))
+        end = time.monotonic() + min(self.spec.timeout_s, 2.0)
+        done: set[int] = set()
+        heard = False
+        while time.monotonic() < end and not done >= MOTORS:
+            for text in self._lines():
+                reply = self._reply(text)
+                if reply is None:
+                    continue
+                heard = True
+                if reply.code == DONE:
+                    done.add(reply.motor)
+                elif reply.code != BUSY:       # a standard response: busy, then done
+                    return
+        if not heard:
+            raise self._drop(f"nothing came back in {duration + self.spec.timeout_s:g} s "
+                             f"after {name}, nor to a stop: the line is down or the "
+                             "feeder off")
+        if done >= MOTORS:
+            self._owed = {}
+            raise CommsLost(f"AnyFeeder at {self.spec.url}: the end of {name} was lost on "
+                            "the line; the feeder answers idle")
 
     def _write_params(self) -> None:
         """The cell's speeds (``ab[N+16]=V x=N+16``, a standard response) and repetitions
