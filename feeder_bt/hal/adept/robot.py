@@ -12,7 +12,7 @@ import threading
 import time
 from collections.abc import Iterable
 
-from feeder_bt.core.clock import Clock
+from feeder_bt.core.clock import Clock, sampled_at
 from feeder_bt.core.errors import CommsLost, HalError, MissedGrab
 from feeder_bt.core.jobs import DoneJob, FutureJob, Job
 from feeder_bt.hal.adept import protocol
@@ -210,10 +210,11 @@ class AdeptRobotPosition:
 
     def read_once(self) -> None:
         """One POLL (blocking; the poller thread, or start-up)."""
+        t0 = time.monotonic()
         pose, count = protocol.decode_poll(self.position.call("POLL"))
         self.polls += 1
         self._pose, self._count = pose, protocol.wrap_robot(count * self.belt_sign)
-        self.updated_at = time.monotonic()
+        self.updated_at = sampled_at(t0, time.monotonic())
         self.error = None
 
     def start(self) -> AdeptRobotPosition:

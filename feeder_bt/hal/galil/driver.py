@@ -55,7 +55,7 @@ from typing import Any
 
 import serial
 
-from feeder_bt.core.clock import Clock
+from feeder_bt.core.clock import Clock, sampled_at
 from feeder_bt.core.encoder import wrap
 from feeder_bt.core.errors import CommsLost, ConfigError, ConveyorFault, HalError
 from feeder_bt.core.model import GalilSpec
@@ -294,9 +294,11 @@ class GalilController(CardSetup):
         self.submit(self.read_position, axis).add_done_callback(done)
 
     def read_position(self, axis: str) -> int:
-        """``TP`` now (device worker only); updates the latest count."""
+        """``TP`` now (device worker only); updates the latest count, stamped at the
+        round trip's middle (``sampled_at``)."""
+        t0 = self.clock.now()
         count = parse_int(self.ask(f"TP{axis.upper()}"))
-        self._set_position(axis.upper(), count)
+        self._set_position(axis.upper(), count, sampled_at(t0, self.clock.now()))
         return count
 
     def run_steps(self, name: str, steps: list[Callable[[], Any]],
