@@ -194,6 +194,38 @@ def test_idle_connections_leave_room_for_a_new_robot(capsys):
     assert "Traceback" not in err and len(err.splitlines()) <= 5, err[-2000:]
 
 
+def test_a_flood_from_the_robots_own_address_leaves_it_room(tmp_path, capsys):
+    """40 idle connections from the robot's own address (127.0.0.5), opened again as the
+    server closes them: the robot the robots file knows by that address is vouched for
+    at connect, never closed for a newcomer, and gets its answers and parts. (An anonymous
+    robot on a flooded address can be closed before its first request: a robot that must
+    get through names itself in the robots file, docs/part-server.md.)"""
+    from feeder_bt.plant.robots import RobotTrust
+    from tests.plant.test_robot_trust import Line, _robots_file
+
+    path, _secret, _plain = _robots_file(tmp_path, capsys)
+    served = _ServedCell(RobotTrust.load(path))
+    flood = ReopeningFlood(served.port, 40, source="127.0.0.5")
+    try:
+        for _ in range(3):
+            t0 = time.monotonic()
+            robot = Line(served.host, served.port, "127.0.0.5")
+            try:
+                assert robot.ask("STATUS").startswith("OK STATUS state=RUNNING")
+                took = time.monotonic() - t0
+                offer = robot.ask("PART WAIT 10")
+                assert offer.startswith("OK PART"), offer
+                assert robot.ask(f"RELEASE {offer.split()[2]}").startswith("OK")
+            finally:
+                robot.close()
+            assert took < GOT_THROUGH_S, took
+        assert served.server.server.gate.counts["admitted"] >= 40   # the flood was in
+    finally:
+        flood.close()
+        served.close()
+    assert "Traceback" not in capsys.readouterr().err
+
+
 def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
     pytest.importorskip("asyncua")
     from tests.plant.test_opcua import ALICE, LiveCell, cell_node, client, read
