@@ -10,8 +10,9 @@ From sample images and what is in them (``tuning.labels``) it learns, in this or
 2. each class's feature ranges (``tuning.ranges``: the samples' spread plus a margin), with
    the features that keep classes apart: area always, a shape feature that shuts out
    touching pairs, and for every pair of classes whose boxes would overlap the feature
-   whose sample ranges are furthest apart; a pair that no feature separates is an error
-   naming both classes. Where two classes are apart on a feature, each range reaches
+   whose sample ranges are furthest apart (an outline feature, or failing those the
+   frame's grey under the blob: ``grey_mean``, ``grey_std``); a pair that no feature
+   separates is an error naming both classes. Where two classes are apart on a feature, each range reaches
    halfway to the other (the nearer class wins), elsewhere its margin;
 3. each pose's outline with its holes, in mm through the cell's camera scale: the samples'
    outlines turned onto one another and the pixels most of them cover (a median
@@ -52,6 +53,8 @@ GRID = 96                  # the outline raster's cells across the largest sampl
 ALIGN_STEP_DEG = 4.0       # the coarse turn search aligning samples' outlines
 #: Shape features that tell a whole part from touching parts, steadiest chosen per class.
 SHAPE = ("solidity", "circularity", "rectangularity", "aspect")
+#: Pixel features tried when no outline feature separates two classes (steadier first).
+GREY = ("grey_mean", "grey_std")
 
 
 Cls = tuple[str, str]
@@ -327,6 +330,14 @@ def learn_classes(samples: dict[Cls, list[Measured]]
             best = max(names, key=apart)
             d = apart(best)
             if d <= 0:
+                # no outline feature: the frame's grey under the blob (brass and steel of
+                # one size under a front light), the outline's first when both would do
+                greys = [n for n in GREY
+                         if all(n in m.features for m in samples[a] + samples[b])]
+                grey = max(greys, key=apart, default=None)
+                if grey is not None and apart(grey) > 0:
+                    best, d = grey, apart(grey)
+            if d <= 0:
                 raise BadInput(
                     f"classes {'/'.join(a)} and {'/'.join(b)} overlap in every feature "
                     f"(nearest to apart: {best}); label them as one class, or add a "
@@ -339,7 +350,8 @@ def learn_classes(samples: dict[Cls, list[Measured]]
     split = {(c, f) for a, b, f in separated for c in (a, b)}
     many = [c for c in classes if len(samples[c]) >= POOL_MIN]
     pooled_spread = {n: float(np.median([spread([m.features for m in samples[c]], n)
-                                         for c in many])) if many else 0.0 for n in names}
+                                         for c in many])) if many else 0.0
+                     for n in [*names, *GREY]}
     for c in classes:
         r = {}
         for n in chosen[c]:

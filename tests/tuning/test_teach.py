@@ -305,6 +305,27 @@ def test_a_feature_is_added_to_separate_classes_of_one_size():
     assert ranges[("a", "flat")]["aspect"][1] <= ranges[("b", "flat")]["aspect"][0]
 
 
+def test_a_grey_feature_separates_classes_alike_in_every_outline_feature():
+    """Brass and steel washers of one size under a front light: the outline cannot tell
+    them apart, the grey under the blob can."""
+    a = _class({"area_mm2": [450, 460, 455], **FLAT, "grey_mean": [150, 158, 154],
+                "grey_std": [20, 22, 21]})
+    b = _class({"area_mm2": [452, 458, 456], **FLAT, "grey_mean": [80, 86, 83],
+                "grey_std": [20, 21, 22]})
+    ranges, separated = learn_classes({("a", "flat"): a, ("b", "flat"): b})
+    assert separated == [(("a", "flat"), ("b", "flat"), "grey_mean")]
+    assert ranges[("b", "flat")]["grey_mean"][1] <= ranges[("a", "flat")]["grey_mean"][0]
+
+
+def test_an_outline_feature_is_preferred_to_the_grey():
+    a = _class({"area_mm2": [450, 460, 455], **FLAT, "grey_mean": [150, 158, 154],
+                "grey_std": [20, 22, 21]})
+    b = _class({"area_mm2": [452, 458, 456], **{**FLAT, "aspect": [1.6, 1.65, 1.7]},
+                "grey_mean": [80, 86, 83], "grey_std": [20, 21, 22]})
+    _, separated = learn_classes({("a", "flat"): a, ("b", "flat"): b})
+    assert separated == [(("a", "flat"), ("b", "flat"), "aspect")]
+
+
 def test_held_out_images_are_spread_evenly_and_always_the_same():
     assert held_out(4, 0.5) == [1, 3]
     assert held_out(10, 0.3) == [3, 6, 9]
