@@ -48,6 +48,12 @@ def f1s(out: str) -> tuple[float, float]:
 #: Each is taught from half its images and scored on the other half, both ways round.
 REAL_SETS = {
     "greek_coins": "row_*.png",
+    "oysters": "oysters_*.jpg",
+}
+#: Sets that do not reach F1 0.95 yet, with their figures (taught / plain, each half).
+SHORT = {
+    "oysters": "front-lit oysters, some touching, light ones as bright as the paper: "
+               "F1 0.632 / 0.000 and 0.824 / 0.426",
 }
 
 
@@ -72,7 +78,9 @@ def _split(tmp_path: Path, folder: Path, pattern: str, other_half: bool) -> list
 
 
 @pytest.mark.parametrize("other_half", [False, True], ids=["first_half", "other_half"])
-@pytest.mark.parametrize("name", sorted(REAL_SETS))
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=SHORT[n])) if n in SHORT
+    else n for n in sorted(REAL_SETS)])
 def test_real_photos_taught_from_half_find_the_other_half(tmp_path, capsys, name, other_half):
     folder = ROOT / "tests/data" / name
     images = _split(tmp_path, folder, REAL_SETS[name], other_half)
@@ -84,7 +92,8 @@ def test_real_photos_taught_from_half_find_the_other_half(tmp_path, capsys, name
     held = re.search(r"held out (\d+) of (\d+) image", text)
     assert 2 * int(held.group(1)) >= int(held.group(2)) >= 2
     taught, plain = f1s(text)
-    assert taught >= 0.95 and taught > plain, text
+    assert taught > plain, text
+    assert taught >= 0.95, text
 
 
 def test_coins_taught_from_half_the_rows_find_the_other_half(tmp_path, capsys):
