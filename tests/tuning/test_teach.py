@@ -1,7 +1,7 @@
 """`feeder teach`: a scenario learnt from labelled images, scored on held-out ones.
 
-Real photos (tests/data/greek_coins: a museum photo of coins of three sizes under a front
-light) and frames the simulated cell renders with its truth as the labels (washers and
+Real photos (tests/data: a museum photo of coins of three sizes under a front light, and
+oysters with coins under a front light and on a light box, REAL_SETS) and frames the simulated cell renders with its truth as the labels (washers and
 slugs told apart by a hole, front-lit concave brackets, hex nuts in two poses). Each is
 taught from half its images and scored on the other half, against the plain OpenCV
 pipeline (Otsu, contours, nearest class by area) on the same images."""
