@@ -5,13 +5,17 @@
 from __future__ import annotations
 
 import argparse
+import tempfile
+from dataclasses import replace
+from pathlib import Path
 
 from feeder_bt.cli.argtypes import expect_kind
 from feeder_bt.cli.inputs import scenario_locator
 from feeder_bt.core.images import BadInput, read_image
+from feeder_bt.core.model import CellSpec
 from feeder_bt.tuning.evaluate import PlainBaseline, held_out, score_finds
 from feeder_bt.tuning.labels import Sample, load_coco, load_part_dir
-from feeder_bt.tuning.teach import cell_calibration, teach, write_scenario
+from feeder_bt.tuning.teach import Taught, cell_calibration, teach, write_scenario
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -70,9 +74,15 @@ def cmd_teach(args: argparse.Namespace) -> int:
             raise BadInput(f"--validate {args.validate}: {len(labelled)} labelled image(s) "
                            "cannot be split into a teaching and a held-out part")
     taught = teach(train + folders, cal)
+    if train:
+        taught = _choose_split(taught, train, args.cell, cell_spec)
     seg = taught.segmentation
     print(f"segmentation: {seg.name}: {seg.good} of {seg.labels} labelled part(s) alone, "
           f"{seg.stray} stray blob(s) (best of {taught.tried})")
+    if taught.split is not None:
+        print(f"split_touching: {'true' if taught.recipe.split_touching else 'false'}: "
+              f"F1 {taught.split[1]:.3f} cutting touching parts apart, "
+              f"{taught.split[0]:.3f} not, on the teaching images")
     for c, ms in sorted(taught.samples.items()):
         o = taught.outlines[c]
         rg = ", ".join(taught.ranges[c])
@@ -101,6 +111,37 @@ def cmd_teach(args: argparse.Namespace) -> int:
           f"F1 {base.f1:.3f}")
     print(f"taught recipe: F1 {sc.f1:.3f}")
     return 0
+
+
+def _f1(path: str, written: list[str], samples: list[Sample], classes: list[str]) -> float:
+    """The F1 of the scenario at ``path`` on labelled ``samples``, found by the locator
+    the cell builds for it (as the held-out images are scored)."""
+    _, _, locator = scenario_locator(path)
+    if locator.recipe.golden_image and len(written) > 1:
+        locator.set_golden(read_image(written[1]))
+    return score_finds(samples, lambda s: [(f"{d.part}/{d.pose}", d.u_px, d.v_px)
+                                           for d in locator.locate(s.image).parts],
+                       classes).f1
+
+
+def _choose_split(taught: Taught, train: list[Sample], cell: str, cell_spec: CellSpec
+                  ) -> Taught:
+    """The taught scenario with ``split_touching`` on if, on the teaching images, it finds
+    the labelled parts at least as well as without: it only cuts blobs no class takes and
+    keeps the pieces only when each is a part, so where it costs nothing there it can
+    only save the parts that touch in other frames. Both are scored by the locator the
+    cell would build from the written file."""
+    classes = ["/".join(c) for c in taught.samples]
+    f1 = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for split in (False, True):
+            t = replace(taught, recipe=replace(taught.recipe, split_touching=split))
+            path = str(Path(tmp) / f"split_{int(split)}.yaml")
+            written = write_scenario(t, path, cell, cell_spec, len(train))
+            f1.append(_f1(path, written, train, classes))
+    split = f1[1] >= f1[0]
+    return replace(taught, recipe=replace(taught.recipe, split_touching=split),
+                   split=(f1[0], f1[1]))
 
 
 

