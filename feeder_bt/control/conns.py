@@ -90,10 +90,11 @@ CAPPED, TRIAL, RESERVED = "capped", "trial", "reserved"
 class _Entry:
     """What the gate knows of one connection."""
 
-    __slots__ = ("ip", "busy", "kept", "pool")
+    __slots__ = ("ip", "busy", "kept", "pool", "spoke")
 
     def __init__(self, ip: str, busy: Callable[[], bool], pool: str) -> None:
         self.ip, self.busy = ip, busy
+        self.spoke = False                             # sent a byte (``heard``)
         self.pool = pool                               # CAPPED, TRIAL or RESERVED
         self.kept: Callable[[], bool] | None = None    # set by vouch(): the reserve's
 
@@ -178,6 +179,15 @@ class ConnGate:
         self._count(entry.ip, RESERVED, +1)
         return True
 
+    def heard(self, transport: Any) -> None:
+        """The connection sent something: among idle ones it is closed for a newcomer only
+        after every one that never said a word. A flood of connections that never speak,
+        from a client's own address, then makes room by closing its own, not the client
+        mid-handshake (an OPC UA Hello, a robot's first line)."""
+        entry = self._conns.get(transport)
+        if entry is not None:
+            entry.spoke = True
+
     def unkeep(self, transport: Any) -> None:
         """This connection's latest request was not the reserve owner's (a proxy's
         pooled connection carries everyone's): it may be closed for a newcomer again."""
@@ -227,15 +237,16 @@ class ConnGate:
     def _evict(self, pool: str, ip: str | None = None) -> bool:
         """Close the oldest idle connection in ``pool`` (from ``ip``, or from anywhere)
         that is not kept; False if there is none."""
-        for transport, entry in self._conns.items():     # oldest first
-            if entry.pool != pool or (ip is not None and entry.ip != ip) \
-                    or entry.protected():
-                continue
-            self.release(transport)
-            transport.abort()
-            self.counts["evicted"] += 1
-            self.note("an idle connection closed for a newcomer")
-            return True
+        for silent_only in (True, False):                # the ones that never spoke first
+            for transport, entry in self._conns.items():     # oldest first
+                if entry.pool != pool or (ip is not None and entry.ip != ip) \
+                        or (silent_only and entry.spoke) or entry.protected():
+                    continue
+                self.release(transport)
+                transport.abort()
+                self.counts["evicted"] += 1
+                self.note("an idle connection closed for a newcomer")
+                return True
         return False
 
     def _refuse(self, transport: Any, why: str) -> None:

@@ -150,6 +150,8 @@ class _Conn(asyncio.Protocol):
         if self.closing:
             return
         self.seen = self.srv.loop.time()
+        if self.transport is not None:
+            self.srv.gate.heard(self.transport)
         self.buf += data
         while b"\n" in self.buf and not self.closing:
             raw, _, self.buf = self.buf.partition(b"\n")

@@ -162,6 +162,7 @@ class _GatedUa:
 
     def data_received(self, data: bytes) -> None:
         if self.transport is not None:
+            self.gate.heard(self.transport)
             self.inner.data_received(data)
 
     def eof_received(self) -> bool | None:
