@@ -62,3 +62,21 @@ def test_the_docs_quote_the_committed_benchmark():
         assert (int(ftf), int(ltf)) == (f["too_far"], k["too_far"]), seed
         assert (float(fppm), float(lppm)) == (round(f["parts_per_minute"], 2),
                                               round(k["parts_per_minute"], 2)), seed
+
+
+def test_the_docs_quote_the_run_before_the_change():
+    """The figures the docs give for a79eaef (before every policy priced reach) are the
+    committed JSON's of that run."""
+    data = json.loads((ROOT / "benchmarks/results/missed_before_a79eaef.json").read_text())
+    runs = {(r["policy"], r["seed"]): r for r in data["runs"]}
+    text = " ".join((ROOT / "docs/performance.md").read_text().split())
+    seeds = data["seeds"]
+
+    def row(policy, key):
+        return " / ".join(str(runs[(policy, s)][key]) for s in seeds)
+    assert (f"gave FIFO {row('fifo', 'failed_picks')} failed picks on seeds 1–5, of them "
+            f"{row('fifo', 'out_of_reach')} out of reach, against lookahead's "
+            f"{row('lookahead', 'failed_picks')}") in text
+    before, now = data["mean"]["fifo"], json.loads(RESULT.read_text())["mean"]["fifo"]
+    assert (f"({before['parts_per_minute']:.2f} → {now['parts_per_minute']:.2f}, mean of the "
+            f"five)") in text
