@@ -1,6 +1,6 @@
 """Smart feeding against a fixed cycle on the same plate, same seeds.
 
-    python benchmarks/plate_bench.py [--duration 3600] [--seeds 1 2 3 4 5]
+    python benchmarks/plate_bench.py [--duration 3600] [--seeds 1 2 3 4 5] [--workers 2]
 
 Runs scenarios/plate_lenses.yaml with its smart feeding and with the fixed cycle of
 benchmarks/plate_fixed.yaml (dispense, feed forward and flip on every Nth look that found
@@ -14,6 +14,7 @@ given the knobs a user would turn.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures as cf
 import itertools
 import json
 import statistics
@@ -52,6 +53,7 @@ def fixed_overlay(folder: Path, reps: dict) -> Path:
 
 
 def one(seed: int, duration: float, overlay: Path | None) -> dict:
+    """One run in virtual time (a run's figures do not depend on the process it ran in)."""
     r = run_job(RunOptions(scenario=str(SCENARIO), duration=duration, fast=True, seed=seed,
                            view="none", overlay=str(overlay) if overlay else None))
     return {"seed": seed, "parts_per_minute": r["parts_per_minute"],
@@ -72,16 +74,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=3600.0)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     ap.add_argument("--periods", type=int, nargs="+", default=list(PERIODS))
+    ap.add_argument("--workers", type=int, default=1, help="runs at once (processes)")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "plate.json"))
     a = ap.parse_args(argv)
-    smart = summary([one(s, a.duration, None) for s in a.seeds])
     grid = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for reps in FIXED_GRID:
-            if reps["fixed_every"] not in a.periods:
-                continue
-            got = summary([one(s, a.duration, fixed_overlay(Path(tmp), reps))
-                           for s in a.seeds])
+    settings = [reps for reps in FIXED_GRID if reps["fixed_every"] in a.periods]
+    with tempfile.TemporaryDirectory() as tmp, \
+            cf.ProcessPoolExecutor(max_workers=max(a.workers, 1)) as pool:
+        overlays = [fixed_overlay(Path(tmp), reps) for reps in settings]
+        smart_jobs = [pool.submit(one, s, a.duration, None) for s in a.seeds]
+        jobs = [[pool.submit(one, s, a.duration, ov) for s in a.seeds] for ov in overlays]
+        smart = summary([j.result() for j in smart_jobs])
+        for reps, js in zip(settings, jobs, strict=True):
+            got = summary([j.result() for j in js])
             grid.append({**reps, **got})
             print(f"fixed, {describe(reps)}: {got['mean_ppm']} parts/min", flush=True)
     fixed = max(grid, key=lambda g: g["mean_ppm"])
