@@ -23,8 +23,9 @@ recirculation cost, and what switching between them could reach under a budget.
    one with two constraints sits on at most two settings). Fresh-seed figures.
 
 A kit scenario (``retrieve.kit``, fed by a supply plan: ``--supply``) is judged in kits per
-minute instead: each setting's "mean" is its kits/min, beside its kit inflow and selection
-bounds (``--max-recirc`` large to leave wear out).
+minute instead: each setting's "mean" is its kits/min, beside its kit inflow bound and its
+kit selection yardstick (no bound: it moves with the setting; ``--max-recirc`` large to
+leave wear out).
 
 What the bound does not cover, it says so: a controller that reacts within a pass (the
 pick policy does; all four are in the grid) or to transients of the belt. Those are the
@@ -226,11 +227,11 @@ def main() -> None:
     unit = evaluated[0].get("unit", "parts/min") if evaluated else "parts/min"
     for e in sorted(evaluated, key=lambda e: -e["mean"]):
         flag = "" if e["recirc_per_placed"] <= args.max_recirc else "  (over the budget)"
-        kit = (f", kit bounds: inflow {e['kit_inflow_bound_kpm']:.2f}, selection "
-               f"{e['kit_selection_bound_kpm']:.2f}" if "unit" in e else "")
+        kit = (f", kit inflow bound {e['kit_inflow_bound_kpm']:.2f}, kit selection "
+               f"yardstick {e['kit_selection_bound_kpm']:.2f}" if "unit" in e else "")
         print(f"  {e['mean']:6.2f} {unit} (sd {e['sd']:.2f}), {e['recirc_per_placed']:.2f} "
               f"recirculated per placed, robot {e['robot_busy_pct']:.1f} % busy, selection "
-              f"bound {e['selection_bound_ppm']:.2f} parts/min{kit}: {e['setting']}{flag}")
+              f"yardstick {e['selection_bound_ppm']:.2f} parts/min{kit}: {e['setting']}{flag}")
     if best_fixed:
         print(f"best fixed within the budget: {best_fixed['mean']:.2f} {unit} "
               f"({best_fixed['setting']})")

@@ -193,7 +193,7 @@ def _cell(s: dict) -> str:
 def _of(s: dict) -> str:
     of = f"{100 * s['of_ceiling']:.1f} % of {s['ceiling_ppm']:.1f}" if "of_ceiling" in s \
         else "-"
-    of += (f"; {100 * s['of_selection_bound']:.1f} % of the selection bound "
+    of += (f"; {s['of_selection_bound']:.3f}× the selection yardstick "
            f"{s['selection_bound_ppm']:.1f}" if "of_selection_bound" in s else "")
     of += f"; robot busy {s['robot_busy_pct']:.0f} %" if "robot_busy_pct" in s else ""
     return of + (f"; recirculated {s['recirc_per_placed']:.2f}/placed"
@@ -226,11 +226,12 @@ def markdown(result: dict) -> str:
                          f"water marks | | {_x(tu['best_possible_vs_watermarks'])} | |")
         if "kits_ours_vs_watermarks" in tu:
             lines += ["", "| setting (same budget) | kits/min mean (min–max, sd) | "
-                      "of the kit ceiling | of the kit inflow bound | of the kit selection "
-                      "bound |", "|---|---|---|---|---|"]
+                      "of the kit ceiling | of the kit inflow bound | × the kit selection "
+                      "yardstick |", "|---|---|---|---|---|"]
             for space, label in SPACES.items():
                 k = tu[space]["kits"]
-                ofs = [f"{100 * k[f'of_{b}']:.1f} % of {k[f'{b}_kpm']:.2f}"
+                ofs = [(f"{k[f'of_{b}']:.2f}× of {k[f'{b}_kpm']:.2f}" if b == "selection_bound"
+                        else f"{100 * k[f'of_{b}']:.1f} % of {k[f'{b}_kpm']:.2f}")
                        if k.get(f"of_{b}") is not None else "-"
                        for b in ("ceiling", "inflow_bound", "selection_bound")]
                 lines.append(f"| {label} | {k['mean']:.3f} ({k['min']:.3f}–{k['max']:.3f}, "

@@ -15,7 +15,7 @@ from feeder_bt.control.ticker import Ticker
 from feeder_bt.core.model import CellSpec, Scenario
 from feeder_bt.core.outputs import write_or_fallback
 from feeder_bt.core.vocabulary import split
-from feeder_bt.policy.kits import KitTracker, kits_report
+from feeder_bt.policy.kits import KitTracker, kits_report, steady_kits
 from feeder_bt.policy.supply_bound import (
     ceiling,
     inflow_bound_parts,
@@ -67,7 +67,8 @@ def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds
     bound when parts enter only by totes; the lowest is the ceiling, and parts/min as a %
     of it. The inflow bound counts parts over the run's whole ``span_s``, each arrival
     ``lag_s`` late (the ride to the robot), and is put per minute of feeding, like
-    parts/min. ``selection_ppm``: nearest-first over the run's parts (robot_bounds.py)."""
+    parts/min. ``selection_ppm``: nearest-first over the run's parts (robot_bounds.py), a
+    yardstick and never the ceiling: parts/min as a ratio to it, ``of_selection``."""
     supply = supply_bound_ppm(located_in_reach, feed_seconds)
     out: dict[str, Any] = {"supply_bound_ppm": round(supply, 3)}
     inflow_ppm = None
@@ -76,15 +77,17 @@ def bounds(located_in_reach: int, robot_ppm: float, retrieved: int, feed_seconds
         inflow_ppm = parts * 60.0 / feed_seconds
         out["inflow_bound_ppm"] = round(inflow_ppm, 3)
         out["inflow_lag_s"] = round(lag_s, 3)
-    which, ceil = ceiling(robot_ppm, supply, inflow_ppm, selection_ppm)
+    which, ceil = ceiling(robot_ppm, supply, inflow_ppm)
     ppm = retrieved * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
+    if selection_ppm:
+        out["of_selection"] = round(ppm / selection_ppm, 3)
     return {**out, "ceiling": which, "ceiling_ppm": round(ceil, 3),
             "of_ceiling_pct": round(100.0 * ppm / ceil, 1) if ceil > 0 else None}
 
 
 def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
                        feed_seconds: float, sim_seconds: float) -> dict[str, Any]:
-    """The selection-aware robot bounds over the simulated world's record of the run
+    """The selection-aware robot yardsticks over the simulated world's record of the run
     (``feeder_bt.analysis.robot_bounds``), with the world's own arm: the mean cycle over where the
     robot picked, and nearest-first over the parts that passed."""
     since = _record_since(world, sim_seconds)
@@ -228,6 +231,9 @@ def build_report(cell: Cell, ticker: Ticker, *, seed: int, hal: str, sim_seconds
         report["robot_busy_pct"] = (round(100.0 * fit.busy_s / feed_seconds, 1)
                                     if feed_seconds > 0 else None)
         report["robot_time"] = fit.time_split(feed_seconds, s.started_at)
+        if "kits" in report and total > 0:
+            report["kits"].update(steady_kits(report["kits"]["kit"], total, feed_seconds,
+                                              fit.busy_s - fit.waited_s))
         report["robot_model"]["fitted"]["robot_bound_ppm"] = round(
             robot_bound(cell.cell, cell.scenario, fit.model)[1], 3)
         if world is not None:             # the simulated arm's truth, for comparison

@@ -1,9 +1,11 @@
-"""Selection-aware robot bounds: what the robot could do with the parts the run
+"""Selection-aware robot yardsticks: what the robot could do with the parts the run
 really had, not with a part always waiting at the best corner of its window.
 
 ``robot_bound_ppm`` (``report.robot_bound``) is 60 over the shortest pick-and-place cycle
-anywhere in the pick window: the corner case, which no part may ever offer. Two bounds
-closer to a run, from the simulated world's record of it (``sim/passlog.py``), priced
+anywhere in the pick window: the corner case, which no part may ever offer, and a true
+bound. Two rates closer to a run (yardsticks, not bounds: each moves with the run's own
+setting and picks, and the report never takes either for its ceiling; the ``_bound``
+in their keys is historical), from the simulated world's record of it (``sim/passlog.py``), priced
 with the world's own arm (a SCARA, ``feeder_bt.robot.scara``):
 
 - ``mean_bound``: 60 over the mean cycle (place pose → pick → place pose, with settle,

@@ -110,6 +110,8 @@ class RunReport:
     supply_bound_ppm: float = _absent()
     inflow_bound_ppm: float = _absent()      # parts enter only by totes (a supply plan)
     inflow_lag_s: float = _absent()
+    # parts/min over the selection yardstick's: a ratio, since it is no bound
+    of_selection: float = _absent()
     ceiling: str = _absent()
     ceiling_ppm: float = _absent()
     of_ceiling_pct: float | None = _absent()

@@ -92,8 +92,10 @@ def _robots_line(report: dict) -> str:
 
 def _ceiling_line(report: dict) -> str:
     """The ceiling: the lowest of the robot, supply (and inflow) bounds, and how near the
-    run came; with an inflow bound or the selection-aware robot bounds (a simulated run)
-    the bounds get lines of their own (80 columns)."""
+    run came; with an inflow bound or the selection-aware robot rates (a simulated run)
+    the bounds get lines of their own (80 columns). The mean cycle's and nearest-first
+    selection's rates move with the run's own setting: yardsticks, said so, never a
+    ceiling, and the run against them as a ratio."""
     if "ceiling_ppm" not in report:
         return ""
     pct = report["of_ceiling_pct"]
@@ -104,13 +106,18 @@ def _ceiling_line(report: dict) -> str:
                 f"robot {report['robot_bound_ppm']:.1f}, {supply}){of}")
     robot = f"robot {report['robot_bound_ppm']:.1f}"
     if report.get("robot_bound_selection_ppm") is not None:
-        mean = report.get("robot_bound_mean_ppm")
-        robot += (" corner" + (f", {mean:.1f} mean" if mean is not None else "")
-                  + f", {report['robot_bound_selection_ppm']:.1f} selection;")
+        robot += " corner,"
     else:
         robot += ","
     out = (f"\n  ceiling {report['ceiling_ppm']:.1f} parts/min ({report['ceiling']} bound){of}"
            f"\n  bounds: {robot} {supply}")
+    if report.get("robot_bound_selection_ppm") is not None:
+        mean = report.get("robot_bound_mean_ppm")
+        ratio = report.get("of_selection")
+        out += ("\n  yardsticks, not bounds:"
+                + (f" {mean:.1f} mean cycle," if mean is not None else "")
+                + f" {report['robot_bound_selection_ppm']:.1f} nearest-first"
+                + (f" (run {ratio:.2f}x)" if ratio is not None else ""))
     if "inflow_bound_ppm" in report:
         out += (f"\n  inflow bound {report['inflow_bound_ppm']:.1f} parts/min (parts reach "
                 f"the robot {report['inflow_lag_s']:.1f} s after they come)")

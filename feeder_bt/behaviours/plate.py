@@ -212,12 +212,14 @@ class ChoosePlateAction(Leaf):
     def __init__(self, name: str, ctx: Ctx, waiter: WaitLook) -> None:
         super().__init__(name, ctx)
         self.waiter = waiter
+        self.judged = 0                     # looks judged: the fixed cycle's period counts them
 
     def update(self) -> Status:
         look = self.bb.get(LOOK)
+        self.judged += 1
         view = view_of(self.bb.get(LOCATE.RESULT), self.ctx.cell.plate,
                        part_area_mm2(self.ctx.scenario.vision))
-        actions, why = next_actions(view, self.ctx.scenario.present.plate)
+        actions, why = next_actions(view, self.ctx.scenario.present.plate, self.judged)
         self.bb.set(PLAN, (look, actions))
         self.waiter.judged = look
         self.ctx.stats.count("plate_decisions")

@@ -1,10 +1,14 @@
 """Pick policies: which located part the robot takes next (``retrieve.policy``).
 
-``fifo`` and ``earliest_deadline`` need only the queue. ``shortest_cycle`` and
-``lookahead`` price every part by the robot model fitted online from the robot's measured
-move times (``feeder_bt.robot.fit``; thesis Figure 8-5, "does location matter"): the seconds from now until the part is released at its place pose, with the
-intercept on the moving belt predicted from the belt speed. All parts of a choice are
-priced at once with numpy, so a choice over a long queue stays well inside a tick.
+Every policy prices reach with the robot model fitted online from the robot's measured
+move times (``feeder_bt.robot.fit``; thesis Figure 8-5, "does location matter"): the
+seconds from now until the part is released at its place pose, with the intercept on the
+moving belt predicted from the belt speed, and infinite for a part no pick can catch any
+more. ``fifo`` and ``earliest_deadline`` keep their order and take the first part of it
+that can still be caught; ``shortest_cycle`` takes the cheapest, ``lookahead`` the
+cheapest pair. The scenario's ``retrieve.reach_time_s`` is only a prior: the lead before
+the fit has measured a move, and when there is no model. All parts of a choice are priced
+at once with numpy, so a choice over a long queue stays well inside a tick.
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ import numpy as np
 from feeder_bt.behaviours.base import Ctx
 from feeder_bt.core.model import belt_window
 from feeder_bt.core.parts import Part
-from feeder_bt.robot.fit import pricing_model
+from feeder_bt.robot.fit import pricing_model, robot_fit
 
 XNow = Callable[[Part], float]
 
@@ -37,42 +41,6 @@ def gone_by(ctx: Ctx, x_now: XNow, lead_mm: float) -> Callable[[Part], bool]:
     return gone
 
 
-class Policy:
-    """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
-
-    A policy that needs more reads the robot's pose through ``ctx``; ``NextPart`` keeps
-    ``belt_mm_s`` and ``robot_pct`` (the horizontal belt and robot speeds on the
-    blackboard, which the adjuster or the operator may change) current before each choice."""
-
-    name = "fifo"
-
-    def __init__(self, ctx: Ctx | None = None) -> None:
-        self.ctx = ctx
-        self.belt_mm_s = 0.0
-        self.robot_pct = ctx.scenario.retrieve.robot_speed_pct if ctx is not None else 100.0
-
-    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
-        return parts[0] if parts else None
-
-    def lead_s(self) -> float:
-        """How long before the grip a part must be dropped as too far: the scenario's
-        ``reach_time_s`` for a policy that does not price the pick itself."""
-        return self.ctx.scenario.retrieve.reach_time_s if self.ctx is not None else 0.0
-
-
-class Fifo(Policy):
-    name = "fifo"
-
-
-class EarliestDeadline(Policy):
-    """The part that leaves the pick window first: the one furthest down the belt."""
-
-    name = "earliest_deadline"
-
-    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
-        return max(parts, key=x_now, default=None)
-
-
 @dataclass
 class _Batch:
     """The candidate parts as columns: where each is now, and where each is placed."""
@@ -84,27 +52,45 @@ class _Batch:
     place_y: np.ndarray
 
 
-class ShortestCycle(Policy):
-    """The part whose pick-and-place from the robot's current pose takes least time.
+class Policy:
+    """How the next part is chosen; ``x_now`` predicts a part's belt x from the encoder.
 
-    A part still upstream of the reach costs its wait, and a part that would pass
-    ``too_far`` before the grip is skipped. When parts arrive faster than the robot can
-    take them, taking the cheap ones first turns the surplus into shorter cycles instead
-    of longer queues."""
+    Every policy prices picks with the same model (``pricing_model``: fitted online from
+    measured move times, or the cell's nominal model with ``retrieve.learn_robot:
+    false``). A policy reads the robot's pose through ``ctx``; ``NextPart`` keeps
+    ``belt_mm_s`` and ``robot_pct`` (the horizontal belt and robot speeds on the
+    blackboard, which the adjuster or the operator may change) current before each choice.
+    The base class is FIFO: the first part in the queue that can still be caught."""
 
-    name = "shortest_cycle"
+    name = "fifo"
 
     def __init__(self, ctx: Ctx | None = None) -> None:
-        super().__init__(ctx)
+        self.ctx = ctx
+        self.belt_mm_s = 0.0
+        self.robot_pct = ctx.scenario.retrieve.robot_speed_pct if ctx is not None else 100.0
         # fitted online from measured move times (feeder_bt/robot/fit.py), not the
         # simulator's model; the cell's nominal model with retrieve.learn_robot: false
         self.model = pricing_model(ctx) if ctx is not None else None
+        self.fit = robot_fit(ctx) if ctx is not None else None
+
+    def has_data(self) -> bool:
+        """Whether the model has anything to price with: a fit that has measured a move,
+        or the cell's nominal model when the scenario does not learn."""
+        if self.model is None or self.fit is None:
+            return False
+        return not self.fit.learning or sum(self.fit.samples.values()) > 0
 
     def lead_s(self) -> float:
-        """The pricing skips what cannot be caught, so only what no pick can reach in time
-        is dropped: the settle and grip after the shortest possible move."""
-        if self.ctx is None or self.model is None:
-            return super().lead_s()
+        """How long before the grip a part must be dropped as too far. The pricing skips
+        what cannot be caught, so only what no pick can reach in time is dropped: the
+        settle and grip after the shortest possible move, by the model. Before the model
+        has measured a move (or with no model) the scenario's ``reach_time_s`` is the
+        prior."""
+        if self.ctx is None:
+            return 0.0
+        if not self.has_data():
+            return self.ctx.scenario.retrieve.reach_time_s
+        assert self.model is not None
         sp, r = self.ctx.cell.robot, self.ctx.scenario.retrieve
         fastest = float(self.model.arch_times(np.zeros(1), self.robot_pct)[0])
         return fastest + (sp.track_settle_s if r.tracking else 0.0) + sp.grip_s
@@ -157,13 +143,63 @@ class ShortestCycle(Policy):
         pose = self.ctx.hal.robot_position.pose()
         return float(self.costs(self._batch([part], x_now), (pose.x, pose.y), speed_mm_s)[0])
 
+    def priced(self, parts: list[Part], x_now: XNow) -> np.ndarray:
+        """Every part's cost from the robot's pose now, at the current belt speed."""
+        assert self.ctx is not None
+        pose = self.ctx.hal.robot_position.pose()
+        return self.costs(self._batch(parts, x_now), (pose.x, pose.y), self.belt_mm_s)
+
+    def order(self, parts: list[Part], x_now: XNow) -> list[int]:
+        """The policy's order over ``parts`` (indices): the queue's own for FIFO."""
+        return list(range(len(parts)))
+
+    def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
+        """The first part in the policy's order that can still be caught, by the same
+        priced check ``shortest_cycle`` makes; if none can, the first in the order (the
+        pick is tried, and a part that has gone is dropped at the next choice)."""
+        if not parts:
+            return None
+        order = self.order(parts, x_now)
+        if self.ctx is None or self.model is None:
+            return parts[order[0]]
+        c = self.priced(parts, x_now)
+        for i in order:
+            if math.isfinite(c[i]):
+                return parts[i]
+        return parts[order[0]]
+
+
+class Fifo(Policy):
+    name = "fifo"
+
+
+class EarliestDeadline(Policy):
+    """The part that leaves the pick window first (the one furthest down the belt) of
+    those that can still be caught."""
+
+    name = "earliest_deadline"
+
+    def order(self, parts: list[Part], x_now: XNow) -> list[int]:
+        xs = [x_now(p) for p in parts]
+        return sorted(range(len(parts)), key=lambda i: -xs[i])
+
+
+class ShortestCycle(Policy):
+    """The part whose pick-and-place from the robot's current pose takes least time.
+
+    A part still upstream of the reach costs its wait, and a part that would pass
+    ``too_far`` before the grip is skipped. When parts arrive faster than the robot can
+    take them, taking the cheap ones first turns the surplus into shorter cycles instead
+    of longer queues."""
+
+    name = "shortest_cycle"
+
     def choose(self, parts: list[Part], x_now: XNow) -> Part | None:
         if not parts:
             return None
         if self.ctx is None:
             return parts[0]
-        pose = self.ctx.hal.robot_position.pose()
-        c = self.costs(self._batch(parts, x_now), (pose.x, pose.y), self.belt_mm_s)
+        c = self.priced(parts, x_now)
         i = int(np.argmin(c))
         return parts[i] if math.isfinite(c[i]) else max(parts, key=x_now)
 

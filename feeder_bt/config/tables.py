@@ -316,6 +316,7 @@ ENUMS[(PlatePolicy, "policy")] = ("smart", "fixed")
 for _f in ("feed_reps", "flip_reps", "dispense_reps"):
     RANGES[(PlatePolicy, _f)] = Range(1, 10)            # AnyFeeder Guide Table 3-2: [turns]
 RANGES[(PlatePolicy, "purge_reps")] = Range(1, 127)     # Table 3-2: purge 1...127
+RANGES[(PlatePolicy, "fixed_every")] = Range(1, 100)
 for _f in ("feed_mm_per_rep", "rep_s", "dispense_per_rep", "purge_mm_per_rep", "timeout_s"):
     RANGES[(PlateSpec, _f)] = POSITIVE
 RANGES[(PlateSpec, "flip_prob")] = Range(0, 1)

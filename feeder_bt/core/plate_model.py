@@ -99,7 +99,8 @@ class PlatePolicy:
     """How the plate is worked when a look finds nothing new to pick (``present.plate``).
 
     ``smart``: the next action from what the last frame showed (docs/plate-feeders.md);
-    ``fixed``: dispense, feed forward and flip every time (the comparison)."""
+    ``fixed``: dispense, feed forward and flip on every ``fixed_every``-th look that
+    found nothing new, else flip only (the comparison; 1: the full cycle every time)."""
 
     policy: str = "smart"                # smart | fixed
     min_parts: int = 6                   # fewer blobs than this on the plate: dispense
@@ -111,3 +112,4 @@ class PlatePolicy:
     flip_reps: int = 1
     dispense_reps: int = 2
     purge_reps: int = 2
+    fixed_every: int = 1                 # fixed: the full cycle on every Nth empty look

@@ -111,7 +111,7 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
     kits a part of which was placed before ``s`` (one per open kit, ``open_kits``). ``selection_kits``: kits a
     nearest-first robot completes from the run's passes, taking only the types the kit
     wants (``robot_bounds.selection_bound``; simulated runs only), a yardstick as the
-    parts' selection bound is."""
+    parts' selection rate is: reported beside the bounds, never the ceiling."""
     if feed_seconds <= 0:
         return {}
     per_min = 60.0 / feed_seconds
@@ -123,11 +123,29 @@ def kit_bounds(counts: dict[str, int], in_reach: dict[str, int], feed_seconds: f
             _kit_inflow(*inflow.get(t, (0, [])), n, robot_ppm / size, span_s, lag_s,
                         open_kits) * per_min
             for t, n in counts.items())
-    if selection_kits is not None:
-        out["selection_bound_kpm"] = selection_kits * per_min
     out = {k: round(v, 3) for k, v in out.items()}
     out["ceiling_kpm"] = min(out.values())
+    if selection_kits is not None:          # a yardstick: after the ceiling is taken
+        out["selection_bound_kpm"] = round(selection_kits * per_min, 3)
     return out
+
+
+def steady_kits(counts: dict[str, int], placed: int, feed_seconds: float,
+                cycles_s: float) -> dict[str, float]:
+    """The steady-state kit bound priced at the run's measured robot cycle: with
+    ``cycles_s`` of feeding spent on pick-and-place cycles that placed ``placed`` parts
+    (``robot_time``), the measured cycle is ``cycles_s / placed`` and the share of feeding
+    on cycles ``cycles_s / feed_seconds``; at that cycle and share no pick order builds
+    more than ``60 * share / cycle / size`` kits a minute (every placed part in a finished
+    kit), which is the run's parts/min over the kit's size. A bound for that cycle and that
+    share, not for the cell: a cheaper cycle or less waiting raises it."""
+    size = sum(counts.values())
+    if placed <= 0 or feed_seconds <= 0 or cycles_s <= 0 or size <= 0:
+        return {}
+    cycle = cycles_s / placed
+    share = cycles_s / feed_seconds
+    return {"robot_cycle_s": round(cycle, 4), "cycles_share": round(share, 4),
+            "steady_at_cycle_kpm": round(60.0 * share / cycle / size, 3)}
 
 
 def _kit_inflow(initial: int, arrivals: list[tuple[float, int]], n: int, kits_pm: float,
@@ -155,12 +173,18 @@ def kits_report(tracker: KitTracker, in_reach: dict[str, int], feed_seconds: flo
 
 def describe_kits(k: dict) -> str:
     """A report's ``kits``: how many, how fast, against the kit ceiling (and which bound
-    it is), as the run's summary and ``feeder report`` say it."""
+    it is) and the steady-state bound at the measured cycle, as the run's summary and
+    ``feeder report`` say it."""
     kit = " + ".join(f"{n} {t}" for t, n in k["kit"].items()) + (
         f", {k['open_kits']} open at once" if k.get("open_kits", 1) > 1 else "")
     which = next((name[:-len("_bound_kpm")] for name, v in k.items()
-                  if name.endswith("_bound_kpm") and v == k.get("ceiling_kpm")), None)
+                  if name.endswith("_bound_kpm") and name != "selection_bound_kpm"
+                  and name != "steady_at_cycle_kpm" and v == k.get("ceiling_kpm")), None)
     of = (f", {k['of_ceiling_pct']:.0f} % of the kit ceiling {k['ceiling_kpm']:.1f}"
           + (f" ({which} bound)" if which else "")
           if k.get("of_ceiling_pct") is not None else "")
+    steady = k.get("steady_at_cycle_kpm")
+    if steady:
+        of += (f"; {100.0 * k['per_minute'] / steady:.0f} % of {steady:.2f} at the measured "
+               f"{k['robot_cycle_s']:.2f} s cycle")
     return f"kits {k['completed']} ({kit}): {k['per_minute']:.1f} kits/min{of}"

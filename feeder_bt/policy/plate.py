@@ -3,8 +3,8 @@
 The thesis's adjust sub-system retunes the presentation from what the locator saw; for a
 vibrating plate that means choosing the next action rather than a speed. The view is the
 recipe's result only (blobs found, classed or rejected, and where) — never the
-simulator's truth. A ``fixed`` policy (dispense, feed forward, flip every time) is the
-comparison the issue asks for.
+simulator's truth. A ``fixed`` policy (dispense, feed forward and flip on every Nth look
+that found nothing new, else flip) is the comparison.
 """
 
 from __future__ import annotations
@@ -56,11 +56,16 @@ def view_of(result: object, plate: PlateSpec, part_area: float) -> PlateView:
                      sum(areas) / part_area)
 
 
-def next_actions(view: PlateView, policy: PlatePolicy) -> tuple[list[Action], str]:
-    """The actions to run before the next look, and why (one line for the event log)."""
+def next_actions(view: PlateView, policy: PlatePolicy,
+                 empty_look: int = 1) -> tuple[list[Action], str]:
+    """The actions to run before the next look, and why (one line for the event log).
+    ``empty_look`` counts the looks judged so far, this one included (1, 2, ...): the fixed
+    cycle's full cycle comes on the first and every ``fixed_every``-th after it."""
     if policy.policy == "fixed":
-        return ([("dispense", policy.dispense_reps), ("feed_forward", policy.feed_reps),
-                 ("flip", policy.flip_reps)], "fixed cycle")
+        if (empty_look - 1) % policy.fixed_every == 0:
+            return ([("dispense", policy.dispense_reps), ("feed_forward", policy.feed_reps),
+                     ("flip", policy.flip_reps)], "fixed cycle")
+        return [("flip", policy.flip_reps)], f"fixed cycle: flip ({policy.fixed_every})"
     n = view.parts
     if n > policy.crowded_parts:
         return ([("purge", policy.purge_reps)],

@@ -101,11 +101,11 @@ def transport_lag_s(cell: CellSpec) -> float:
     return inc.length_mm / inc.max_mm_s + to_reach / hor.max_mm_s
 
 
-def ceiling(robot_ppm: float, supply_ppm: float | None, inflow_ppm: float | None = None,
-            selection_ppm: float | None = None) -> tuple[str, float]:
+def ceiling(robot_ppm: float, supply_ppm: float | None,
+            inflow_ppm: float | None = None) -> tuple[str, float]:
     """(which bound, parts/min): the lowest bound known is the ceiling (``None``: that
-    bound not known; the robot's corner bound always is). ``selection``: nearest-first
-    picking over the parts the run really had (``feeder_bt.analysis.robot_bounds``)."""
-    known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm),
-             ("selection", selection_ppm)]
+    bound not known; the robot's corner bound always is). Only bounds count: the mean
+    cycle's and nearest-first selection's rates (``feeder_bt.analysis.robot_bounds``) move
+    with each run's own setting and picks, so they are yardsticks, never the ceiling."""
+    known = [("robot", robot_ppm), ("supply", supply_ppm), ("inflow", inflow_ppm)]
     return min(((k, v) for k, v in known if v is not None), key=lambda kv: kv[1])

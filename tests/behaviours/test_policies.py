@@ -14,6 +14,7 @@ from feeder_bt.behaviours.policies import POLICIES, Lookahead, ShortestCycle
 from feeder_bt.behaviours.retrieve import NextPart
 from feeder_bt.config.loader import RETRIEVE_POLICIES
 from feeder_bt.hal.interfaces import Pose
+from feeder_bt.robot.fit import robot_fit
 from feeder_bt.robot.model import RobotModel
 from feeder_bt.trees import retrieve
 from feeder_bt.trees.build import Loop
@@ -130,20 +131,45 @@ def test_the_next_pick_is_sent_in_the_tick_the_place_ends():
     assert pending(ctx.hal, "robot", "pick") is not first
 
 
-@pytest.mark.parametrize("policy, kept", [("fifo", False), ("shortest_cycle", True),
-                                          ("lookahead", True)])
-def test_a_pricing_policy_drops_only_what_no_pick_can_catch(policy, kept):
-    """FIFO drops a part ``reach_time_s`` ahead of too_far; a policy that prices each pick
-    keeps it while the quickest possible pick still catches it (here 40 mm short of
-    too_far at 150 mm/s: 0.27 s of belt, more than settle + grip + the shortest move)."""
+@pytest.mark.parametrize("policy", ["fifo", "earliest_deadline", "shortest_cycle",
+                                    "lookahead"])
+@pytest.mark.parametrize("measured", [True, False])
+def test_every_policy_drops_only_what_no_pick_can_catch(policy, measured):
+    """Every policy prices reach with the learnt model: once the fit has measured a move, a
+    part 40 mm short of too_far at 150 mm/s (0.27 s of belt, more than settle + grip + the
+    shortest move) is kept and picked. Before any measured move ``reach_time_s`` (0.35 s:
+    52.5 mm of belt) is the prior, and the part is dropped, whatever the policy."""
     ctx = make_ctx(retrieve={"policy": policy})
+    if measured:
+        robot_fit(ctx).samples["pick"] += 1
     ctx.hal.robot_position.at = Pose(1180.0, 40.0)       # right above the part
     root = retrieve.build(ctx)
     close = part(ctx.scenario.retrieve.too_far_mm - 40.0, 40.0)
     ctx.queue.put(close)
     tick(root, ctx)
-    assert ctx.stats.counts["too_far"] == (0 if kept else 1)
-    assert bool(ctx.hal.pending("robot", "pick")) is kept
+    assert ctx.stats.counts["too_far"] == (0 if measured else 1)
+    assert bool(ctx.hal.pending("robot", "pick")) is measured
+
+
+@pytest.mark.parametrize("policy, first", [("fifo", 1), ("earliest_deadline", 1)])
+def test_fifo_and_edf_keep_their_order_but_skip_what_cannot_be_caught(policy, first):
+    """FIFO takes the first part in the queue that can still be caught, EDF the one
+    furthest down the belt of those: a part the arm would reach only past too_far (here
+    one at the belt's far side, 20 mm short of too_far, the arm at the other side) is
+    passed over by the same priced check shortest_cycle makes, instead of sent for."""
+    ctx = make_ctx(retrieve={"policy": policy})
+    robot_fit(ctx).samples["pick"] += 1
+    ctx.hal.robot_position.at = PLACE
+    pol = POLICIES[policy](ctx)
+    pol.belt_mm_s = BELT
+    too_far = ctx.scenario.retrieve.too_far_mm
+    late, ok, later = part(too_far - 20.0, 500.0), part(1000.0, 200.0), part(900.0, 150.0)
+    assert not math.isfinite(pol.cost(late, x_now, BELT))
+    assert math.isfinite(pol.cost(ok, x_now, BELT))
+    parts = [late, ok, later]
+    assert pol.choose(parts, x_now) is parts[first]
+    # nothing can be caught: the policy's own first choice, as before the pricing
+    assert pol.choose([late], x_now) is late
 
 
 def test_pricing_follows_the_robot_speed_on_the_blackboard():

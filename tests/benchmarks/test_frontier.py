@@ -116,9 +116,11 @@ def test_the_docs_quote_the_committed_two_tray_kits():
     """docs/performance.md's two-tray kit table is honest_kits_two_trays.json's."""
     tuned, rows = _table("honest_kits_two_trays.json", "| setting, two trays (same budget) |",
                          r"^\| [^|]+ \| \**([\d.]+)\** \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| "
-                         r"([\d.]+) % of ([\d.]+) \|")
-    got = [(float(m), float(lo), float(hi), float(ib)) for m, lo, hi, _, _, ib in rows]
-    want = [(round(k["mean"], 2), k["min"], k["max"], k["inflow_bound_kpm"])
+                         r"([\d.]+) % of ([\d.]+) \| ([\d.]+)× of ([\d.]+) \|")
+    got = [(float(m), float(lo), float(hi), float(ib), float(x), float(sb))
+           for m, lo, hi, _, _, ib, x, sb in rows]
+    want = [(round(k["mean"], 2), k["min"], k["max"], k["inflow_bound_kpm"],
+             round(k["mean"] / k["selection_bound_kpm"], 2), round(k["selection_bound_kpm"], 2))
             for k in (tuned["tuned"][s]["kits"] for s in ("ours", "watermarks", "fixed"))]
     assert got == want
 
@@ -142,13 +144,20 @@ def test_the_docs_quote_the_committed_kit_grid():
     """docs/performance.md's kit grid table is frontier_kits.json's, row for row."""
     result, rows = _table("frontier_kits.json", "| setting (fresh seeds 101–105, 600 s) |",
                           r"^\| ([^|]+) \| ([\d.]+) \(sd ([\d.]+)\) \| ([\d.]+) % of "
-                          r"([\d.]+) \| ([\d.]+) % of ([\d.]+) \| ([\d.]+) % \| "
+                          r"([\d.]+) \| ([\d.]+)× of ([\d.]+) \| ([\d.]+) % of ([\d.]+) "
+                          r"\(([\d.]+) s\) \| ([\d.]+) % \| "
                           r"([\d.]+) / ([\d.]+) / ([\d.]+) / ([\d.]+) % \|$")
     quoted = [(name, *map(float, figs)) for name, *figs in rows]
+
+    def steady(e):                  # the steady-state bound at the measured cycle
+        t = e["robot_time_pct"]
+        cycle = t["cycles"] / 100 * 60 / e["parts_per_min"]
+        return 60 * t["cycles"] / 100 / cycle / 4, cycle
     want = [(e["setting"], e["mean"], e["sd"],
              round(100 * e["mean"] / e["kit_inflow_bound_kpm"], 1), e["kit_inflow_bound_kpm"],
-             round(100 * e["mean"] / e["kit_selection_bound_kpm"], 1),
-             e["kit_selection_bound_kpm"], e["robot_busy_pct"],
+             round(e["mean"] / e["kit_selection_bound_kpm"], 2),
+             e["kit_selection_bound_kpm"], round(100 * e["mean"] / steady(e)[0], 1),
+             round(steady(e)[0], 2), round(steady(e)[1], 2), e["robot_busy_pct"],
              *(e["robot_time_pct"][k] for k in ("cycles", "waiting", "missed", "idle")))
             for e in sorted(result["evaluated"], key=lambda e: -e["mean"])]
     assert len(quoted) == len(result["evaluated"]) == 9
@@ -191,20 +200,23 @@ def test_the_docs_quote_the_three_tray_kit_grid():
     assert len(result["screened"]) == 36 and result["eval_seeds"] == [101, 102, 103, 104, 105]
 
 
-def test_the_docs_robot_time_sentence_is_the_kit_grids():
-    """The cycle per part, the share of feeding 17.1 kits/min needs on cycles and what the
-    rest takes now: derived from frontier_kits.json's best setting."""
+def test_the_docs_steady_state_kit_bound_is_the_kit_grids():
+    """The steady-state kit bound priced at the best setting's measured robot cycle, and
+    how near the best setting comes: derived from frontier_kits.json's best setting."""
     best = json.loads((ROOT / "benchmarks" / "results" / "frontier_kits.json").read_text()
                       )["best_fixed"]
     t = best["robot_time_pct"]
     cycle = t["cycles"] / 100 * 60 / best["parts_per_min"]
+    bound = 60 * t["cycles"] / 100 / cycle / 4
     text = " ".join((ROOT / "docs" / "performance.md").read_text().split())
-    m = re.search(r"The best setting spends ([\d.]+) % of feeding on pick-and-place cycles, "
-                  r"([\d.]+) s of cycle per placed part \(([\d.]+) parts/min\)\. At that cycle, "
-                  r"17.1 kits/min \(68.4 parts/min\) needs ([\d.]+) % on cycles, which leaves "
-                  r"([\d.]+) % for everything else; the rest takes ([\d.]+) % now", text)
+    m = re.search(r"The best setting's arm spends ([\d.]+) % of feeding on pick-and-place "
+                  r"cycles, ([\d.]+) s of cycle per placed part \(([\d.]+) parts/min; the "
+                  r"report's `robot_time`\)\. Priced at that cycle and that share, no pick "
+                  r"order builds more than \*\*([\d.]+)\*\* kits/min .* the best setting builds "
+                  r"\*\*([\d.]+), ([\d.]+) % of it\*\*", text)
     assert m, "the sentence is gone"
-    need = 17.1 * 4 * cycle / 60 * 100
     assert tuple(map(float, m.groups())) == (
-        t["cycles"], round(cycle, 2), best["parts_per_min"], round(need, 1),
-        round(100 - need, 1), round(t["waiting"] + t["missed"] + t["idle"], 1))
+        t["cycles"], round(cycle, 2), best["parts_per_min"], round(bound, 2), best["mean"],
+        round(100 * best["mean"] / bound, 1))
+    m = re.search(r"the rest takes ([\d.]+) % \(waiting", text)
+    assert m and float(m.group(1)) == round(t["waiting"] + t["missed"] + t["idle"], 1)

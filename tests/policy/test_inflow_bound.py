@@ -48,7 +48,8 @@ def test_the_ceiling_is_the_lowest_bound_known():
     assert ceiling(60.0, 90.0, 66.1) == ("robot", 60.0)
     assert ceiling(109.6, None, None) == ("robot", 109.6)
     assert ceiling(109.6, 109.6) == ("robot", 109.6)                # a tie: the robot's
-    assert ceiling(109.6, 90.0, 66.1, 60.2) == ("selection", 60.2)  # nearest-first replay
+    with pytest.raises(TypeError):      # the nearest-first replay is a yardstick, no bound
+        ceiling(109.6, 90.0, 66.1, 60.2)
 
 
 @pytest.fixture(scope="module")
@@ -70,11 +71,13 @@ def test_a_run_stays_under_its_inflow_bound_which_is_its_ceiling(tight):
                                r["inflow_lag_s"])
     assert bound == 60                                   # everything that came
     assert r["inflow_bound_ppm"] == pytest.approx(bound * 60 / r["feed_seconds"], abs=1e-3)
-    # the ceiling: the inflow bound, or the nearest-first replay of the parts that came
-    #, which cannot place more than came either
-    assert r["robot_bound_selection_parts"] <= bound
-    assert r["ceiling"] in ("inflow", "selection")
-    assert r["ceiling_ppm"] == min(r["inflow_bound_ppm"], r["robot_bound_selection_ppm"])
+    # the ceiling: the inflow bound. The nearest-first replay of the parts that came is a
+    # yardstick, never the ceiling: a pass the run's robot left to recirculate comes back
+    # to the replay as a new pass even when the replay took its part the first time, so
+    # it may place a part or two more than came (61 of 60 here, seed 1)
+    assert r["robot_bound_selection_parts"] <= bound + 2
+    assert r["ceiling"] == "inflow"
+    assert r["ceiling_ppm"] == r["inflow_bound_ppm"]
     assert placed <= r["robot_bound_selection_parts"]
     assert r["ceiling_ppm"] < r["supply_bound_ppm"]     # passes count a part again and again
     assert 0.9 * bound <= placed <= bound               # near it: the bound is not loose
@@ -98,21 +101,22 @@ def test_no_inflow_bound_when_placed_parts_go_back_to_the_hopper(tmp_path):
     plan.write_text("start: {lens: 20}\ntotes: {every_s: 20, parts: 20}\n")
     r = run_job(RunOptions(scenario=str(ROOT / "scenarios/lenses.yaml"), duration=30.0,
                            fast=True, seed=1, view="none", supply=str(plan)))
-    assert "inflow_bound_ppm" not in r and r["ceiling"] in ("robot", "supply", "selection")
+    assert "inflow_bound_ppm" not in r and r["ceiling"] in ("robot", "supply")
 
 
 def test_the_summary_gives_the_three_bounds_in_80_columns(tight):
     scarce = tight
     every = summary(scarce).splitlines()
     i = next(i for i, s in enumerate(every) if s.startswith("  ceiling "))
-    lines = every[i: i + 3]
+    lines = every[i: i + 4]
     assert lines[0] == (f"  ceiling {scarce['ceiling_ppm']:.1f} parts/min "
                         f"({scarce['ceiling']} bound): {scarce['of_ceiling_pct']:.0f} % of it")
-    assert lines[1] == (f"  bounds: robot {scarce['robot_bound_ppm']:.1f} corner, "
-                        f"{scarce['robot_bound_mean_ppm']:.1f} mean, "
-                        f"{scarce['robot_bound_selection_ppm']:.1f} selection; supply "
+    assert lines[1] == (f"  bounds: robot {scarce['robot_bound_ppm']:.1f} corner, supply "
                         f"{scarce['supply_bound_ppm']:.1f}")
-    assert lines[2] == (f"  inflow bound {scarce['inflow_bound_ppm']:.1f} parts/min (parts "
+    assert lines[2] == (f"  yardsticks, not bounds: {scarce['robot_bound_mean_ppm']:.1f} mean "
+                        f"cycle, {scarce['robot_bound_selection_ppm']:.1f} nearest-first "
+                        f"(run {scarce['of_selection']:.2f}x)")
+    assert lines[3] == (f"  inflow bound {scarce['inflow_bound_ppm']:.1f} parts/min (parts "
                         f"reach the robot {scarce['inflow_lag_s']:.1f} s after they come)")
     assert all(len(line) <= 80 for line in every)
 

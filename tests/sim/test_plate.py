@@ -139,6 +139,19 @@ def test_smart_feeding_rules():
         "dispense", "feed_forward", "flip"]
 
 
+def test_the_periodic_fixed_cycle_runs_in_full_on_every_nth_empty_look():
+    """The fixed baseline searched over periods: dispense, feed and flip on the first and
+    every Nth look that found nothing new after it, else flip only."""
+    every3 = PlatePolicy(policy="fixed", fixed_every=3)
+    plans = [[a for a, _ in next_actions(PlateView(0, 0, 0, None, 0.0), every3, n)[0]]
+             for n in range(1, 8)]
+    full, flip = ["dispense", "feed_forward", "flip"], ["flip"]
+    assert plans == [full, flip, flip, full, flip, flip, full]
+    every1 = PlatePolicy(policy="fixed")
+    assert all(next_actions(PlateView(0, 0, 0, None, 0.0), every1, n)[0][0][0] == "dispense"
+               for n in range(1, 5))
+
+
 def test_the_view_is_the_recipe_result_only():
     plate = PlateSpec(origin_mm=(100.0, 0.0), size_mm=(400.0, 300.0))
 

@@ -1,0 +1,63 @@
+"""The figures docs/performance.md quotes for the thesis table and the plant's budget table
+are the committed benchmark JSON's (`python benchmarks/honest_bench.py --only thesis`,
+`benchmarks/frontier_bench.py`, `honest_bench.py --only tuned --max-recirc 1.5`)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+RESULTS = ROOT / "benchmarks" / "results"
+
+
+def _doc() -> str:
+    return (ROOT / "docs" / "performance.md").read_text()
+
+
+def test_the_thesis_table_is_honest_json():
+    t = json.loads((RESULTS / "honest.json").read_text())["thesis"]
+    text = _doc()
+    for label, key in (("original CWRU feeder", "original"),
+                       ("new feeder, thesis's water marks", "new_water_marks")):
+        m = re.search(rf"^\| {re.escape(label)} \| \*\*([\d.]+)\*\* \(([\d.]+)–([\d.]+), sd "
+                      rf"([\d.]+)\) \|", text, flags=re.M)
+        assert m, label
+        r = t[key]
+        assert tuple(map(float, m.groups())) == (r["mean"], r["min"], r["max"], r["stdev"])
+    m = re.search(r"^\| ratio \| \*\*([\d.]+)×\*\* \|", text, flags=re.M)
+    assert m and float(m.group(1)) == round(t["ratio"], 2)
+    flat = " ".join(text.split())
+    new = t["new_water_marks"]
+    assert (f"the thesis's water marks {new['recirc_per_placed']:.2f} (`recirc_per_placed` in "
+            f"`honest.json`)") in flat
+    assert (f"the new feeder at {100 * new['of_ceiling']:.1f} % of its ceiling (the supply "
+            f"bound, {new['ceiling_ppm']:.1f}) and {new['of_selection_bound']:.3f}× its "
+            f"selection yardstick {new['selection_bound_ppm']:.1f}") in flat
+    assert f"original sits at {100 * t['original']['of_ceiling']:.1f} % of its ceiling" in flat
+
+
+def test_the_budget_table_is_the_frontier_and_the_budget_runs():
+    best = json.loads((RESULTS / "frontier.json").read_text())["best_fixed"]
+    ours = json.loads((RESULTS / "honest_budget.json").read_text())["tuned"]["ours"]
+    text = _doc()
+    m = re.search(r"^\| fixed setting, gridded \(frontier below\): lookahead, belt 260 mm/s, "
+                  r"incline 38\.46 % \| \*\*([\d.]+)\*\* \(sd ([\d.]+)\) \| ([\d.]+)× of "
+                  r"([\d.]+) \| (\d+) % \| ([\d.]+) \|$", text, flags=re.M)
+    assert m
+    assert tuple(map(float, m.groups())) == (
+        best["mean"], best["sd"], round(best["mean"] / best["selection_bound_ppm"], 2),
+        best["selection_bound_ppm"], round(best["robot_busy_pct"]),
+        round(best["recirc_per_placed"], 2))
+    m = re.search(r"^\| ours = thesis's water marks with every option, tuned: water marks \+ "
+                  r"lookahead \| ([\d.]+) \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| ([\d.]+)× of "
+                  r"([\d.]+) \| (\d+) % \| ([\d.]+) \|$", text, flags=re.M)
+    assert m
+    assert tuple(map(float, m.groups())) == (
+        ours["mean"], ours["min"], ours["max"], ours["stdev"],
+        round(ours["of_selection_bound"], 2), round(ours["selection_bound_ppm"], 1),
+        round(ours["robot_busy_pct"]), ours["recirc_per_placed"])
+    m = re.search(r"^\| ours / the gridded fixed setting \| \*\*([\d.]+)×\*\*", text, flags=re.M)
+    assert m and float(m.group(1)) == round(ours["mean"] / best["mean"], 3)
+    assert "1.143×" not in text           # no ratio against a baseline the docs say was beaten
