@@ -24,7 +24,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from feeder_bt.app.links import HOWS, LIMIT_S, LINKS, emulated, simulated  # noqa: E402
+from feeder_bt.app.links import (  # noqa: E402
+    HOWS,
+    LIMIT_S,
+    LINKS,
+    emulated,
+    matrix_table,
+    simulated,
+)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -62,6 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = {"runs": len(rows), "ok": sum(r["emulated"]["ok"] for r in rows),
                "same_verdict": sum(r["same_verdict"] for r in rows),
                "limit_s": LIMIT_S, "wall_s": round(time.time() - started)}
+    for cut_s in sorted({r["cut_s"] for r in rows}):
+        print(f"\n{cut_s:g} s\n" + matrix_table(rows, cut_s))
     print(f"{summary['ok']} of {summary['runs']} runs ok; {summary['same_verdict']} with the "
           "simulator's verdict")
     if a.out:

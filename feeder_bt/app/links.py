@@ -166,3 +166,31 @@ def _ok(v: dict[str, Any]) -> bool:
             and v["placing_after_restore_s"] <= LIMIT_S)
 
 
+
+
+def matrix_table(rows: list[dict[str, Any]], cut_s: float) -> str:
+    """The matrix's runs of one cut length as a markdown table, links by deaths: how each
+    emulated run ended (recovered: seconds from the link's return to the next part placed;
+    or FAULT), ``✗`` where it missed the verdict's rules, ``≠ sim`` where the simulated
+    cell ended otherwise. docs/real-cell.md quotes it; a test holds the two together."""
+    mine = [r for r in rows if r["cut_s"] == cut_s]
+    hows = [h for h in HOWS if any(r["how"] == h for r in mine)]
+    links = [lk for lk in LINKS if any(r["link"] == lk for r in mine)]
+    out = ["| link | " + " | ".join(h.replace("_", "-") for h in hows) + " |",
+           "|---|" + "---|" * len(hows)]
+    for link in links:
+        cells = []
+        for how in hows:
+            r = next((r for r in mine if r["link"] == link and r["how"] == how), None)
+            if r is None:
+                cells.append("")
+                continue
+            e = r["emulated"]
+            text = ("FAULT" if e["end"] == "FAULT"
+                    else f"{e['placing_after_restore_s']:.1f} s"
+                    if e["placing_after_restore_s"] is not None else "recovered")
+            text += "" if e["ok"] else " ✗"
+            text += "" if r["same_verdict"] else " ≠ sim"
+            cells.append(text)
+        out.append(f"| {link} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
