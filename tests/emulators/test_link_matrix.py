@@ -1,8 +1,8 @@
 """The emulated cell through links that die like cables: a slice of the fault proxy's matrix
-(``benchmarks/link_matrix.py`` runs all of it). A link of the Galil or of the V+ motion
-server is silenced (a pulled cable: no FIN), half-opened (pulled, and the device dropped the
-connection meanwhile), refused (the controller gone), dripped, flooded or garbled for 4 s
-while parts are being picked, through a proxy between the real drivers and the emulators.
+(``benchmarks/link_matrix.py`` runs all of it). A link of the Galil, of the V+ motion or
+position server or a plate's feeder line is silenced (a pulled cable: no FIN),
+half-opened (pulled, and the device dropped the connection meanwhile), refused (the
+controller gone), flooded or garbled for 4 s while parts are being picked, through a proxy between the real drivers and the emulators.
 Every run recovers, placing again within 10 s of the link's return, or FAULTs naming the
 link; nothing is lost and the world's placements equal the cell's count; and the simulated
 cell given the same cut as a fault plan ends the same way (real time: soak)."""
@@ -13,9 +13,8 @@ import pytest
 
 from feeder_bt.app.links import LIMIT_S, emulated, simulated
 
-CASES = [("galil", "silence"), ("galil", "refuse"), ("galil", "half_open"),
-         ("galil", "flood"), ("motion", "silence"), ("motion", "refuse"),
-         ("motion", "half_open"), ("motion", "garbage"), ("motion", "drip")]
+CASES = [("galil", "silence"), ("galil", "flood"), ("motion", "half_open"),
+         ("motion", "garbage"), ("position", "refuse"), ("plate", "silence")]
 
 
 @pytest.mark.soak
