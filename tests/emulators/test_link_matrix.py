@@ -2,8 +2,8 @@
 (``benchmarks/link_matrix.py`` runs all of it). A link of the Galil, of the V+ motion or
 position server or a plate's feeder line is silenced (a pulled cable: no FIN),
 half-opened (pulled, and the device dropped the connection meanwhile), refused (the
-controller gone), flooded or garbled for 4 s while parts are being picked, through a proxy between the real drivers and the emulators.
-Every run recovers, placing again within 10 s of the link's return, or FAULTs naming the
+controller gone), flooded or garbled for 4 s while parts are being picked, through a
+proxy between the real drivers and the emulators. Every run recovers, placing again within 10 s of the link's return, or FAULTs naming the
 link; nothing is lost and the world's placements equal the cell's count; and the simulated
 cell given the same cut as a fault plan ends the same way (real time: soak)."""
 
