@@ -73,11 +73,13 @@ class CheckDrift(Leaf):
         pos = self.ctx.hal.robot_position
         conv_age = getattr(conv, "position_age", lambda: None)()
         robot_age = getattr(pos, "age", lambda: None)()
+        doubt = (getattr(conv, "position_rtt", lambda: 0.0)()
+                 + getattr(pos, "rtt", 0.0)) / 2.0
         drift = self.watch.sample(now, conv.position(), conv_age, pos.belt_encoder(),
-                                  robot_age)
+                                  robot_age, doubt_s=doubt)
         stats = self.ctx.stats
         stats.drift = {"last_mm": drift, "max_abs_mm": round(self.watch.max_abs_mm, 2),
-                       "samples": self.watch.taken}
+                       "samples": self.watch.taken, "doubtful": self.watch.doubtful}
         if drift is None:
             return Status.SUCCESS
         self.feedback_message = f"encoder drift {drift:+.2f} mm"

@@ -168,11 +168,16 @@ class DriftWatch:
         self._prev: tuple[float, int] | None = None      # (time of read, conveyor count)
         self.max_abs_mm = 0.0
         self.taken = 0
+        self.max_doubt_mm = 0.5           # a pair timed worse than this gives no sample
+        self.doubtful = 0                 # pairs left out for it
 
     def sample(self, now: float, conveyor: int, conveyor_age: float | None, robot: int,
-               robot_age: float | None) -> float | None:
+               robot_age: float | None, doubt_s: float = 0.0) -> float | None:
         """Feed one pair of cached reads; the filtered drift in mm (robot ahead of the
-        conveyor is positive) once the window is full, else None."""
+        conveyor is positive) once the window is full, else None. ``doubt_s``: how far
+        either read's moment of sampling may be from its stamp (half of each round trip);
+        a pair whose doubt moves a running belt more than ``max_doubt_mm`` gives no
+        sample: a host slow to hear its replies is not an encoder that lost pulses."""
         if (not self.sync.is_reset or conveyor_age is None or robot_age is None
                 or conveyor_age > self.max_age_s or robot_age > self.max_age_s):
             return None
@@ -181,6 +186,9 @@ class DriftWatch:
         if prev is None or t_conv - prev[0] <= 1e-6:
             return None                                  # no speed yet to carry it forward
         speed = diff(conveyor, prev[1], self.sync.conveyor_bits) / (t_conv - prev[0])
+        if abs(speed) * doubt_s > self.max_doubt_mm * self.counts_per_mm:
+            self.doubtful += 1
+            return None
         predicted = self.sync.to_robot(conveyor) + round(speed * (t_robot - t_conv))
         self.samples.append(self.sync.robot_diff(robot, predicted) / self.counts_per_mm)
         self.taken += 1

@@ -65,6 +65,25 @@ def test_stale_or_missing_reads_give_no_sample():
     assert watch.taken == 0
 
 
+def test_reads_whose_moment_is_in_doubt_give_no_sample():
+    """A host slow to hear its replies: 20 ms of round trip at 300 mm/s leaves 3 mm of
+    doubt about when a count was sampled, so the pair is left out (counted), not read as
+    drift; reads that came back in 2 ms are taken."""
+    _, watch = _watch(window=1)
+    for i in range(1, 6):
+        now = float(i)
+        g = 1000 + round((now - 0.01) * 300 * CPM)      # stamped 10 ms after it was sampled
+        r = 5_000 + round(now * 300 * CPM)
+        assert watch.sample(now, g, 0.0, r, 0.0, doubt_s=0.02) is None
+    assert watch.taken == 0 and watch.doubtful >= 4
+    for i in range(6, 9):
+        now = float(i)
+        g = 1000 + round(now * 300 * CPM)
+        r = 5_000 + round(now * 300 * CPM)
+        d = watch.sample(now, g, 0.0, r, 0.0, doubt_s=0.001)
+    assert d is not None and abs(d) < 0.1
+
+
 def test_the_robot_counter_wrapping_is_not_drift():
     sync = EncoderSync(32, 24)
     sync.reset(0, 2 ** 23 - 50)                                # robot wraps within a second

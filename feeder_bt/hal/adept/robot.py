@@ -204,6 +204,7 @@ class AdeptRobotPosition:
         self._pose = Pose(0.0, 0.0)
         self._count = 0
         self.updated_at: float | None = None      # monotonic time of the last good read
+        self.rtt = 0.0                            # that read's round trip (s)
         self.error: HalError | None = None        # the last failure, None once reading again
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -214,7 +215,9 @@ class AdeptRobotPosition:
         pose, count = protocol.decode_poll(self.position.call("POLL"))
         self.polls += 1
         self._pose, self._count = pose, protocol.wrap_robot(count * self.belt_sign)
-        self.updated_at = sampled_at(t0, time.monotonic())
+        t1 = time.monotonic()
+        self.updated_at = sampled_at(t0, t1)
+        self.rtt = t1 - t0                        # when the count was sampled: +- half of it
         self.error = None
 
     def start(self) -> AdeptRobotPosition:

@@ -296,6 +296,10 @@ class GalilConveyor:
         sync must anchor only on a fresh count."""
         return self.ctl.position_age(self.axis)
 
+    def position_rtt(self) -> float:
+        """Seconds the read behind ``position()`` took to come back (its timing's doubt)."""
+        return self.ctl.position_rtt(self.axis)
+
     def read_position(self) -> Job:
         """A fresh ``TP`` read now; the job's result is the count (for anchoring a sync)."""
         return self._job("read_position", self.ctl.submit(self.ctl.read_position, self.axis))

@@ -161,6 +161,7 @@ class GalilController(CardSetup):
         self._last_error: BaseException | None = None
         self._lock = threading.Lock()
         self._positions: dict[str, tuple[int, float]] = {}       # axis -> (count, clock t)
+        self._rtts: dict[str, float] = {}        # axis -> the latest TP's round trip (s)
         self._polled: dict[str, float] = {}                      # axis -> monotonic of last TP
         self._polling: set[str] = set()
         self._subscribers: list[EventCallback] = []
@@ -277,6 +278,12 @@ class GalilController(CardSetup):
             got = self._positions.get(axis.upper())
         return None if got is None else self.clock.now() - got[1]
 
+    def position_rtt(self, axis: str) -> float:
+        """The round trip of the read behind ``position(axis)``: when the card sampled the
+        count is known to half of it (0: a notification, or never read)."""
+        with self._lock:
+            return self._rtts.get(axis.upper(), 0.0)
+
     def refresh_position(self, axis: str, max_age: float = POSITION_POLL_S) -> None:
         """Queue a ``TP`` read of ``axis`` unless one ran in the last ``max_age`` s."""
         axis = axis.upper()
@@ -298,7 +305,10 @@ class GalilController(CardSetup):
         round trip's middle (``sampled_at``)."""
         t0 = self.clock.now()
         count = parse_int(self.ask(f"TP{axis.upper()}"))
-        self._set_position(axis.upper(), count, sampled_at(t0, self.clock.now()))
+        t1 = self.clock.now()
+        self._set_position(axis.upper(), count, sampled_at(t0, t1))
+        with self._lock:
+            self._rtts[axis.upper()] = t1 - t0
         return count
 
     def run_steps(self, name: str, steps: list[Callable[[], Any]],
