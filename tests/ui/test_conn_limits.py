@@ -236,26 +236,6 @@ async def _ua_state(url: str) -> tuple[str, float]:
     return state, time.monotonic() - t0
 
 
-def test_a_flood_from_the_clients_own_address_leaves_opc_ua_room(tmp_path):
-    """40 idle connections from 127.0.0.1 that never say a word, opened again as the
-    server closes them: an OPC UA client on the same address, which sends its Hello at
-    once, is not the one closed for a newcomer; it logs in and reads the state."""
-    pytest.importorskip("asyncua")
-    from tests.plant.test_opcua import LiveCell
-
-    live = LiveCell(tmp_path)
-    port = int(live.url.rsplit(":", 1)[1].split("/")[0])
-    flood = ReopeningFlood(port, 40)
-    try:
-        for _ in range(2):
-            state, took = asyncio.run(_ua_state(live.url))
-            assert state == CellState.STOPPED.value and took < GOT_THROUGH_S, (state, took)
-        assert live.ua.gate.counts["evicted"] >= 1       # the flood made room of its own
-    finally:
-        flood.close()
-        live.close()
-
-
 def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
     pytest.importorskip("asyncua")
     from tests.plant.test_opcua import LiveCell
