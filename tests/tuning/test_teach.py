@@ -183,6 +183,11 @@ def _truth_to_coco(frames: Path, scenario: str) -> Path:
     return path
 
 
+# Teaching from rendered frames searches every threshold with every opening and closing
+# (480 candidates) on ten frames: about 30 s a test. They run with the soak (CI runs it),
+# keeping the README's test command within its five minutes on two cores; the real photo
+# sets above, quicker, stay in it.
+@pytest.mark.soak
 @pytest.mark.parametrize("scenario, frames, seed, cell", [
     ("scenarios/washers.yaml", 10, 3, "cells/sim.yaml"),
     ("scenarios/brackets_frontlit.yaml", 10, 1, "cells/sim_frontlit.yaml"),
@@ -206,6 +211,7 @@ def test_rendered_parts_taught_from_half_the_frames(tmp_path, capsys, scenario, 
     assert main(["check", str(out)]) == 0
 
 
+@pytest.mark.soak                      # about 35 s: as the rendered frames above
 def test_washer_and_slug_are_told_apart_by_the_hole(tmp_path, capsys):
     d = tmp_path / "frames"
     assert main(["render", str(ROOT / "scenarios/washers.yaml"), "--out", str(d),
