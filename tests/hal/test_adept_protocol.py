@@ -390,19 +390,24 @@ def test_a_pick_needs_a_positive_part_id():
 def test_a_motions_deadline_grows_as_the_robot_slows():
     """``motion_timeout_s`` is the longest motion at full speed: a lost reply (a half-open
     link) is found that soon, and a robot run at 25 % gets four times as long."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from feeder_bt.core.clock import RealClock
     from feeder_bt.hal.adept.robot import AdeptRobot
 
     class _Motion:
-        worker = None
+        worker = ThreadPoolExecutor(1)
 
         def call(self, verb, *args, timeout=None, on_timeout=None):
             self.last = (verb, timeout)
             return []
 
-    robot = AdeptRobot(_Motion(), None, motion_timeout_s=6.0, timeout_s=2.0)  # type: ignore[arg-type]
+    motion = _Motion()
+    robot = AdeptRobot(motion, RealClock(), motion_timeout_s=6.0, timeout_s=2.0)  # type: ignore[arg-type]
     assert robot.motion_deadline_s() == 6.0
-    robot._call("SPEED", 25.0, motion=False)
-    robot._speed_pct = 25.0
+    robot.set_speed(25.0)
+    motion.worker.shutdown(wait=True)          # the SPEED request has run
+    assert motion.last == ("SPEED", 2.0)
     assert robot.motion_deadline_s() == 24.0
     robot._call("SAFE")
     assert robot.motion.last == ("SAFE", 24.0)
