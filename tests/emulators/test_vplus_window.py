@@ -107,10 +107,13 @@ def test_the_arm_never_tracks_past_the_window_and_stops_tracking_with_each_pick(
     watch = _Watch(emu)
     landed, missed = 0, 0
     try:
-        while landed < 3 and missed < 4:
+        while landed < 3 and missed < 6:
             job = wait_job(ctrl.robot.pick(pickable_target(plant)))
-            if isinstance(job.error, MissedGrab):
-                missed += 1          # a loaded machine may starve the real-time arm
+            if isinstance(job.error, MissedGrab) or (
+                    isinstance(job.error, EnvelopeError) and "-9004" in str(job.error)):
+                # a loaded machine may starve the real-time arm, or send the pick after its
+                # part rode past the pick limit: refused, as it must be
+                missed += 1
                 continue
             assert job.ok, job.error
             landed += 1
