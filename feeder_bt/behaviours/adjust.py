@@ -44,8 +44,9 @@ class CheckDrift(Leaf):
     commissioning checks it once, but a counter that loses pulses
     later moves every pick by the difference. Reads only cached counts, so it never
     blocks; samples every ``encoder.drift_check_s``. Past ``drift_warn_mm`` it records an
-    ``encoder_drift`` event; past ``drift_limit_mm`` it asks the cell to go to FAULT (the
-    operator's reset re-anchors the sync with the belt at rest)."""
+    ``encoder_drift`` event; held past ``drift_limit_mm`` (``DriftWatch.held_past``) it asks
+    the cell to go to FAULT (the operator's reset re-anchors the sync with the belt at
+    rest)."""
 
     READS = (FAULTS.ESCALATE,)
     WRITES = (FAULTS.ESCALATE,)
@@ -83,7 +84,7 @@ class CheckDrift(Leaf):
         if drift is None:
             return Status.SUCCESS
         self.feedback_message = f"encoder drift {drift:+.2f} mm"
-        if abs(drift) > self.spec.drift_limit_mm:
+        if self.watch.held_past(drift, self.spec.drift_limit_mm):
             if self.bb.get(FAULTS.ESCALATE) is None:
                 stats.emit(now, "encoder_drift", mm=round(drift, 2), level="fault")
                 stats.faults["encoder_drift"] += 1

@@ -170,6 +170,7 @@ class DriftWatch:
         self.taken = 0
         self.max_doubt_mm = 0.5           # a pair timed worse than this gives no sample
         self.doubtful = 0                 # pairs left out for it
+        self._over = 0                    # verdicts in a row past the limit
 
     def sample(self, now: float, conveyor: int, conveyor_age: float | None, robot: int,
                robot_age: float | None, doubt_s: float = 0.0) -> float | None:
@@ -198,3 +199,12 @@ class DriftWatch:
         drift = sorted(self.samples)[len(self.samples) // 2]
         self.max_abs_mm = max(self.max_abs_mm, abs(drift))
         return drift
+
+    def held_past(self, drift: float, limit_mm: float) -> bool:
+        """Whether the verdict ``drift`` (from ``sample``) calls for a fault: past twice
+        ``limit_mm``, or past it for a whole window of verdicts in a row. Lost pulses are a
+        step that stays; a host late to hear its replies (a loaded machine, a slow hop on
+        the link) gives bursts of late stamps that come and go, and a burst can carry a
+        median just past the limit, but not for a window of verdicts, nor twice as far."""
+        self._over = self._over + 1 if abs(drift) > limit_mm else 0
+        return self._over >= self.window or abs(drift) > 2 * limit_mm

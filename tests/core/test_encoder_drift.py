@@ -46,6 +46,43 @@ def test_a_slipped_counter_is_measured_in_mm():
     assert got[-1] == pytest.approx(10.0, abs=0.1)        # 200 counts at 20 counts/mm
 
 
+
+def _verdicts(watch: DriftWatch, offsets_mm: list[float], limit_mm: float = 3.0
+              ) -> list[bool]:
+    """Feed one sample per offset (the robot's count ahead by that many mm) and return,
+    for each verdict, whether the watch calls for a fault."""
+    out = []
+    for i, off in enumerate(offsets_mm, start=1):
+        now = float(i)
+        g = 1000 + round(now * 300 * CPM)
+        r = wrap(5_000 + round((now * 300 + off) * CPM), 24)
+        d = watch.sample(now, g, 0.0, r, 0.0)
+        if d is not None:
+            out.append(watch.held_past(d, limit_mm))
+    return out
+
+
+def test_a_burst_of_late_stamps_is_no_fault():
+    """Emulated runs through a slow hop read bursts like this one (+4..5 mm on six reads
+    of eleven): medians pass the 3 mm limit for a few verdicts, then fall back."""
+    _, watch = _watch(window=9)
+    burst = [0.5] * 10 + [4.8, 0.6, 4.9, 4.0, 0.5, 3.3, 4.1, 0.4, 4.7, 0.7, 4.2] + [0.5] * 10
+    verdicts = _verdicts(watch, burst)
+    assert watch.max_abs_mm > 3.0                 # the medians did pass the limit
+    assert not any(verdicts)
+
+
+def test_a_step_past_the_limit_faults_after_a_window_and_twice_the_limit_at_once():
+    _, watch = _watch(window=9)
+    # verdict k is sample 10 + k (the first sample has no speed yet, then a window of 9);
+    # the step comes at sample 11, and the median shows it at sample 15 (verdict 5)
+    verdicts = _verdicts(watch, [0.0] * 10 + [4.0] * 30)
+    assert verdicts.index(True) == 5 + 9 - 1              # held for a window of verdicts
+    _, watch = _watch(window=9)
+    verdicts = _verdicts(watch, [0.0] * 10 + [7.0] * 10)
+    assert verdicts.index(True) == 5                      # twice the limit: at once
+
+
 def test_without_age_compensation_a_stale_read_would_look_like_drift():
     """The counterfactual the compensation exists for: 48 ms of age difference at 300 mm/s
     is 14 mm; a watch told both reads are fresh reports it as drift."""
