@@ -123,3 +123,20 @@ def test_no_empty_notice_band(alice):
     alice.evaluate("() => { document.querySelector('#notice').textContent = ''; }")
     box = alice.locator("#notice").bounding_box()
     assert box is None or box["height"] == 0, box
+
+
+@pytest.mark.parametrize("width,height", [(1366, 768)])
+def test_blackboard_values_wrap_as_words_not_a_letter_a_line(alice, width, height):
+    """The blackboard beside the tree is narrow; a long value (the located frame's
+    summary) must get the side's width, not the sliver its key leaves."""
+    measure(alice, width, height)
+    alice.wait_for_function(
+        "() => [...document.querySelectorAll('#tv-board td')].some(td => "
+        "td.textContent.length > 30)", timeout=15_000)
+    widths = alice.evaluate("""() => {
+      const side = document.querySelector('#tv-board').getBoundingClientRect().width;
+      const tds = [...document.querySelectorAll('#tv-board td')]
+        .filter(td => td.textContent.length > 30);
+      return {side, tds: tds.map(td => td.getBoundingClientRect().width)};
+    }""")
+    assert widths["tds"] and min(widths["tds"]) >= 0.8 * widths["side"], widths

@@ -369,7 +369,8 @@
       for (const [k, v] of Object.entries(this.state.board)) {
         const tr = el("tr", {});
         if (JSON.stringify(this.prevBoard[k]) !== JSON.stringify(v)) tr.className = "changed";
-        tr.append(el("th", {}, k), el("td", {}, v === null ? "-" : String(v)));
+        const text = v === null ? "-" : String(v);
+        tr.append(el("th", {}, k), el("td", {title: text}, text));
         rows.push(tr);
       }
       this.board.replaceChildren(...rows);
