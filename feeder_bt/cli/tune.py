@@ -74,8 +74,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--eta", type=positive_int, default=3,
                    help="with halving: each rung keeps the best 1/ETA (default 3)")
     p.add_argument("--minutes", type=positive, default=None,
-                   help="wall-clock budget: no run starts after this many minutes; trials "
-                        "cut short are pruned (with --trials as the most to try)")
+                   help="wall-clock budget of the whole command: no run starts that would "
+                        "end after it (5 s kept for the start and the wrap-up); trials cut "
+                        "short are pruned (with --trials as the most to try)")
     p.add_argument("--sampler-seed", type=int, default=0,
                    help="seed of the search itself (default 0)")
     p.set_defaults(handler=cmd_tune)
@@ -116,13 +117,14 @@ def _executor(args: argparse.Namespace, stack: ExitStack) -> tuple[cf.Executor, 
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
+    started = time.monotonic()          # --minutes bounds the whole command, from here
     from feeder_bt.tuning.progress import TrialProgress
     from feeder_bt.tuning.search import TuneConfig, best_overlay, describe, run_search, unit_of
     cfg = TuneConfig(scenario=args.scenario, trials=args.trials, duration=args.duration,
                      seeds=args.seeds, space=args.space, study=args.study, cell=args.cell,
                      supply=args.supply, world=args.world, sampler_seed=args.sampler_seed,
                      max_recirc=args.max_recirc, grid=args.grid, halving=args.halving,
-                     eta=args.eta, minutes=args.minutes)
+                     eta=args.eta, minutes=args.minutes, started=started)
     if args.world:                  # a bad world file: one line now, not every trial failed
         from feeder_bt.config import load_scenario
         from feeder_bt.config.world import load_world

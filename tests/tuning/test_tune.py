@@ -403,21 +403,23 @@ def test_a_rung_keeps_the_best_third_and_the_budget_ranks_first():
 
 
 def test_a_wall_clock_budget_stops_starting_runs(tmp_path, monkeypatch):
-    """--minutes M: no run starts after M minutes (here a clock each run moves on); trials
-    cut short are pruned, and the search ends with the trials it finished."""
+    """--minutes M: no run starts that would end after M minutes of the command (here a
+    clock each run moves on, and the command began 20 s before the search), less the
+    wrap-up's reserve; trials cut short are pruned, and the search ends with the trials it
+    finished."""
     from optuna.trial import TrialState
 
     from feeder_bt.tuning import search
-    clock = [0.0]
+    clock = [20.0]
     _fake_runs(monkeypatch, clock)
     monkeypatch.setattr(search.time, "monotonic", lambda: clock[0])
     cfg = search.TuneConfig(scenario=LENSES, trials=1000, duration=600, seeds=2,
-                            space="fixed", study=None, max_recirc=1.5, minutes=1.0,
-                            halving=True)
+                            space="fixed", study=None, max_recirc=1.5, minutes=2.0,
+                            halving=True, started=0.0)
     study = search.run_search(cfg, search.InlineExecutor(), 1)
     assert 5 <= len(study.trials) < 1000
     assert all(t.state in (TrialState.COMPLETE, TrialState.PRUNED) for t in study.trials)
-    assert clock[0] <= 60.0 + 6.0                       # the last run started before 60 s
+    assert clock[0] <= 120.0 - search.WRAP_UP_S         # the last run ended in time
 
 
 def test_the_wear_budget_is_on_by_default(tmp_path, capsys):
