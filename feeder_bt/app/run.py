@@ -346,7 +346,8 @@ class _Run:
                                     world=prep.world)
         if prep.plan is not None:
             from feeder_bt.sim.faults import inject_faults
-            self.injector = inject_faults(self.hal, prep.plan)  # type: ignore[arg-type]
+            self.injector = inject_faults(self.hal, prep.plan,  # type: ignore[arg-type]
+                                          drivers=prep.cell_spec)
         if prep.supply_plan is not None:
             from feeder_bt.sim.supply import apply_supply
             self.supply = apply_supply(self.hal, prep.supply_plan)

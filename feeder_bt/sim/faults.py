@@ -44,6 +44,7 @@ from feeder_bt.core.errors import (
     ServoTimeout,
 )
 from feeder_bt.core.jobs import DoneJob, Job, JobState
+from feeder_bt.core.model import CellSpec
 from feeder_bt.hal.interfaces import IoChange, PickTarget, Pose, watchdog_stopped
 from feeder_bt.sim.devices import SimHal, TimedJob
 from feeder_bt.sim.world import World
@@ -429,9 +430,13 @@ class FaultInjector:
     """Carries out a fault plan on one simulated cell; ``injected`` and ``log`` say what it
     did. Create it with ``inject_faults``."""
 
-    def __init__(self, hal: SimHal, plan: FaultPlanSpec, seed: int) -> None:
+    def __init__(self, hal: SimHal, plan: FaultPlanSpec, seed: int,
+                 drivers: CellSpec | None = None) -> None:
         self.plan = plan
         self.seed = seed
+        #: the cell file the controller's drivers are set from: their time-outs and the
+        #: watchdog period they give the card are its figures, not the world's truth
+        self.drivers = drivers
         #: every fault actually injected, by plan kind (``FAULT_KINDS``)
         self.injected: Counter[str] = Counter()
         #: one entry per injected fault: ``t``, ``kind``, ``device``, ``detail`` and ``seen``
@@ -645,7 +650,7 @@ class FaultInjector:
         elif link == "galil":
             for conv in self.conveyors.values():
                 conv.freeze(t)
-            watchdog_s = self.world.cell.galil.watchdog_s
+            watchdog_s = (self.drivers or self.world.cell).galil.watchdog_s
             if 0 < watchdog_s < outage_s:
                 self._at(t + watchdog_s, lambda now: self._watchdog(now, entry, watchdog_s))
 
@@ -706,8 +711,9 @@ class FaultInjector:
         return job
 
     def _timeout_s(self, link: str) -> float:
-        """How long the link's driver waits for a reply before it gives the link up."""
-        cell = self.world.cell
+        """How long the link's driver waits for a reply before it gives the link up (the
+        controller's cell file's figure)."""
+        cell = self.drivers or self.world.cell
         if link == "galil":
             return cell.galil.timeout_s
         if link == "adept":
@@ -755,9 +761,12 @@ class FaultInjector:
             self.io.input_changed("estop", value, t)
 
 
-def inject_faults(hal: SimHal, plan: FaultPlanSpec, seed: int | None = None) -> FaultInjector:
+def inject_faults(hal: SimHal, plan: FaultPlanSpec, seed: int | None = None,
+                  drivers: CellSpec | None = None) -> FaultInjector:
     """Wrap the simulated cell's devices so they fail as ``plan`` says; ``seed`` is the
-    run's seed (default: the world's), mixed with ``plan.seed`` for the fault draws.
+    run's seed (default: the world's), mixed with ``plan.seed`` for the fault draws;
+    ``drivers`` the cell file the controller reads (default: the world's cell), whose
+    drivers' time-outs a silent link is waited out by.
 
     Plan times count from now (the start of the run). Only the simulated cell takes a
     plan: the emulators have their own (``feeder_bt.emulators.faults``)."""
@@ -766,4 +775,4 @@ def inject_faults(hal: SimHal, plan: FaultPlanSpec, seed: int | None = None) -> 
                           f"not a {getattr(hal, 'kind', type(hal).__name__)} cell")
     if "fault_injector" in hal.extras:
         raise FeederError("this simulated cell already has a fault plan")
-    return FaultInjector(hal, plan, hal.world.seed if seed is None else seed)
+    return FaultInjector(hal, plan, hal.world.seed if seed is None else seed, drivers)
