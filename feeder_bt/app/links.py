@@ -23,11 +23,12 @@ from typing import Any
 
 import feeder_bt.app.factory as factory
 from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.emulators.dying_camera import DyingCameraSource
 from feeder_bt.emulators.linkproxy import LinkProxy
 
 ROOT = Path(__file__).resolve().parents[2]
 
-LINKS = ("galil", "motion", "position", "io", "notify", "plate")
+LINKS = ("galil", "motion", "position", "io", "notify", "plate", "camera")
 HOWS = ("silence", "half_open", "refuse", "drip", "flood", "garbage")
 #: how the simulated cell's fault plan gives each death: as the driver meets it. A silent
 #: cable, a half-open one and a drip each leave a call waiting out its time-out; a refused
@@ -37,7 +38,7 @@ LINK_AS = {"silence": "silent", "half_open": "silent", "drip": "silent",
            "refuse": "refused", "flood": "refused", "garbage": "refused"}
 #: the simulated cell's device for each link
 DEVICE = {"galil": "galil", "motion": "adept", "position": "adept", "io": "adept",
-          "notify": "adept", "plate": "plate"}
+          "notify": "adept", "plate": "plate", "camera": "camera"}
 LIMIT_S = 10.0
 CUT_AT_S = 28.0          # lenses reach the robot at ~24 s: the cut falls while it picks
 AFTER_S = 18.0           # fed after the link is back
@@ -62,8 +63,10 @@ def _proxied(cell: Any, link: str, proxy_to) -> Any:
 
 def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None = None,
              at_s: float = CUT_AT_S) -> dict[str, Any]:
-    """One run through the real drivers with ``how`` on ``link`` from ``at_s``."""
-    proxies: list[LinkProxy] = []
+    """One run through the real drivers with ``how`` on ``link`` from ``at_s``. The
+    camera's link lives in its SDK, not on TCP: its deaths are given at the frame source
+    (``feeder_bt.emulators.dying_camera``), in front of the emulated camera."""
+    proxies: list[LinkProxy | DyingCameraSource] = []
     times: dict[str, float] = {}
     real = factory.connect_drivers
 
@@ -82,7 +85,11 @@ def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None 
             proxies[0].restore()
             times["restore"] = clock.now()
 
-        hal = real(_proxied(cell_spec, link, proxy_to), clock, source=source, kind=kind)
+        if link == "camera":
+            proxies.append(DyingCameraSource(source, seed=seed))
+            hal = real(cell_spec, clock, source=proxies[0], kind=kind)
+        else:
+            hal = real(_proxied(cell_spec, link, proxy_to), clock, source=source, kind=kind)
         threading.Thread(target=cut, daemon=True, name="link-cut").start()
         return hal
 
@@ -96,7 +103,8 @@ def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None 
         finally:
             factory.connect_drivers = real
             for p in proxies:
-                p.close()
+                if isinstance(p, LinkProxy):    # the camera's is closed with the cell
+                    p.close()
         events = _events(db)
     return verdict(report, events, times.get("cut", at_s), times.get("restore", at_s + cut_s))
 
