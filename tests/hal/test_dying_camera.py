@@ -16,6 +16,7 @@ from feeder_bt.core.jobs import Job
 from feeder_bt.core.model import CameraSpec, PylonSpec
 from feeder_bt.emulators.dying_camera import DyingCameraSource
 from feeder_bt.hal.camera.latched import GRAB_GRACE_S, LatchedCamera, grab_timeout_s
+from feeder_bt.hal.camera.sources import STREAM_TIMEOUT_S
 
 W, H = 64, 48
 BOUND_S = 0.3           # the driver's grab time-out in these tests
@@ -135,8 +136,13 @@ def test_a_source_without_reopen_that_hangs_leaves_the_worker_free():
     try:
         job, took = _grab(cam)
         assert isinstance(job.error, CommsLost) and took < GENEROUS_S
-        src.hang = False                    # the next grab runs on a fresh thread
-        assert _grab(cam)[0].ok
+        job, took = _grab(cam)              # never two threads in one source: at once
+        assert "still stuck" in str(job.error) and took < BOUND_S
+        src.hang = False                    # it returned: a fresh thread grabs
+        t0 = time.monotonic()
+        while not _grab(cam)[0].ok:
+            assert time.monotonic() - t0 < GENEROUS_S
+            time.sleep(0.01)
         assert cam.abandoned == 1 and cam.reopened == 0
     finally:
         src.hang = False
@@ -145,8 +151,11 @@ def test_a_source_without_reopen_that_hangs_leaves_the_worker_free():
 
 def test_the_grab_bound_lies_past_the_pylon_frame_time_out():
     """The driver gives a camera its grab's time and a second; a pylon camera, which ends
-    a lost frame itself, gets its frame time-out twice first (trigger-ready, frame). The
-    simulated cell's silent camera link waits the same (``sim.faults``)."""
+    a lost frame itself, gets its frame time-out twice first (trigger-ready, frame), and a
+    stream its read time-out. The simulated cell's silent camera link waits the same
+    (``sim.faults``)."""
     assert grab_timeout_s(CameraSpec()) == pytest.approx(CameraSpec().grab_s + GRAB_GRACE_S)
     pylon = CameraSpec(source="pylon:", pylon=PylonSpec(frame_timeout_s=2.0))
     assert grab_timeout_s(pylon) == pytest.approx(4.0 + GRAB_GRACE_S)
+    stream = CameraSpec(source="rtsp://10.0.0.9/cam")
+    assert grab_timeout_s(stream) == pytest.approx(STREAM_TIMEOUT_S + GRAB_GRACE_S)

@@ -29,7 +29,7 @@ from feeder_bt.core.clock import Clock
 from feeder_bt.core.errors import CommsLost, FeederError, GrabFailed, HalError
 from feeder_bt.core.jobs import DoneJob, FutureJob, Job
 from feeder_bt.core.model import CameraSpec
-from feeder_bt.hal.camera.sources import FrameSource
+from feeder_bt.hal.camera.sources import STREAM_TIMEOUT_S, FrameSource
 from feeder_bt.hal.interfaces import Frame
 
 #: past the grab's own time, how long a camera may take to answer before the driver gives
@@ -41,10 +41,13 @@ def grab_timeout_s(camera: CameraSpec) -> float:
     """How long one grab may run before the camera counts as not responding: its own time
     and ``GRAB_GRACE_S``. A pylon camera ends a lost frame itself in
     ``pylon.frame_timeout_s``, once waiting to be ready for the trigger and once for the
-    frame: the driver's bound lies past both, so a lost frame stays a lost frame."""
+    frame: the driver's bound lies past both, so a lost frame stays a lost frame. A stream
+    (a URL) ends a read itself in ``STREAM_TIMEOUT_S``: the bound lies past that too."""
     bound = camera.grab_s + GRAB_GRACE_S
     if camera.source.startswith("pylon:"):
         bound = max(bound, 2 * camera.pylon.frame_timeout_s + GRAB_GRACE_S)
+    elif "://" in camera.source:
+        bound = max(bound, STREAM_TIMEOUT_S + GRAB_GRACE_S)
     return bound
 
 
@@ -77,9 +80,9 @@ class _CaptureThread:
         self._calls: queue.SimpleQueue = queue.SimpleQueue()
         threading.Thread(target=self._run, daemon=True, name="camera-capture").start()
 
-    def call(self, fn: Callable[[], Any], timeout_s: float) -> Any:
-        """``fn()``'s result or error; ``FutureTimeout`` when it has not returned in time."""
-        done: Future = Future()
+    def call(self, fn: Callable[[], Any], timeout_s: float, done: Future) -> Any:
+        """``fn()``'s result or error (also set on ``done``); ``FutureTimeout`` when it has
+        not returned in time."""
         self._calls.put((fn, done))
         return done.result(timeout=timeout_s)
 
@@ -113,19 +116,28 @@ class LatchedCamera:
         self.abandoned = 0               # capture threads given up, stuck in a grab
         self.reopened = 0
         self._capture: _CaptureThread | None = None
+        self._stuck: Future | None = None   # an abandoned call, on a source kept in use
         self._stale = False              # the source hung: open it afresh before a grab
 
     def _call(self, fn: Callable[[], Any], what: str) -> Any:
         """A call of the source on the capture thread, bounded by ``grab_timeout_s``."""
+        if self._stuck is not None and not self._stuck.done():
+            # a source that cannot be opened afresh is never called from two threads
+            raise CommsLost(f"camera: {what}: still stuck in a grab abandoned "
+                            f"{self.grab_timeout_s:g} s or more ago (link lost)")
+        self._stuck = None
         if self._capture is None:
             self._capture = _CaptureThread()
+        done: Future = Future()
         try:
-            return self._capture.call(fn, self.grab_timeout_s)
+            return self._capture.call(fn, self.grab_timeout_s, done)
         except FutureTimeout:
             self._capture.stop()
             self._capture = None
             self.abandoned += 1
             self._stale = hasattr(self.source, "reopen")
+            if not self._stale:
+                self._stuck = done
             again = " and the camera opened afresh" if self._stale else ""
             raise CommsLost(f"camera: {what}: no answer in {self.grab_timeout_s:g} s, the "
                             f"camera does not respond (link lost); abandoned{again}") from None
