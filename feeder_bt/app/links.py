@@ -2,7 +2,7 @@
 real drivers, and the same cut as a fault plan on the simulated cell; what each run did.
 
 ``emulated`` puts a ``feeder_bt.emulators.linkproxy`` death on one link once parts are
-being picked; ``simulated`` gives the simulated cell the same cut as a ``comms_lost`` fault
+being picked (the camera's at its frame source: ``feeder_bt.emulators.dying_camera``); ``simulated`` gives the simulated cell the same cut as a ``comms_lost`` fault
 (the way the driver meets that death: ``LINK_AS``); ``verdict`` says how each run ended.
 A run passes when it ends STOPPED, placing again within ``LIMIT_S`` of the link's return,
 or in FAULT naming a link, with nothing lost and the emulated world's placements equal to
@@ -66,28 +66,30 @@ def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None 
     """One run through the real drivers with ``how`` on ``link`` from ``at_s``. The
     camera's link lives in its SDK, not on TCP: its deaths are given at the frame source
     (``feeder_bt.emulators.dying_camera``), in front of the emulated camera."""
-    proxies: list[LinkProxy | DyingCameraSource] = []
+    proxies: list[LinkProxy] = []
+    cables: list[LinkProxy | DyingCameraSource] = []       # the first is the one cut
     times: dict[str, float] = {}
     real = factory.connect_drivers
 
     def through_a_proxy(cell_spec, clock, source=None, kind="real"):
         def proxy_to(port: int) -> int:
             proxies.append(LinkProxy(port, seed=seed))
+            cables.append(proxies[-1])
             return proxies[-1].port
 
         def cut() -> None:
             while clock.now() < at_s:
                 time.sleep(0.02)
             times["cut"] = clock.now()
-            proxies[0].cut(how)
+            cables[0].cut(how)
             while clock.now() < at_s + cut_s:
                 time.sleep(0.02)
-            proxies[0].restore()
+            cables[0].restore()
             times["restore"] = clock.now()
 
         if link == "camera":
-            proxies.append(DyingCameraSource(source, seed=seed))
-            hal = real(cell_spec, clock, source=proxies[0], kind=kind)
+            cables.append(DyingCameraSource(source, seed=seed))   # closed with the cell
+            hal = real(cell_spec, clock, source=cables[0], kind=kind)
         else:
             hal = real(_proxied(cell_spec, link, proxy_to), clock, source=source, kind=kind)
         threading.Thread(target=cut, daemon=True, name="link-cut").start()
@@ -103,8 +105,7 @@ def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None 
         finally:
             factory.connect_drivers = real
             for p in proxies:
-                if isinstance(p, LinkProxy):    # the camera's is closed with the cell
-                    p.close()
+                p.close()
         events = _events(db)
     return verdict(report, events, times.get("cut", at_s), times.get("restore", at_s + cut_s))
 
