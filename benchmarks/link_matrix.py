@@ -6,7 +6,8 @@ through the real drivers; the same plan in the simulator; the verdicts side by s
 
 Each emulated run (``--hal emulated``, real time) feeds lenses (plates for the ``plate``
 link) and, once parts are being picked, puts a ``feeder_bt.emulators.linkproxy`` death on
-one link for the cut's seconds. A run passes when it ends STOPPED having recovered, or in
+one link for the cut's seconds (the camera's, whose link lives in its SDK, at the frame
+source: ``feeder_bt.emulators.dying_camera``). A run passes when it ends STOPPED having recovered, or in
 FAULT naming a link, within ``LIMIT_S`` of the cut's end (of its start for a FAULT), with
 nothing lost and the emulated world's placements equal to the cell's count. The same cut
 is then run on the simulated cell as a fault plan (``comms_lost``, the way the driver sees

@@ -141,6 +141,7 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
     """Open the drivers of a cell: Galil conveyors and I/O, V+ robot, latched camera."""
     from feeder_bt.hal.adept import AdeptController
     from feeder_bt.hal.camera import LatchedCamera, open_source
+    from feeder_bt.hal.camera.latched import grab_timeout_s
     from feeder_bt.hal.galil import make_galil
 
     closers: list = []
@@ -154,9 +155,15 @@ def connect_drivers(cell: CellSpec, clock: Clock, source=None, kind: str = "real
         closers.append(adept.close)
         latch_name = next((n for n, a in cell.galil.axes.items()
                            if a.upper() == cell.galil.latch_axis.upper()), "horizontal")
+        # frames of the cell's size are checked where the camera is set to it (a pylon
+        # camera, the emulated one); a stream or recorded images keep their own
+        sized = kind == "emulated" or cell.camera.source.startswith("pylon:")
         camera = LatchedCamera(source if source is not None
                                else open_source(cell.camera.source, cell.camera),
-                               clock, latch=conveyors[latch_name])
+                               clock, latch=conveyors[latch_name],
+                               grab_timeout_s=grab_timeout_s(cell.camera),
+                               size=(cell.camera.width_px, cell.camera.height_px)
+                               if sized else None)
         closers.append(camera.close)
         io = CellIO(cell, {"galil": galil_io, "adept": adept.io})
         wire_line_trigger(cell, camera.source, io)

@@ -2,7 +2,7 @@
 real drivers, and the same cut as a fault plan on the simulated cell; what each run did.
 
 ``emulated`` puts a ``feeder_bt.emulators.linkproxy`` death on one link once parts are
-being picked; ``simulated`` gives the simulated cell the same cut as a ``comms_lost`` fault
+being picked (the camera's at its frame source: ``feeder_bt.emulators.dying_camera``); ``simulated`` gives the simulated cell the same cut as a ``comms_lost`` fault
 (the way the driver meets that death: ``LINK_AS``); ``verdict`` says how each run ended.
 A run passes when it ends STOPPED, placing again within ``LIMIT_S`` of the link's return,
 or in FAULT naming a link, with nothing lost and the emulated world's placements equal to
@@ -23,11 +23,12 @@ from typing import Any
 
 import feeder_bt.app.factory as factory
 from feeder_bt.app.run import RunOptions, run_job
+from feeder_bt.emulators.dying_camera import DyingCameraSource
 from feeder_bt.emulators.linkproxy import LinkProxy
 
 ROOT = Path(__file__).resolve().parents[2]
 
-LINKS = ("galil", "motion", "position", "io", "notify", "plate")
+LINKS = ("galil", "motion", "position", "io", "notify", "plate", "camera")
 HOWS = ("silence", "half_open", "refuse", "drip", "flood", "garbage")
 #: how the simulated cell's fault plan gives each death: as the driver meets it. A silent
 #: cable, a half-open one and a drip each leave a call waiting out its time-out; a refused
@@ -37,7 +38,7 @@ LINK_AS = {"silence": "silent", "half_open": "silent", "drip": "silent",
            "refuse": "refused", "flood": "refused", "garbage": "refused"}
 #: the simulated cell's device for each link
 DEVICE = {"galil": "galil", "motion": "adept", "position": "adept", "io": "adept",
-          "notify": "adept", "plate": "plate"}
+          "notify": "adept", "plate": "plate", "camera": "camera"}
 LIMIT_S = 10.0
 CUT_AT_S = 28.0          # lenses reach the robot at ~24 s: the cut falls while it picks
 AFTER_S = 18.0           # fed after the link is back
@@ -62,27 +63,35 @@ def _proxied(cell: Any, link: str, proxy_to) -> Any:
 
 def emulated(link: str, how: str, cut_s: float, seed: int = 1, cell: str | None = None,
              at_s: float = CUT_AT_S) -> dict[str, Any]:
-    """One run through the real drivers with ``how`` on ``link`` from ``at_s``."""
+    """One run through the real drivers with ``how`` on ``link`` from ``at_s``. The
+    camera's link lives in its SDK, not on TCP: its deaths are given at the frame source
+    (``feeder_bt.emulators.dying_camera``), in front of the emulated camera."""
     proxies: list[LinkProxy] = []
+    cables: list[LinkProxy | DyingCameraSource] = []       # the first is the one cut
     times: dict[str, float] = {}
     real = factory.connect_drivers
 
     def through_a_proxy(cell_spec, clock, source=None, kind="real"):
         def proxy_to(port: int) -> int:
             proxies.append(LinkProxy(port, seed=seed))
+            cables.append(proxies[-1])
             return proxies[-1].port
 
         def cut() -> None:
             while clock.now() < at_s:
                 time.sleep(0.02)
             times["cut"] = clock.now()
-            proxies[0].cut(how)
+            cables[0].cut(how)
             while clock.now() < at_s + cut_s:
                 time.sleep(0.02)
-            proxies[0].restore()
+            cables[0].restore()
             times["restore"] = clock.now()
 
-        hal = real(_proxied(cell_spec, link, proxy_to), clock, source=source, kind=kind)
+        if link == "camera":
+            cables.append(DyingCameraSource(source, seed=seed))   # closed with the cell
+            hal = real(cell_spec, clock, source=cables[0], kind=kind)
+        else:
+            hal = real(_proxied(cell_spec, link, proxy_to), clock, source=source, kind=kind)
         threading.Thread(target=cut, daemon=True, name="link-cut").start()
         return hal
 

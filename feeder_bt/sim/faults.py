@@ -45,6 +45,7 @@ from feeder_bt.core.errors import (
 )
 from feeder_bt.core.jobs import DoneJob, Job, JobState
 from feeder_bt.core.model import CellSpec
+from feeder_bt.hal.camera.latched import grab_timeout_s
 from feeder_bt.hal.interfaces import IoChange, PickTarget, Pose, watchdog_stopped
 from feeder_bt.sim.devices import SimHal, TimedJob
 from feeder_bt.sim.world import World
@@ -720,7 +721,7 @@ class FaultInjector:
             return cell.adept.timeout_s
         if link == "plate":
             return cell.plate.timeout_s
-        return cell.camera.grab_s + 1.0
+        return grab_timeout_s(cell.camera)     # the camera driver's own bound
 
     # ------------------------------------------------------------------ conveyor, e-stop
     def _jam(self, t: float) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from feeder_bt.app.links import LIMIT_S, matrix_table
+from feeder_bt.app.links import HOWS, LIMIT_S, matrix_table
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULT = json.loads((ROOT / "benchmarks/results/link_matrix.json").read_text())
@@ -33,3 +33,15 @@ def test_the_docs_quote_the_committed_matrix() -> None:
     assert f"**{s['ok']} of {s['runs']}** runs" in text
     assert f"{s['same_verdict']} of {s['runs']} ended as the simulated cell" in text
     assert "python benchmarks/link_matrix.py" in text
+
+
+def test_the_camera_row_is_measured_every_way_and_quoted() -> None:
+    """The camera's link, killed at the frame source, is a row of the 4 s table like the
+    others: all six deaths, each within the rules and as the simulated cell ended."""
+    rows = [r for r in RESULT["rows"] if r["link"] == "camera"]
+    assert sorted(r["how"] for r in rows if r["cut_s"] == 4.0) == sorted(HOWS)
+    for r in rows:
+        assert r["emulated"]["ok"] and r["same_verdict"], r
+    table = matrix_table(RESULT["rows"], 4.0)
+    row = next(line for line in table.splitlines() if line.startswith("| camera |"))
+    assert row in (ROOT / "docs/real-cell.md").read_text()

@@ -3,7 +3,8 @@
 position server or a plate's feeder line is silenced (a pulled cable: no FIN),
 half-opened (pulled, and the device dropped the connection meanwhile), refused (the
 controller gone), flooded or garbled for 4 s while parts are being picked, through a
-proxy between the real drivers and the emulators. Every run recovers, placing again within 10 s of the link's return, or FAULTs naming the
+proxy between the real drivers and the emulators; the camera's link, which lives in its
+SDK, is silenced at the frame source (``emulators.dying_camera``). Every run recovers, placing again within 10 s of the link's return, or FAULTs naming the
 link; nothing is lost and the world's placements equal the cell's count; and the simulated
 cell given the same cut as a fault plan ends the same way (real time: soak)."""
 
@@ -14,7 +15,8 @@ import pytest
 from feeder_bt.app.links import LIMIT_S, emulated, simulated
 
 CASES = [("galil", "silence"), ("galil", "flood"), ("motion", "half_open"),
-         ("motion", "garbage"), ("position", "refuse"), ("plate", "silence")]
+         ("motion", "garbage"), ("position", "refuse"), ("plate", "silence"),
+         ("camera", "silence")]
 
 
 @pytest.mark.soak

@@ -18,8 +18,12 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 
 
 class FrameSource(Protocol):
+    """A camera's frames. A source may also offer ``reopen()``: a fresh handle on the same
+    camera, the old one closed, which ``LatchedCamera`` takes after a grab that hung."""
+
     def capture(self) -> np.ndarray:
-        """Trigger and return one grey uint8 image; raise ``GrabFailed`` when none comes."""
+        """Trigger and return one grey uint8 image; raise ``GrabFailed`` when none comes,
+        ``CommsLost`` when the camera's link is gone (removed, a corrupt transfer)."""
 
     def close(self) -> None: ...
 
