@@ -248,7 +248,8 @@ def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
 
         state, took = asyncio.run(_ua_state(live.url))
         assert state == CellState.STOPPED.value and took < GOT_THROUGH_S, (state, took)
-        assert live.ua.gate.stats()["open"] <= live.ua.gate.total
+        gate = live.ua.gate        # the silent ones wait in the lobby, outside the caps
+        assert gate.stats()["open"] <= gate.total + gate.lobby, gate.stats()
     finally:
         flood.close()
         live.close()
