@@ -17,7 +17,8 @@ has:
   that proved who it is. A vouched-for connection is never closed for a newcomer. When
   every capped connection is busy, a newcomer goes *on trial* in the reserve; the
   listener closes it unless its first request is vouched for (``on_trial``);
-- optionally (``ConnLimits.lobby``, for listeners that call ``heard`` on every first byte)
+- optionally (``ConnLimits.lobby``, for listeners that call ``heard`` on every first byte:
+  the part server and the OPC UA server; not the web listeners, whose h11 is not told)
   a **lobby** for connections that have not sent a byte yet, outside the caps: they do not
   compete with connections that have spoken. When the lobby is full, the oldest silent
   connection of the address holding the most lobby places is closed. A connection enters
