@@ -133,7 +133,10 @@ class ConnGate:
         self.total = max(8, min(self.limits.total, (fds - 64) // 2))
         self.reserve = max(0, min(self.limits.reserve, self.total))
         self.trials = (self.reserve + 1) // 2     # of the reserve, at most this on trial
-        self.lobby = max(0, min(self.limits.lobby, (fds - 64) // 2))   # silent, outside caps
+        # silent connections, outside the caps; with the caps, within the same fds budget
+        spare = (fds - 64) // 2 - self.total
+        want = max(0, self.limits.lobby)
+        self.lobby = max(min(8, want), min(want, spare))
         self.say = say or (lambda line: print(line, file=sys.stderr, flush=True))
         self._conns: dict[Any, _Entry] = {}       # oldest first
         self._per_ip: Counter[str] = Counter()    # capped connections (not the reserve's)
@@ -352,7 +355,8 @@ class ConnGate:
         self._told_at = self.clock()
         parts = ", ".join(f"{n} {what}" for what, n in sorted(self._pending.items()))
         self._pending.clear()
-        self.say(f"feeder: {self.name}: {parts} (in {len(self._conns)} open; at most "
+        lobby = f", {self._in_lobby} of {self.lobby} silent" if self.lobby else ""
+        self.say(f"feeder: {self.name}: {parts} (in {len(self._conns)} open{lobby}; at most "
                  f"{self.total}, {self.limits.per_address} per address)")
 
     def open_count(self) -> int:
