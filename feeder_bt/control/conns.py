@@ -17,6 +17,16 @@ has:
   that proved who it is. A vouched-for connection is never closed for a newcomer. When
   every capped connection is busy, a newcomer goes *on trial* in the reserve; the
   listener closes it unless its first request is vouched for (``on_trial``);
+- optionally (``ConnLimits.lobby``, for listeners that call ``heard`` on every first byte:
+  the part server and the OPC UA server; not the web listeners, whose h11 is not told)
+  a **lobby** for connections that have not sent a byte yet, outside the caps: they do not
+  compete with connections that have spoken. When the lobby is full, the oldest silent
+  connection of the address holding the most lobby places is closed. A connection enters
+  the caps on its first bytes (``heard``), where it may displace only the oldest idle
+  connection that has spoken (from its address, or from anywhere). So a client is closed
+  before it speaks only after ``lobby`` newer silent connections from an address holding
+  at least as many places as its own: a flood of fewer silent connections than that, even
+  from the client's own address and reopened as fast as they close, never closes it;
 - a deadline for a connection's first request (``header_s``; the listeners apply it) and
   an idle time-out;
 - a listen backlog as large as the system allows (``backlog()``), so a burst waits in the
@@ -52,6 +62,7 @@ class ConnLimits:
     idle_s: float = 60.0        # a connection silent this long is closed (where it applies)
     period_s: float = 60.0      # at most one summary line of refusals per period
     reserve: int = 0            # connections outside the caps for whom the listener vouches
+    lobby: int = 0              # silent connections held outside the caps (0: no lobby)
 
 
 def backlog(want: int = 4096) -> int:
@@ -84,7 +95,7 @@ def peer_ip(transport: Any) -> str:
     return str(peer[0]) if isinstance(peer, tuple) and peer else "?"
 
 
-CAPPED, TRIAL, RESERVED = "capped", "trial", "reserved"
+CAPPED, TRIAL, RESERVED, LOBBY = "capped", "trial", "reserved", "lobby"
 
 
 class _Entry:
@@ -95,7 +106,7 @@ class _Entry:
     def __init__(self, ip: str, busy: Callable[[], bool], pool: str) -> None:
         self.ip, self.busy = ip, busy
         self.spoke = False                             # sent a byte (``heard``)
-        self.pool = pool                               # CAPPED, TRIAL or RESERVED
+        self.pool = pool                               # CAPPED, TRIAL, RESERVED, LOBBY
         self.kept: Callable[[], bool] | None = None    # set by vouch(): the reserve's
 
     def protected(self) -> bool:
@@ -122,12 +133,18 @@ class ConnGate:
         self.total = max(8, min(self.limits.total, (fds - 64) // 2))
         self.reserve = max(0, min(self.limits.reserve, self.total))
         self.trials = (self.reserve + 1) // 2     # of the reserve, at most this on trial
+        # silent connections, outside the caps; with the caps, within the same fds budget
+        spare = (fds - 64) // 2 - self.total
+        want = max(0, self.limits.lobby)
+        self.lobby = max(min(8, want), min(want, spare))
         self.say = say or (lambda line: print(line, file=sys.stderr, flush=True))
         self._conns: dict[Any, _Entry] = {}       # oldest first
         self._per_ip: Counter[str] = Counter()    # capped connections (not the reserve's)
         self._capped = 0                          # ... in all
         self._vouched = 0                         # in the reserve, vouched for
         self._on_trial = 0                        # in the reserve, on trial
+        self._lobby_ip: Counter[str] = Counter()  # in the lobby, per address
+        self._in_lobby = 0                        # ... in all
         self.counts: Counter[str] = Counter()     # admitted, refused, evicted, errors, ...
         self._pending: Counter[str] = Counter()   # not yet told
         self._told_at = -1e18
@@ -142,23 +159,40 @@ class ConnGate:
         per-address cap) is closed to make room: a peer holding idle connections can
         never keep a newcomer out. Only if none is idle does the newcomer go on trial in
         the reserve (the listener must see it vouched for by its first request, else
-        close it: ``on_trial``), and only if the reserve is full too is it refused."""
+        close it: ``on_trial``), and only if the reserve is full too is it refused.
+
+        With a lobby, none of that happens here but at its first bytes (``heard``): it
+        waits in the lobby, where only another silent connection can take its place."""
         ip = peer_ip(transport)
+        if self.lobby:
+            if self._in_lobby >= self.lobby and not self._evict_lobby(ip):
+                self._refuse(transport, f"{self.lobby} silent connections, none to close")
+                return False
+            pool = LOBBY
+        else:
+            pool, why = self._place(ip)
+            if pool is None:
+                self._refuse(transport, why)
+                return False
+        self._conns[transport] = _Entry(ip, busy, pool)
+        self._count(ip, pool, +1)
+        self.counts["admitted"] += 1
+        return True
+
+    def _place(self, ip: str) -> tuple[str | None, str]:
+        """Where a connection from ``ip`` goes in the caps: CAPPED (after closing an idle
+        one if over a cap), TRIAL, or None (refused), with why it is not CAPPED."""
         why = ""
         if self._per_ip[ip] >= self.limits.per_address and not self._evict(CAPPED, ip):
             why = f"over {self.limits.per_address} from one address, all busy"
         elif self._capped >= self.total and not self._evict(CAPPED):
             why = f"{self.total} connections, all busy"
-        pool = TRIAL if why else CAPPED
-        if pool == TRIAL and not self._room(trial=True):
-            self._refuse(transport, why)
-            return False
-        self._conns[transport] = _Entry(ip, busy, pool)
-        self._count(ip, pool, +1)
-        if pool == TRIAL:
-            self.counts["on_trial"] += 1
-        self.counts["admitted"] += 1
-        return True
+        if not why:
+            return CAPPED, ""
+        if not self._room(trial=True):
+            return None, why
+        self.counts["on_trial"] += 1
+        return TRIAL, why
 
     def vouch(self, transport: Any, kept: Callable[[], bool]) -> bool:
         """The listener knows this connection is the reserve owner's (the session that
@@ -172,21 +206,37 @@ class ConnGate:
         entry.kept = kept
         if entry.pool == RESERVED:
             return True
-        if entry.pool == CAPPED and not self._room(trial=False):
-            return False                     # kept from eviction, but within the caps
+        if entry.pool in (CAPPED, LOBBY) and not self._room(trial=False):
+            return False                     # kept from eviction, but where it was
         self._count(entry.ip, entry.pool, -1)
         entry.pool = RESERVED
         self._count(entry.ip, RESERVED, +1)
         return True
 
-    def heard(self, transport: Any) -> None:
+    def heard(self, transport: Any) -> bool:
         """The connection sent something: among idle ones it is closed for a newcomer only
-        after every one that never said a word. A flood of connections that never speak,
-        from a client's own address, then makes room by closing its own, not the client
-        mid-handshake (an OPC UA Hello, a robot's first line)."""
+        after every one that never said a word. With a lobby, this is where it enters the
+        caps (closing the oldest idle connection that has spoken, from its address or from
+        anywhere, if over one): a flood of connections that never speak then cannot
+        displace it, nor a client mid-handshake (an OPC UA Hello, a robot's first line).
+        False: it was refused and aborted here (over the caps, all busy, no reserve), and
+        the listener must drop the data."""
         entry = self._conns.get(transport)
-        if entry is not None:
-            entry.spoke = True
+        if entry is None:
+            return True
+        entry.spoke = True
+        if entry.pool != LOBBY:
+            return True
+        self._count(entry.ip, LOBBY, -1)
+        del self._conns[transport]           # its age in the caps starts now
+        pool, why = self._place(entry.ip)
+        if pool is None:
+            self._refuse(transport, why)
+            return False
+        entry.pool = pool
+        self._conns[transport] = entry
+        self._count(entry.ip, pool, +1)
+        return True
 
     def unkeep(self, transport: Any) -> None:
         """This connection's latest request was not the reserve owner's (a proxy's
@@ -222,6 +272,11 @@ class ConnGate:
                 del self._per_ip[ip]
         elif pool == TRIAL:
             self._on_trial += n
+        elif pool == LOBBY:
+            self._in_lobby += n
+            self._lobby_ip[ip] += n
+            if self._lobby_ip[ip] <= 0:
+                del self._lobby_ip[ip]
         else:
             self._vouched += n
 
@@ -242,12 +297,35 @@ class ConnGate:
                 if entry.pool != pool or (ip is not None and entry.ip != ip) \
                         or (silent_only and entry.spoke) or entry.protected():
                     continue
-                self.release(transport)
-                transport.abort()
-                self.counts["evicted"] += 1
-                self.note("an idle connection closed for a newcomer")
+                self._close(transport)
                 return True
         return False
+
+    def _evict_lobby(self, ip: str) -> bool:
+        """The lobby is full and a newcomer from ``ip`` comes: close the oldest silent
+        connection of the address that would hold the most lobby places (ties: the one
+        whose oldest is oldest), so that one address's flood makes room from itself and
+        never from a lighter address. False (refuse the newcomer) if that address is the
+        newcomer's own with nothing to close, or nothing can be closed."""
+        oldest: dict[str, Any] = {}                      # address -> its oldest closable
+        for transport, entry in self._conns.items():     # oldest first
+            if entry.pool == LOBBY and entry.ip not in oldest and not entry.protected():
+                oldest[entry.ip] = transport
+        if not oldest:
+            return False
+        load = self._lobby_ip.copy()
+        load[ip] += 1                                    # the newcomer counts
+        victim = max(oldest, key=lambda a: load[a])      # first of the heaviest
+        if load[ip] > load[victim]:
+            return False
+        self._close(oldest[victim])
+        return True
+
+    def _close(self, transport: Any) -> None:
+        self.release(transport)
+        transport.abort()
+        self.counts["evicted"] += 1
+        self.note("an idle connection closed for a newcomer")
 
     def _refuse(self, transport: Any, why: str) -> None:
         transport.abort()
@@ -277,7 +355,8 @@ class ConnGate:
         self._told_at = self.clock()
         parts = ", ".join(f"{n} {what}" for what, n in sorted(self._pending.items()))
         self._pending.clear()
-        self.say(f"feeder: {self.name}: {parts} (in {len(self._conns)} open; at most "
+        lobby = f", {self._in_lobby} of {self.lobby} silent" if self.lobby else ""
+        self.say(f"feeder: {self.name}: {parts} (in {len(self._conns)} open{lobby}; at most "
                  f"{self.total}, {self.limits.per_address} per address)")
 
     def open_count(self) -> int:
@@ -285,7 +364,8 @@ class ConnGate:
 
     def stats(self) -> dict[str, int]:
         return {"open": len(self._conns), "addresses": len(self._per_ip),
-                "reserve_open": self._vouched + self._on_trial, **dict(self.counts)}
+                "reserve_open": self._vouched + self._on_trial, "lobby_open": self._in_lobby,
+                **dict(self.counts)}
 
     def loop_errors(self, loop: asyncio.AbstractEventLoop) -> None:
         """Make ``loop``'s unhandled errors (``socket.accept() out of system resource``

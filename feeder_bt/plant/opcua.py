@@ -58,6 +58,11 @@ from feeder_bt.plant.ua_security import (
 
 NAMESPACE = "urn:feeder_bt"
 DEFAULT_PORT = 4840
+#: connections that have not sent a byte, held outside the caps (``ConnLimits.lobby``):
+#: more than one asyncio accept burst (asyncua listens with asyncio's backlog, 100), so a
+#: burst of silent ones cannot close a client between its accept and its Hello. With the
+#: caps (128 that spoke), at most 384 connections open: 384 descriptors.
+LOBBY = 256
 COMMAND_TIMEOUT_S = 10.0
 SEVERITY = {"fault": 800, "state": 300, "recovered": 400, "operator": 200}
 EVENT_KINDS = frozenset(SEVERITY)
@@ -112,7 +117,7 @@ class CellUaServer:
         self.last_msg = 0
         self.events_sent = 0
         self.refused = 0
-        self.gate = ConnGate("OPC UA", ConnLimits(total=128, per_address=16,
+        self.gate = ConnGate("OPC UA", ConnLimits(total=128, per_address=16, lobby=LOBBY,
                                                   header_s=ACTIVATION_S))
 
     # ------------------------------------------------------------------ tick thread
@@ -167,9 +172,9 @@ class CellUaServer:
         # max_connections is only a backstop far above ours: it counts a closed connection
         # until its connection_lost runs, so under a burst it would refuse (reset) the very
         # client our gate let in. Its watchdog closes a connection that has not activated a
-        # session within ACTIVATION_S.
+        # session within ACTIVATION_S (in the lobby too: a silent one lives 10 s at most).
         GATES[id(server.iserver)] = self.gate
-        server.iserver.max_connections = self.gate.total * 8 + 1000
+        server.iserver.max_connections = (self.gate.total + self.gate.lobby) * 8 + 1000
         server.iserver.max_pending_activation_seconds = ACTIVATION_S
         self.gate.loop_errors(self.loop)      # asyncua's own log is silenced (start())
         server.set_endpoint(self.url)

@@ -6,9 +6,10 @@ tick thread answers it (``ServeRobots`` while feeding, ``Desk.serve_idle`` other
 the answer is handed back to the loop, which writes it. The cell never waits on a robot,
 and a robot that goes away leaves only records that time out (behaviours/serve.py).
 
-Nobody on the network can starve it: connections pass a ``control.conns.ConnGate`` (a cap
-per address and in all; over either, the oldest connection that has not said who it is
-makes room; a robot that proved who it is moves into the gate's reserve, outside the
+Nobody on the network can starve it: connections pass a ``control.conns.ConnGate`` (one
+that has said nothing waits in its lobby, where only another silent one can take its
+place; then a cap per address and in all; over either, the oldest connection that has not
+said who it is makes room; a robot that proved who it is moves into the gate's reserve, outside the
 caps, and when every capped connection is busy a newcomer is let in on trial and closed
 unless its first line proves it a robot), a connection must send its first line within ``header_s`` and is closed
 after ``idle_s`` of silence with nothing asked; the backlog is the system's ceiling.
@@ -43,7 +44,11 @@ from feeder_bt.trees.desk import build_serving, build_serving_cleanup, build_ser
 DEFAULT_PORT = 7600
 SWEEP_S = 1.0              # how often idle connections are looked for
 IN_FLIGHT = 8              # requests a connection may have waiting; then it is not read
-LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0, reserve=32)
+#: a lobby of 256 for connections that have said nothing yet, outside the caps, so silent
+#: ones never displace a robot that has sent its first line, nor (being fewer than 256 and
+#: more than one accept burst) one about to: at most 256 + 256 + 32 = 544 connections open
+LIMITS = ConnLimits(total=256, per_address=16, header_s=10.0, idle_s=120.0, reserve=32,
+                    lobby=256)
 FREE = ("HELP", "QUIT")    # what a robot may ask before it has said who it is
 AUTH = ("HELLO", "PROOF")  # how it says who it is
 NONCE_BYTES = 16           # a challenge: 128 random bits, new for every HELLO NAME
@@ -150,8 +155,8 @@ class _Conn(asyncio.Protocol):
         if self.closing:
             return
         self.seen = self.srv.loop.time()
-        if self.transport is not None:
-            self.srv.gate.heard(self.transport)
+        if self.transport is not None and not self.srv.gate.heard(self.transport):
+            return                         # refused as it left the lobby: aborted
         self.buf += data
         while b"\n" in self.buf and not self.closing:
             raw, _, self.buf = self.buf.partition(b"\n")

@@ -161,8 +161,7 @@ class _GatedUa:
         self.inner.connection_lost(exc)
 
     def data_received(self, data: bytes) -> None:
-        if self.transport is not None:
-            self.gate.heard(self.transport)
+        if self.transport is not None and self.gate.heard(self.transport):
             self.inner.data_received(data)
 
     def eof_received(self) -> bool | None:

@@ -81,3 +81,71 @@ def test_without_a_reserve_a_full_address_of_busy_connections_refuses():
     assert g.admit(FakeTransport(port=1), lambda: True)
     late = FakeTransport(port=2)
     assert not g.admit(late, lambda: False) and late.aborted
+
+
+def test_with_a_lobby_silent_connections_never_displace_one_that_spoke():
+    g = gate(total=100, per_address=2, lobby=8)
+    client = FakeTransport(port=1)
+    assert g.admit(client, lambda: False) and g.heard(client)   # its Hello: in the caps
+    flood = [FakeTransport(port=100 + i) for i in range(50)]     # silent, same address
+    for t in flood:
+        assert g.admit(t, lambda: False)
+    assert not client.aborted
+    assert sum(not t.aborted for t in flood) == 8                # the lobby's size
+    assert all(t.aborted for t in flood[:42])                    # the oldest made room
+    assert g.stats()["lobby_open"] == 8 and g.stats()["open"] == 9
+
+
+def test_a_silent_client_outlasts_one_lobby_less_one_of_newer_silent_ones():
+    """The bound the design gives: a client not yet heard from is closed only after
+    ``lobby`` newer silent connections from its own (heaviest) address."""
+    g = gate(total=100, per_address=2, lobby=8)
+    flood = [FakeTransport(port=100 + i) for i in range(7)]
+    for t in flood:
+        assert g.admit(t, lambda: False)
+    client = FakeTransport(port=1)
+    assert g.admit(client, lambda: False)
+    later = [FakeTransport(port=200 + i) for i in range(7)]
+    for t in later:
+        assert g.admit(t, lambda: False)
+    assert not client.aborted and all(t.aborted for t in flood)
+    assert g.heard(client) and not g.on_trial(client)           # in the caps now
+    for i in range(100):
+        assert g.admit(FakeTransport(port=300 + i), lambda: False)
+    assert not client.aborted
+
+
+def test_a_full_lobby_makes_room_from_the_address_holding_the_most():
+    g = gate(total=100, per_address=2, lobby=4)
+    client = FakeTransport("10.0.0.2", port=1)
+    assert g.admit(client, lambda: False)
+    flood = [FakeTransport("10.0.0.1", port=100 + i) for i in range(40)]
+    for t in flood:
+        assert g.admit(t, lambda: False)
+    assert not client.aborted and sum(not t.aborted for t in flood) == 3
+
+
+def test_a_connection_that_speaks_over_the_cap_closes_the_oldest_idle_one_that_spoke():
+    g = gate(total=100, per_address=2, lobby=8)
+    busy = {"a": False}
+    a, b, c, d = (FakeTransport(port=i) for i in range(4))
+    assert g.admit(a, lambda: busy["a"]) and g.admit(b, lambda: True)
+    assert g.heard(a) and g.heard(b)
+    assert g.admit(c, lambda: False) and not a.aborted           # silent: in the lobby
+    assert g.heard(c) and a.aborted and not b.aborted            # a idle, b busy
+    busy["a"] = True
+    assert g.admit(d, lambda: False) and g.heard(b)             # heard again: no change
+    assert g.stats()["lobby_open"] == 1
+    g.release(c)
+    e = FakeTransport(port=5)
+    assert g.admit(e, lambda: True) and g.heard(e)               # room again (c left)
+    assert not g.heard(d) and d.aborted                          # b, e busy; no reserve
+    assert g.stats()["refused"] == 1 and g.stats()["open"] == 2
+
+
+def test_a_lobby_of_busy_connections_refuses_a_newcomer():
+    g = gate(total=100, per_address=2, lobby=2)
+    for i in range(2):
+        assert g.admit(FakeTransport(port=i), lambda: True)
+    late = FakeTransport(port=9)
+    assert not g.admit(late, lambda: False) and late.aborted

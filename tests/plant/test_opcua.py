@@ -365,3 +365,55 @@ def test_a_refusal_keeps_its_reason(live):
             assert await call(b, f"{idx}:TakeControl") == "you have control"
             assert await call(b, f"{idx}:ReleaseControl") == "control released"
     asyncio.run(go())
+
+
+FLOOD = 40             # silent connections from the client's own address, reopened as closed
+ROUNDS = 20            # before the lobby, 1 in 5 or so was reset: 20 catch it
+GOT_IN_S = 5.0         # generous: the design, not the machine's speed, lets the client in
+
+
+async def _log_in_and_read(url: str) -> tuple[str, float]:
+    """Alice connects, logs in and reads the state: the state (or the error), and how
+    long it took."""
+    t0 = time.monotonic()
+    try:
+        async def go() -> str:
+            async with client(url, ALICE) as c:
+                idx, node = await cell_node(c)
+                return await read(node, idx, "State")
+        state = await asyncio.wait_for(go(), WAIT_S)
+    except Exception as e:          # a reset before the Hello was read, a timeout
+        state = f"{type(e).__name__}: {e}"
+    return state, time.monotonic() - t0
+
+
+def test_a_silent_flood_from_the_client_s_own_address_never_keeps_it_out(tmp_path):
+    """40 connections from 127.0.0.1 that never send a byte, opened again as fast as the
+    server closes them, and alice from 127.0.0.1 too: she connects, logs in and reads the
+    state 20 times of 20, each within 5 s. Silent connections wait in the gate's lobby
+    (``ConnLimits.lobby``, 256), outside the per-address cap, and only another silent one
+    takes a place there: she could be closed before her Hello only by a lobby full of
+    silent ones newer than hers, and the flood has 40. (Before the lobby the flood churned through the cap of 16 and
+    she was reset before her Hello was read: 15, 18 and 18 of 20 got in.)"""
+    from tests.support.floodutil import ReopeningFlood
+
+    live = LiveCell(tmp_path)
+    port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+    flood = ReopeningFlood(port, FLOOD)
+    try:
+        end = time.monotonic() + WAIT_S
+        while live.ua.gate.counts["admitted"] < FLOOD:     # the flood is in
+            assert time.monotonic() < end, live.ua.gate.stats()
+            time.sleep(0.05)
+        rounds = [asyncio.run(_log_in_and_read(live.url)) for _ in range(ROUNDS)]
+        got_in = sum(state == "STOPPED" for state, _ in rounds)
+        assert got_in == ROUNDS, f"{got_in} of {ROUNDS} got in: {rounds}"
+        assert max(took for _, took in rounds) < GOT_IN_S, rounds
+        stats = live.ua.gate.stats()
+        assert stats["open"] <= live.ua.gate.total + live.ua.gate.lobby, stats
+        assert stats["admitted"] >= FLOOD + ROUNDS, stats
+        # the flood is held, not churned: nobody was closed to make room, nobody refused
+        assert stats.get("evicted", 0) == 0 and stats.get("refused", 0) == 0, stats
+    finally:
+        flood.close()
+        live.close()

@@ -102,5 +102,9 @@ def test_the_flood_figures_quote_the_committed_benchmark():
             f"and a part in {round(1000 * ps['part_s'])} ms") in \
         " ".join((ROOT / "docs/part-server.md").read_text().split())
     ua = got["opcua"]
-    assert (f"logged in and read `State` in {ua['connect_login_read_s']:.2f} s") in \
-        " ".join((ROOT / "docs/plant.md").read_text().split())
+    plant = " ".join((ROOT / "docs/plant.md").read_text().split())
+    assert (f"logged in and read `State` in {ua['connect_login_read_s']:.2f} s") in plant
+    own = got["opcua_own_address"]
+    assert (f"{own['got_in']} of {own['rounds']} got in (median "
+            f"{round(1000 * own['median_s'])} ms, slowest {round(1000 * own['max_s'])} ms)"
+            ) in plant

@@ -185,7 +185,8 @@ def test_idle_connections_leave_room_for_a_new_robot(capsys):
             robot.release(offer.id)
         assert t_first < GOT_THROUGH_S, t_first
         stats = served.server.server.gate.stats()
-        assert stats["open"] <= served.server.server.gate.total
+        gate = served.server.server.gate   # the silent ones wait in the lobby
+        assert stats["open"] <= gate.total + gate.lobby, stats
         assert stats["evicted"] >= 1                 # idle ones made room
     finally:
         flood.close()
@@ -197,9 +198,7 @@ def test_idle_connections_leave_room_for_a_new_robot(capsys):
 def test_a_flood_from_the_robots_own_address_leaves_it_room(tmp_path, capsys):
     """40 idle connections from the robot's own address (127.0.0.5), opened again as the
     server closes them: the robot the robots file knows by that address is vouched for
-    at connect, never closed for a newcomer, and gets its answers and parts. (An anonymous
-    robot on a flooded address can be closed before its first request: a robot that must
-    get through names itself in the robots file, docs/part-server.md.)"""
+    at connect, never closed for a newcomer, and gets its answers and parts."""
     from feeder_bt.plant.robots import RobotTrust
     from tests.plant.test_robot_trust import Line, _robots_file
 
@@ -226,6 +225,40 @@ def test_a_flood_from_the_robots_own_address_leaves_it_room(tmp_path, capsys):
     assert "Traceback" not in capsys.readouterr().err
 
 
+def test_a_silent_flood_from_its_own_address_never_keeps_out_an_anonymous_robot():
+    """40 connections from 127.0.0.1 that never send a byte, opened again as the server
+    closes them, and an anonymous robot from 127.0.0.1 (no robots file: loopback is
+    served), which nothing vouches for before its first line: its STATUS is answered 20
+    times of 20. The silent ones wait in the gate's lobby (256 places) and only another
+    silent one takes a place there; once it has spoken, none of them can."""
+    from tests.plant.test_robot_trust import Line
+
+    served = _ServedCell()
+    flood = ReopeningFlood(served.port, 40)
+    gate = served.server.server.gate
+    answers: list[tuple[str, float]] = []
+    try:
+        _wait(lambda: gate.counts["admitted"] >= 40, "the flood to be in")
+        for _ in range(20):
+            t0 = time.monotonic()
+            try:
+                robot = Line(served.host, served.port)
+                try:
+                    answer = robot.ask("STATUS")
+                finally:
+                    robot.close()
+            except OSError as e:                   # reset before its line was read
+                answer = repr(e)
+            answers.append((answer, time.monotonic() - t0))
+        got = sum(a.startswith("OK STATUS") for a, _ in answers)
+        assert got == 20, f"{got} of 20 answered: {answers}"
+        assert max(t for _, t in answers) < GOT_THROUGH_S, answers
+        assert gate.counts["evicted"] == 0 and gate.counts["refused"] == 0, gate.stats()
+    finally:
+        flood.close()
+        served.close()
+
+
 async def _ua_state(url: str) -> tuple[str, float]:
     """Alice logs in over OPC UA and reads the cell's state: the state, and how long."""
     from tests.plant.test_opcua import ALICE, cell_node, client, read
@@ -248,7 +281,8 @@ def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
 
         state, took = asyncio.run(_ua_state(live.url))
         assert state == CellState.STOPPED.value and took < GOT_THROUGH_S, (state, took)
-        assert live.ua.gate.stats()["open"] <= live.ua.gate.total
+        gate = live.ua.gate        # the silent ones wait in the lobby, outside the caps
+        assert gate.stats()["open"] <= gate.total + gate.lobby, gate.stats()
     finally:
         flood.close()
         live.close()
