@@ -38,6 +38,22 @@ def test_the_speed_table_quotes_the_side_by_side_run():
            f"**{after['cpu_s_per_sim_hour']:.2f}** |" in doc
 
 
+def test_the_rerun_at_this_round_s_code_is_quoted_and_its_counts_agree():
+    rerun = json.loads((RESULTS / "simspeed_300x_rerun.json").read_text())["side_by_side"]
+    assert rerun["counts_same"]
+    doc = _doc("performance.md")
+    for r in rerun["table"]:
+        b, a = r["before"], r["after"]
+        assert b["counts"] == a["counts"]
+        assert min(a["sim_per_wall_runs"]) >= 300          # the goal, every run
+        row = (f"| {r['seed']} | {b['parts_per_minute']:.3f} | {a['parts_per_minute']:.3f} | "
+               f"{', '.join(f'{s:.0f}×' for s in b['sim_per_wall_runs'])} | "
+               f"{', '.join(f'{s:.0f}×' for s in a['sim_per_wall_runs'])} | "
+               f"{b['cpu_s_per_sim_hour']:.1f} | {a['cpu_s_per_sim_hour']:.1f} | "
+               f"{b['sim_per_cpu']:.0f}× | {a['sim_per_cpu']:.0f}× |")
+        assert row in doc, row
+
+
 def test_the_tune_figures_quote_the_committed_benchmark():
     tune = json.loads((RESULTS / "tune.json").read_text())
     assert len(tune["searches"]) == 3
