@@ -50,8 +50,9 @@ def test_the_budget_table_is_the_frontier_and_the_budget_runs():
         best["mean"], best["sd"], round(best["mean"] / best["selection_bound_ppm"], 2),
         best["selection_bound_ppm"], round(best["robot_busy_pct"]),
         round(best["recirc_per_placed"], 2))
+    policy = ours["setting"].split(" + ")[1]            # what the search kept
     m = re.search(r"^\| ours = thesis's water marks with every option, tuned: water marks \+ "
-                  r"lookahead \| ([\d.]+) \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| ([\d.]+)× of "
+                  rf"{policy} \| ([\d.]+) \(([\d.]+)–([\d.]+), sd ([\d.]+)\) \| ([\d.]+)× of "
                   r"([\d.]+) \| (\d+) % \| ([\d.]+) \|$", text, flags=re.M)
     assert m
     assert tuple(map(float, m.groups())) == (
