@@ -42,7 +42,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cuts", default="4", help="seconds each link stays dead")
     ap.add_argument("--more-cuts", default="1.5,10",
                     help="also these, for silence, half-open and refuse on --more-links")
-    ap.add_argument("--more-links", default="galil,motion")
+    ap.add_argument("--more-links", default="galil,motion,camera")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
