@@ -220,3 +220,23 @@ def test_the_docs_steady_state_kit_bound_is_the_kit_grids():
         round(100 * best["mean"] / bound, 1))
     m = re.search(r"the rest takes ([\d.]+) % \(waiting", text)
     assert m and float(m.group(1)) == round(t["waiting"] + t["missed"] + t["idle"], 1)
+
+
+def test_the_docs_quote_the_kit_rerun():
+    """The paragraph on the kit benchmarks rerun at this round's code is their JSON's."""
+    grid = json.loads((ROOT / "benchmarks/results/frontier_kits_rerun.json").read_text())
+    tuned = json.loads((ROOT / "benchmarks/results/honest_kits_two_trays_rerun.json")
+                       .read_text())["tuned"]
+    text = " ".join((ROOT / "docs/performance.md").read_text().split())
+    k = {s: tuned[s]["kits"]["mean"] for s in ("ours", "watermarks", "fixed")}
+    assert (f"ours (water marks + lookahead, tuned) {k['ours']:.2f} kits/min, the tuned water "
+            f"marks {k['watermarks']:.2f}, the tuned fixed setting {k['fixed']:.2f}") in text
+    best = grid["best_fixed"]
+    assert best["setting"] == "none + lookahead belt 300 mm/s, incline 130 %"
+    assert f"belt 300 mm/s, incline 130 % ({best['mean']:.2f})" in text
+    by = {e["setting"].split(" + ")[1].split(" ")[0]: e for e in grid["evaluated"]
+          if e["setting"].startswith("none + ")}
+    assert (f"place {by['fifo']['mean']:.2f} and {by['earliest_deadline']['mean']:.2f} "
+            "kits/min at their best settings") in text
+    missed = sorted(by[p]["robot_time_pct"]["missed"] for p in ("fifo", "earliest_deadline"))
+    assert f"their missed picks {missed[0]}–{missed[1]} % of feeding" in text
