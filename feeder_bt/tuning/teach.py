@@ -15,7 +15,8 @@ From sample images and what is in them (``tuning.labels``) it learns, in this or
    whose sample ranges are furthest apart (an outline feature, or failing those the
    frame's grey under the blob: ``grey_mean``, ``grey_std``); a pair that no feature
    separates is an error naming both classes. Where two classes are apart on a feature, each range reaches
-   halfway to the other (the nearer class wins), elsewhere its margin;
+   halfway to the other (the nearer class wins), elsewhere its margin; the area's top
+   reaches halfway to two of the class touching where no class is nearer;
 3. each pose's outline with its holes, in mm through the cell's camera scale: the samples'
    outlines turned onto one another and the pixels most of them cover (a median
    silhouette); its rotational and mirror symmetry; a pick point on material, as far from
@@ -407,6 +408,12 @@ def learn_classes(samples: dict[Cls, list[Measured]]
             half = SPREADS * pooled_spread.get(n, 0.0) * abs(mid)
             wlo = min(wlo, round_sig(mid - half, math.floor))
             whi = max(whi, round_sig(mid + half, math.ceil))
+            if n == "area_mm2":
+                # what the area's top has to shut out is two of the class touching (at
+                # least twice its smallest): with no class nearer, reach halfway to that,
+                # as towards a class. A few samples show little of how large a natural
+                # part grows: an oyster 15 % above the largest of eleven is still one.
+                above.append(2 * tlo)
             if below:
                 wlo = round_sig((max(below) + tlo) / 2, math.ceil)
             if above:
@@ -723,7 +730,8 @@ def write_scenario(taught: Taught, out: str | Path, cell: str | Path, cell_spec:
             items = [f"part: {c[0]}", f"pose: {c[1]}", "pickable: true"]
             items += [f"{n}: [{fmt(lo)}, {fmt(hi)}]" for n, (lo, hi) in rg.items()]
             lines.append(f"    # {len(taught.samples[c])} sample(s): their spread and a "
-                         "margin, or halfway to the next class")
+                         "margin, or halfway to the next class (the area's top: to two "
+                         "touching)")
             lines.append("    - {" + ", ".join(items) + "}")
     # a frame every so far along the belt: each part whole in at least one frame
     cam = cell_spec.camera

@@ -53,11 +53,7 @@ REAL_SETS = {
 }
 #: Halves that do not pass yet (F1 0.95 and above the plain pipeline), with their figures
 #: (taught / plain).
-SHORT = {
-    ("oysters_backlit", True): "taught from the right half, two shells larger than any of "
-                               "its 11 fall outside the oysters' area range: F1 0.929 / "
-                               "1.000 (the plain pipeline finds every part here)",
-}
+SHORT: dict[tuple[str, bool], str] = {}
 
 
 def _split(tmp_path: Path, folder: Path, pattern: str, other_half: bool) -> list[str]:
@@ -96,7 +92,7 @@ def test_real_photos_taught_from_half_find_the_other_half(tmp_path, capsys, name
     held = re.search(r"held out (\d+) of (\d+) image", text)
     assert 2 * int(held.group(1)) >= int(held.group(2)) >= 2
     taught, plain = f1s(text)
-    assert taught > plain, text
+    assert taught > plain or taught == 1.0, text     # nothing is above finding every part
     assert taught >= 0.95, text
 
 
@@ -443,3 +439,21 @@ def test_validate_takes_a_fraction(tmp_path, capsys):
     err = capsys.readouterr().err
     assert e.value.code == 2 and err.count("\n") == 1
     assert "expected a fraction between 0 and 1" in err
+
+
+def test_the_largest_class_takes_a_larger_part_but_not_two_touching():
+    """The oysters of the light-box photo: eleven taught shells of 3663–4458 mm², held-out
+    ones of 4982 and 5136 (the margin alone stopped at 4780). The area's top reaches
+    halfway to two of the class touching, so those are oysters and a clump of the two
+    smallest is not."""
+    areas = [3663, 3870, 3909, 3972, 4136, 4175, 4206, 4349, 4355, 4377, 4458]
+    grey = {"grey_mean": [60, 62, 61], "grey_std": [9, 10, 11]}
+    flat = {k: [v[i % 3] for i in range(len(areas))] for k, v in {**FLAT, **grey}.items()}
+    coin = _class({"area_mm2": [491], **{k: v[:1] for k, v in {**FLAT, **grey}.items()}})
+    ranges, _ = learn_classes({("oyster", "flat"): _class({"area_mm2": areas, **flat}),
+                               ("coin", "flat"): coin})
+    lo, hi = ranges[("oyster", "flat")]["area_mm2"]
+    assert hi >= 5136 and hi < 3663 + 3870 and lo <= 3663
+    # the coin's top reaches halfway to two coins, nearer than the oysters
+    c_lo, c_hi = ranges[("coin", "flat")]["area_mm2"]
+    assert c_lo <= 491 < c_hi < 2 * 491
