@@ -62,3 +62,25 @@ def test_the_budget_table_is_the_frontier_and_the_budget_runs():
     m = re.search(r"^\| ours / the gridded fixed setting \| \*\*([\d.]+)×\*\*", text, flags=re.M)
     assert m and float(m.group(1)) == round(ours["mean"] / best["mean"], 3)
     assert "1.143×" not in text           # no ratio against a baseline the docs say was beaten
+
+
+def test_the_adjuster_policy_grid_is_throughput_json():
+    """docs/performance.md's two grids and the original feeder's line, cell for cell."""
+    result = json.loads((ROOT / "benchmarks/results/throughput.json").read_text())
+    by = {(r["scenario"], r["adjuster"], r["policy"]): r for r in result["summary"]}
+    text = (ROOT / "docs/performance.md").read_text()
+    policies = ("fifo", "earliest_deadline", "shortest_cycle", "lookahead")
+    for scenario in ("lenses", "squares"):
+        table = text[text.index(f"**{scenario}** (robot bound "):].split("\n\n")[1]
+        rows = re.findall(r"^\| `(\w+)` \| (.+) \|$", table, flags=re.M)
+        assert [a for a, _ in rows] == ["none", "queue_proportional", "water_marks",
+                                        "supply_queue"]
+        for adjuster, cells in rows:
+            quoted = re.findall(r"([\d.]+) \(([\d.]+)–([\d.]+)\)", cells)
+            want = [tuple(f"{by[scenario, adjuster, p][k]:.1f}"
+                          for k in ("ppm_mean", "ppm_min", "ppm_max")) for p in policies]
+            assert quoted == want, (scenario, adjuster)
+    o = by["original_cwru_lenses", "scenario", "scenario"]
+    assert (f"Original CWRU feeder, as shipped: {o['ppm_mean']:.2f} ({o['ppm_min']:.2f}–"
+            f"{o['ppm_max']:.2f}) parts/min.") in text
+    assert len(result["runs"]) == 165 and all(r["lost"] == 0 for r in result["runs"])
