@@ -84,3 +84,42 @@ def test_the_adjuster_policy_grid_is_throughput_json():
     assert (f"Original CWRU feeder, as shipped: {o['ppm_mean']:.2f} ({o['ppm_min']:.2f}–"
             f"{o['ppm_max']:.2f}) parts/min.") in text
     assert len(result["runs"]) == 165 and all(r["lost"] == 0 for r in result["runs"])
+
+
+def test_the_sensitivity_table_is_sensitivity_json():
+    """docs/performance.md's "What moves the thesis table most", row for row."""
+    result = json.loads((RESULTS / "sensitivity.json").read_text())
+    text = _doc()
+    table = text[text.index("| change (one at a time) |"):].split("\n\n")[0]
+    rows = re.findall(r"^\| ([^|]+) \| ([^|]+) \| ([^|]+) \| ([^|]+) \|$", table, flags=re.M)[1:]
+
+    def cell(x):
+        return f"{x['mean']:.1f} ({x['min']:.1f}–{x['max']:.1f})" if x else "—"
+    want = [(r["variant"], cell(r["new"]), cell(r["original"]),
+             f"{r['ratio']:.2f}" if r.get("ratio") is not None else "—")
+            for r in result["rows"]]
+    assert rows == want
+    first = result["rows"][0]
+    assert first["variant"] == "as documented"
+    assert (f"at 1800 s for the original ({first['original']['mean']:.2f} against") in \
+        " ".join(text.split())
+
+
+def test_the_tuned_tables_are_their_json():
+    """The batch-refill and ample-supply tables (found, fresh-seed mean, min–max, sd) and
+    their ratios are honest_batch_refill.json's and honest_tuned.json's."""
+    text = _doc()
+    flat = " ".join(text.split())
+    for name, heading in (("honest_batch_refill.json", "### Under batch refill"),
+                          ("honest_tuned.json", "### With ample supply")):
+        tuned = json.loads((RESULTS / name).read_text())["tuned"]
+        section = text[text.index(heading):]
+        table = section[section.index("| setting (same budget) |"):].split("\n\n")[0]
+        rows = re.findall(r"^\| [^|]+ \| ([\d.]+) \| \**([\d.]+)\** \(([\d.]+)–([\d.]+), "
+                          r"sd ([\d.]+)\) \|", table, flags=re.M)
+        want = [(f"{t['tuned_ppm']:.2f}", f"{t['mean']:.2f}", f"{t['min']:.2f}",
+                 f"{t['max']:.2f}", f"{t['stdev']:.2f}")
+                for t in (tuned[k] for k in ("ours", "watermarks", "fixed"))]
+        assert rows == want, name
+        assert (f"Ours is **{tuned['ours_vs_watermarks']:.3f}×** the tuned water marks and "
+                f"**{tuned['ours_vs_fixed']:.3f}×** the best fixed setting") in flat, name
