@@ -123,3 +123,12 @@ def test_the_tuned_tables_are_their_json():
         assert rows == want, name
         assert (f"Ours is **{tuned['ours_vs_watermarks']:.3f}×** the tuned water marks and "
                 f"**{tuned['ours_vs_fixed']:.3f}×** the best fixed setting") in flat, name
+
+
+def test_the_batch_refill_example_is_the_tuned_fixed_setting():
+    """examples/batch_refill_best.yaml (docs/supply.md runs it) is honest_batch_refill.json's
+    best fixed setting."""
+    import yaml
+    tuned = json.loads((RESULTS / "honest_batch_refill.json").read_text())["tuned"]
+    shipped = yaml.safe_load((ROOT / "examples" / "batch_refill_best.yaml").read_text())
+    assert shipped == tuned["fixed"]["overlay"]
