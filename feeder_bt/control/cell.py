@@ -253,6 +253,7 @@ class Cell:
         locator_cls = leaf_class(scenario, "vision.leaf") or Locator
         locator = locator_cls(scenario.vision, scenario.parts,
                               Calibration(self.cell.camera.calibration))
+        locator.prepare((self.cell.camera.height_px, self.cell.camera.width_px))
         leaf_adjuster = leaf_class(scenario, "adjust.leaf")
         adjuster = (leaf_adjuster(scenario.adjust.params)
                     if leaf_adjuster is not None
