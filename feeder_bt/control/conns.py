@@ -229,7 +229,13 @@ class ConnGate:
             return True
         self._count(entry.ip, LOBBY, -1)
         del self._conns[transport]           # its age in the caps starts now
-        pool, why = self._place(entry.ip)
+        if entry.kept is not None and entry.kept():
+            # vouched for while it waited (a robot known by its address, the reserve
+            # full then): the reserve if it has room now, else the caps even over them;
+            # never a trial, which the listener would close at a first line not a HELLO
+            pool: str | None = RESERVED if self._room(trial=False) else CAPPED
+        else:
+            pool, why = self._place(entry.ip)
         if pool is None:
             self._refuse(transport, why)
             return False

@@ -149,3 +149,25 @@ def test_a_lobby_of_busy_connections_refuses_a_newcomer():
         assert g.admit(FakeTransport(port=i), lambda: True)
     late = FakeTransport(port=9)
     assert not g.admit(late, lambda: False) and late.aborted
+
+
+def test_a_robot_vouched_for_in_the_lobby_enters_the_caps_when_it_speaks_never_on_trial():
+    """A robot known by its address is vouched for when it connects; with the reserve full
+    it waits in the lobby, kept. When it speaks it takes the reserve if there is room, else
+    a place in the caps: never a trial (the listener would close it at a first line that is
+    not HELLO) and never a refusal, even with every capped connection busy."""
+    g = gate(total=8, per_address=8, reserve=1, lobby=4)     # 8: the gate's least total
+    owner = FakeTransport(port=1)
+    assert g.admit(owner, lambda: True) and g.heard(owner)
+    assert g.vouch(owner, lambda: True)                      # the reserve's one place
+    for i in range(8):                                       # the caps, all busy
+        t = FakeTransport(port=10 + i)
+        assert g.admit(t, lambda: True) and g.heard(t)
+    robot = FakeTransport("10.0.0.7", port=5)
+    assert g.admit(robot, lambda: False)                     # silent: in the lobby
+    assert not g.vouch(robot, lambda: True)                  # the reserve is full: kept
+    assert g.heard(robot) and not robot.aborted
+    assert not g.on_trial(robot)
+    stranger = FakeTransport("10.0.0.8", port=6)
+    assert g.admit(stranger, lambda: False)
+    assert not g.heard(stranger) and stranger.aborted        # a stranger is still refused
