@@ -197,4 +197,17 @@ class LatchedCamera:
         self.worker.shutdown(wait=True, cancel_futures=True)
         if self._capture is not None:
             self._capture.stop()
+        if self._stuck is not None and not self._stuck.done():
+            # a grab still hangs inside the source, which may hold its own lock (pylon's
+            # does): closing it here could hang as long, so it is closed on a thread of its
+            # own that shutdown does not wait for
+            threading.Thread(target=self._close_source, name="camera-close",
+                             daemon=True).start()
+            return
         self.source.close()
+
+    def _close_source(self) -> None:
+        try:
+            self.source.close()
+        except Exception:             # noqa: BLE001 - shutting down: nothing to tell
+            pass
