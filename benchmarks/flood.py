@@ -157,7 +157,7 @@ def opcua_flood(n: int) -> dict:
     with tempfile.TemporaryDirectory() as d:
         live = LiveCell(Path(d))
         try:
-            port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+            port = live.port
             flood = IdleFlood(port, n, addresses=40, net=3)
             settled = flood.settle()
 
@@ -182,7 +182,7 @@ def opcua_own_address(rounds: int) -> dict:
     with tempfile.TemporaryDirectory() as d:
         live = LiveCell(Path(d))
         try:
-            port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+            port = live.port
             flood = ReopeningFlood(port, FLOOD)
             end = time.monotonic() + 60
             while live.ua.gate.counts["admitted"] < FLOOD and time.monotonic() < end:

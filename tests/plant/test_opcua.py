@@ -62,6 +62,11 @@ class LiveCell:
             until=3600.0, stop=self.done.is_set, every=self.every))
         self.thread.start()
 
+    @property
+    def port(self) -> int:
+        """The server's TCP port (``opc.tcp://127.0.0.1:PORT/...``)."""
+        return int(self.url.rsplit(":", 1)[1].split("/")[0])
+
     def every(self) -> None:
         while self.todo:
             self.todo.pop(0)()
@@ -398,7 +403,7 @@ def test_a_silent_flood_from_the_client_s_own_address_never_keeps_it_out(tmp_pat
     from tests.support.floodutil import ReopeningFlood
 
     live = LiveCell(tmp_path)
-    port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+    port = live.port
     flood = ReopeningFlood(port, FLOOD)
     try:
         end = time.monotonic() + WAIT_S

@@ -259,27 +259,17 @@ def test_a_silent_flood_from_its_own_address_never_keeps_out_an_anonymous_robot(
         served.close()
 
 
-async def _ua_state(url: str) -> tuple[str, float]:
-    """Alice logs in over OPC UA and reads the cell's state: the state, and how long."""
-    from tests.plant.test_opcua import ALICE, cell_node, client, read
-    t0 = time.monotonic()
-    async with client(url, ALICE) as c:
-        idx, node = await cell_node(c)
-        state = await read(node, idx, "State")
-    return state, time.monotonic() - t0
-
-
 def test_idle_connections_on_opc_ua_leave_room_for_a_client(tmp_path):
     pytest.importorskip("asyncua")
-    from tests.plant.test_opcua import LiveCell
+    from tests.plant.test_opcua import LiveCell, _log_in_and_read
 
     live = LiveCell(tmp_path)
-    port = int(live.url.rsplit(":", 1)[1].split("/")[0])
+    port = live.port
     flood = IdleFlood(port, 1100, addresses=40, net=3)
     try:
         assert flood.settle() >= 900
 
-        state, took = asyncio.run(_ua_state(live.url))
+        state, took = asyncio.run(_log_in_and_read(live.url))
         assert state == CellState.STOPPED.value and took < GOT_THROUGH_S, (state, took)
         gate = live.ua.gate        # the silent ones wait in the lobby, outside the caps
         assert gate.stats()["open"] <= gate.total + gate.lobby, gate.stats()
