@@ -408,11 +408,13 @@ def learn_classes(samples: dict[Cls, list[Measured]]
             half = SPREADS * pooled_spread.get(n, 0.0) * abs(mid)
             wlo = min(wlo, round_sig(mid - half, math.floor))
             whi = max(whi, round_sig(mid + half, math.ceil))
-            if n == "area_mm2":
+            if n == "area_mm2" and 2 * tlo > thi:
                 # what the area's top has to shut out is two of the class touching (at
                 # least twice its smallest): with no class nearer, reach halfway to that,
                 # as towards a class. A few samples show little of how large a natural
                 # part grows: an oyster 15 % above the largest of eleven is still one.
+                # (A class whose largest is twice its smallest keeps its margin: its
+                # area cannot tell one from two.)
                 above.append(2 * tlo)
             if below:
                 wlo = round_sig((max(below) + tlo) / 2, math.ceil)

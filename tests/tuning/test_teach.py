@@ -457,3 +457,14 @@ def test_the_largest_class_takes_a_larger_part_but_not_two_touching():
     # the coin's top reaches halfway to two coins, nearer than the oysters
     c_lo, c_hi = ranges[("coin", "flat")]["area_mm2"]
     assert c_lo <= 491 < c_hi < 2 * 491
+
+
+def test_a_class_spread_past_twice_its_smallest_keeps_every_sample_in_its_area_range():
+    """Halfway to two touching would fall inside such a class: its own large samples
+    would be rejected. It keeps its margin instead."""
+    areas = [100, 120, 150, 180, 220, 250]
+    grey = {"grey_mean": [60, 62, 61], "grey_std": [9, 10, 11]}
+    feats = {k: [v[i % 3] for i in range(len(areas))] for k, v in {**FLAT, **grey}.items()}
+    ranges, _ = learn_classes({("pebble", "flat"): _class({"area_mm2": areas, **feats})})
+    lo, hi = ranges[("pebble", "flat")]["area_mm2"]
+    assert lo <= 100 and hi >= 250
