@@ -12,8 +12,9 @@ here: before these kernels half of the locator's time was that glue between call
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length (the mapping, hull and rectangle in
   ``hull_kernels``, which the faces' kernels share).
-* ``otsu_level``, ``foreground_rois``, ``pack_rois``, ``place_contours``; ``packed_morph`` (in ``bit_kernels``: the packing with the opening
-  and closing, a bit a pixel)
+* ``otsu_level``, ``golden_mask``, ``foreground_rois``, ``pack_rois``, ``place_contours``;
+  ``packed_morph`` (in ``bit_kernels``: the packing with the opening and closing, a bit a
+  pixel) and ``golden_morph`` (the level, mask and ``packed_morph`` in one call)
   (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
   rectangles of foreground, packed, and their contours back in the frame
   (``Segmenter._contours_holes``).
@@ -35,12 +36,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from feeder_bt.vision.bit_kernels import packed_morph  # noqa: F401
+from feeder_bt.vision.bit_kernels import golden_morph, packed_morph  # noqa: F401
 from feeder_bt.vision.contour_kernels import (  # noqa: F401  (the locator reads them all here)
     GOLDEN_MINUS,
     MINUS_GOLDEN,
     PLAIN,
     foreground_rois,
+    golden_mask,
     otsu_level,
     pack_rois,
     place_contours,
@@ -190,4 +192,8 @@ def warm() -> None:
         packed, geo = pack_rois(m, rois, 1)
     cross = np.array([-1, 0, 0, 0, 1], np.int64), np.array([0, -1, 0, 1, 0], np.int64)
     packed_morph(mask.view(np.uint64), 6, 12, 1, *cross, *cross)
+    for otsu, light in ((True, False), (False, True)):
+        golden_mask(mask, mask, 3, light, mask)
+        golden_morph(mask, mask, mask[:2, :4].copy(), 4, otsu, 1.0, light, mask, 1,
+                     *cross, *cross)
     place_contours(pts.copy(), lens, 3, geo, 16)

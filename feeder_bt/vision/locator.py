@@ -227,9 +227,9 @@ class Locator(Segmenter):
         """
         t0 = time.perf_counter()
         img = to_grey(image)
-        mask, diff, level = self._threshold(img)
         full = all_features or self._full_chain
-        contours, holes = self._contours_holes(mask, full, all_features or self._want_holes)
+        contours, holes, diff, level = self._segment(img, full,
+                                                     all_features or self._want_holes)
         blobs = self._blobs(contours, img.shape[:2], all_features, full=full, holes=holes,
                             grey=img)
         # classes first; the blobs that need a face wait for one batch of fine outlines
@@ -260,7 +260,7 @@ class Locator(Segmenter):
         classification ("touches border", "too small"); ``part`` is always None.
         """
         img = to_grey(image)
-        contours, holes = self._contours_holes(self._threshold(img)[0], True, True)
+        contours, holes = self._segment(img, True, True)[:2]
         blobs = self._blobs(contours, img.shape[:2], all_features=True, full=True, holes=holes,
                             grey=img)
         return [b.det for b in blobs]

@@ -49,49 +49,30 @@ class Segmenter:
                            for k in (self._open, self._close) if k is not None)
         # the kernels' points (dy, dx from the anchor) for ``kernels.packed_morph``
         self._open_pts, self._close_pts = (_points(k) for k in (self._open, self._close))
-        self._below: np.ndarray | None = None     # golden - level: fixed threshold in one pass
         self._golden_small: np.ndarray | None = None     # its subsample (``subsample``)
-        self._moved_by: dict[int, np.ndarray] = {}       # Otsu's levels: ``_moved``
-        self._moved_lock = threading.Lock()
         self._scratch = threading.local()         # per-thread frame-sized images, reused
 
     # -------------------------------------------------------------- images
 
     def set_golden(self, image: np.ndarray) -> None:
         """Remember the cleared belt; later frames are compared against it."""
-        self._golden = to_grey(image).copy()
+        self._golden = np.ascontiguousarray(to_grey(image)).copy()
         self._golden_small = subsample(self._golden).copy()
-        self._moved_by = {}
+
+    def _against_golden(self, img: np.ndarray) -> tuple[bool, float] | None:
+        """Where the mask is one comparison of the frame with the golden image (a fixed or
+        Otsu level, ``kernels.golden_mask``): (Otsu's or not, the level or the least Otsu
+        may give); else None (no golden image, another method, a fixed level outside
+        0-254: the difference image is made and thresholded)."""
         th = self.recipe.threshold
-        self._below = None
+        golden = self._golden
+        if not self.recipe.golden_image or golden is None or golden.shape != img.shape:
+            return None
         if th.method == "fixed" and 0 <= math.floor(th.value) < 255:
-            if self._light:
-                # frame - golden > t  <=>  frame > golden + t (saturated at 255: never above)
-                self._below = cv2.add(self._golden, math.floor(th.value))
-            else:
-                # golden - frame > t  <=>  frame < golden - t (saturated at 0: never below)
-                self._below = cv2.subtract(self._golden, math.floor(th.value))
-
-    def _moved(self, t: int) -> np.ndarray:
-        """The golden image moved by a level t: below it (dark parts) or above it (light
-        parts) a frame's pixel differs from the golden image by more than t.
-
-        Otsu's level wanders over a dozen grey levels from frame to frame (squares on the
-        bench: 15 levels in 200 frames), and each new one costs a pass over the frame:
-        the levels last used are kept, up to ``MOVED_BUDGET_BYTES`` of images (at least
-        two), the least recently used dropped first. Keeping only 8 and clearing them all
-        when full made a new image for 38 % of those frames.
-        """
-        with self._moved_lock:
-            moved = self._moved_by.pop(t, None)
-            if moved is None:
-                keep = max(2, MOVED_BUDGET_BYTES // max(self._golden.nbytes, 1))
-                while len(self._moved_by) >= keep:
-                    del self._moved_by[next(iter(self._moved_by))]   # least recently used
-                moved = (cv2.add(self._golden, t) if self._light
-                         else cv2.subtract(self._golden, t))
-            self._moved_by[t] = moved                 # now the most recently used
-        return moved
+            return False, float(th.value)
+        if th.method == "otsu":
+            return True, float(th.value)
+        return None
 
     def foreground(self, image: np.ndarray) -> np.ndarray:
         """Binary mask (0/255) of what the recipe considers parts."""
@@ -148,24 +129,20 @@ class Segmenter:
         images, valid until its next frame."""
         th = self.recipe.threshold
         mask = self._buffer("mask", img.shape)
-        if th.method == "fixed" and self.recipe.golden_image and self._below is not None \
-                and self._below.shape == img.shape:
-            # the same mask as subtract-then-threshold, in one pass over the frame
-            return (cv2.compare(img, self._below, cv2.CMP_GT if self._light else cv2.CMP_LT,
-                                dst=mask), None, float(th.value))
-        golden = self._golden
-        if th.method == "otsu" and self.recipe.golden_image and golden is not None \
-                and golden.shape == img.shape:
-            # Otsu's level from the subsample's difference, then the mask in one pass
-            # against the golden image moved by the level, as for a fixed level: no
-            # frame-sized difference image (the faces read the grey from the frame and the
-            # golden image where they need it)
-            level = max(otsu_level(img, self._golden_small,
-                                   "minus_golden" if self._light else "golden_minus"),
-                        float(th.value))
-            return (cv2.compare(img, self._moved(math.floor(level)),
-                                cv2.CMP_GT if self._light else cv2.CMP_LT, dst=mask),
-                    None, level)
+        golden = self._against_golden(img)
+        if golden is not None:
+            # the frame against the golden image, no difference image (the faces read the
+            # grey from the frame and the golden image where they need it); Otsu's level
+            # from the subsample's difference
+            otsu, level = golden
+            if otsu:
+                level = max(otsu_level(img, self._golden_small,
+                                       "minus_golden" if self._light else "golden_minus"),
+                            level)
+            kernels().golden_mask(np.ascontiguousarray(img), self._golden,
+                                  min(math.floor(level), 255), self._light,
+                                  self._words(mask).view(np.uint8))
+            return mask, None, level
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":
             level: float | None = float(th.value)
@@ -207,9 +184,30 @@ class Segmenter:
         """External contours of the opened and closed ``mask`` (``_contours_holes``)."""
         return self._contours_holes(mask, full, holes=False)[0]
 
-    def _contours_holes(self, mask: np.ndarray, full: bool, holes: bool
+    def _segment(self, img: np.ndarray, full: bool, holes: bool
+                 ) -> tuple[list[np.ndarray], list[list[np.ndarray]] | None,
+                            np.ndarray | None, float | None]:
+        """A grey frame's contours and holes (``_contours_holes``), its difference image
+        and level (``_threshold``). Against a golden image with symmetric kernels (every
+        shipped recipe), Otsu's level, the mask and its packed morphology are one compiled
+        call (``kernels.golden_morph``)."""
+        golden = self._against_golden(img) if self._mirror else None
+        if golden is None:
+            mask, diff, level = self._threshold(img)
+            return (*self._contours_holes(mask, full, holes), diff, level)
+        mask = self._buffer("mask", img.shape)
+        level, *morphed = kernels().golden_morph(
+            np.ascontiguousarray(img), self._golden, self._golden_small,
+            _sample_step(*img.shape), *golden, self._light, self._words(mask).view(np.uint8),
+            self._margin, *self._open_pts, *self._close_pts)
+        return (*self._contours_holes(mask, full, holes, tuple(morphed)), None, level)
+
+    def _contours_holes(self, mask: np.ndarray, full: bool, holes: bool,
+                        morphed: tuple | None = None
                         ) -> tuple[list[np.ndarray], list[list[np.ndarray]] | None]:
-        """External contours of the opened and closed ``mask``, in ``findContours``' order
+        """External contours of the opened and closed ``mask`` (with symmetric kernels,
+        ``morphed``: ``kernels.packed_morph``'s result for it, if already made), in
+        ``findContours``' order
         (as on the whole frame: by first point, last found first), and with ``holes`` each
         one's hole contours (``RETR_CCOMP``; else None).
 
@@ -249,8 +247,8 @@ class Segmenter:
             # (for the morphology), which also keeps it one pixel clear of its neighbours;
             # packed, opened, closed and the mirrors cleared a bit a pixel in one call
             # (without morphology the margin is 1: the packing alone)
-            rois, words, geo, width = k.packed_morph(self._words(mask), h, w, self._margin,
-                                                     *self._open_pts, *self._close_pts)
+            rois, words, geo, width = morphed if morphed is not None else k.packed_morph(
+                self._words(mask), h, w, self._margin, *self._open_pts, *self._close_pts)
             packed = words.view(np.uint8)[:, :width]
         found: list[tuple[np.ndarray, list[np.ndarray]]] = []
         if len(rois):
@@ -319,7 +317,6 @@ _NO_LENS = np.zeros(0, np.int64)
 _NO_GEO = np.zeros((0, 9), np.int64)
 
 
-MOVED_BUDGET_BYTES = 16 << 20    # the golden images moved by recent levels (``_moved``)
 OTSU_STEP = 4       # Otsu's level from every 4th pixel of every 4th row
 
 

@@ -191,6 +191,60 @@ def test_otsu_level_of_the_sampled_difference_is_opencvs(seed, h, w):
         cv2.subtract(small, subsample(img)))
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 10**6), st.integers(1, 40), st.integers(1, 90))
+def test_the_frame_against_the_golden_image_is_opencvs_mask(seed, h, w):
+    """``golden_mask``: the frame below the golden image less t (dark parts), above it plus
+    t (light), as ``cv2.compare`` against the golden image moved by ``cv2.subtract`` /
+    ``cv2.add`` (saturated), for every t from 0 to 255; the padding past the last pixel
+    untouched."""
+    rng = np.random.default_rng(seed)
+    img, golden = _grey(rng, h, w), _grey(rng, h, w)
+    pad = -(-w // 8) * 8
+    for t in sorted({0, 1, 127, 128, 254, 255, *rng.integers(0, 256, 4).tolist()}):
+        for light in (False, True):
+            level = np.full_like(golden, t)
+            want = (cv2.compare(img, cv2.add(golden, level), cv2.CMP_GT) if light
+                    else cv2.compare(img, cv2.subtract(golden, level), cv2.CMP_LT))
+            got = np.zeros((h, pad), np.uint8)
+            K.golden_mask(img, golden, t, light, got)
+            assert np.array_equal(got[:, :w], want), (t, light)
+            assert not got[:, w:].any()
+
+
+@pytest.mark.parametrize("method", ["fixed", "otsu"])
+@pytest.mark.parametrize("foreground", ["dark", "light"])
+def test_the_golden_frame_in_one_call_is_the_same_as_step_by_step(method, foreground):
+    """``Segmenter._segment``'s one call (``golden_morph``: the level, the mask, the packed
+    morphology) finds the contours, holes and level that ``_threshold`` then
+    ``_contours_holes`` find."""
+    import dataclasses
+
+    from feeder_bt.core.model import VisionRecipe
+    from feeder_bt.vision.segment import Segmenter
+    rng = np.random.default_rng(11)
+    recipe = VisionRecipe()
+    recipe = dataclasses.replace(recipe, foreground=foreground, golden_image=True,
+                                 threshold=dataclasses.replace(recipe.threshold,
+                                                               method=method, value=20))
+    seg = Segmenter(recipe)
+    golden = np.clip(rng.normal(128, 6, (120, 150)), 0, 255).astype(np.uint8)
+    seg.set_golden(golden)
+    for i in range(8):
+        img = golden.copy()
+        blobs = _mask(i, 120, 150) > 0
+        img[blobs] = np.clip(img[blobs].astype(int) + (60 if foreground == "light" else -60),
+                             0, 255).astype(np.uint8)
+        img = cv2.GaussianBlur(img, (5, 5), 1.5)      # edges graded: the level matters
+        mask, _, level = seg._threshold(img)
+        step = seg._contours_holes(mask.copy(), True, True)
+        contours, holes, diff, got_level = seg._segment(img, True, True)
+        assert got_level == level and diff is None
+        assert len(contours) == len(step[0]) and len(contours) > 0
+        assert all(np.array_equal(a, b) for a, b in zip(contours, step[0], strict=True))
+        assert [len(h) for h in holes] == [len(h) for h in step[1]]
+
+
 def _edge_reference(hulls, diff, cut):
     """``Segmenter._edge_points``' rule in numpy (as before the kernels)."""
     du, dv = np.array([1, -1, 0, 0]), np.array([0, 0, 1, -1])

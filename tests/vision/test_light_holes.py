@@ -192,35 +192,6 @@ def test_light_parts_on_the_front_lit_camera(threshold, golden):
     assert poses == ["flat"] * 8 + ["on_side"] * 2
 
 
-@pytest.mark.parametrize("light", [False, True])
-def test_otsus_moved_golden_images_are_kept_for_the_levels_last_used(monkeypatch, light):
-    # Otsu's level wanders over a dozen grey levels (squares on the bench: 15 in 200
-    # frames); each moved golden image is a pass over the frame, so the recent ones are kept
-    import cv2
-
-    from feeder_bt.core.model import VisionRecipe
-    from feeder_bt.vision import segment
-    seg = segment.Segmenter(VisionRecipe(threshold=Threshold("otsu", value=40),
-                                         foreground="light" if light else "dark"))
-    golden = np.random.default_rng(3).integers(0, 256, (48, 64), dtype=np.uint8)
-    seg.set_golden(golden)
-    first = {t: seg._moved(t) for t in range(70, 85)}
-    assert all(seg._moved(t) is first[t] for t in range(70, 85))    # none made again
-    want = cv2.add(golden, 77) if light else cv2.subtract(golden, 77)
-    assert np.array_equal(first[77], want)
-    # over the budget the least recently used goes first, and never fewer than two stay
-    monkeypatch.setattr(segment, "MOVED_BUDGET_BYTES", 3 * golden.nbytes)
-    seg.set_golden(golden)
-    a, b, c = seg._moved(1), seg._moved(2), seg._moved(3)
-    assert seg._moved(1) is a                    # used again: now the most recent
-    seg._moved(4)                                # full: 2, the least recently used, goes
-    assert seg._moved(1) is a and seg._moved(3) is c and seg._moved(2) is not b
-    monkeypatch.setattr(segment, "MOVED_BUDGET_BYTES", 0)
-    seg.set_golden(golden)
-    a, b = seg._moved(1), seg._moved(2)
-    assert seg._moved(1) is a and seg._moved(2) is b
-
-
 def test_dark_recipe_finds_no_light_part_and_says_why():
     sc, cell, renderer, light = _setup(BRACKETS)
     _, _, _, dark = _setup(BRACKETS, foreground="dark")
