@@ -109,7 +109,8 @@ def test_the_docs_quote_the_committed_simulator_speed_side_by_side():
 @pytest.mark.parametrize("name,what", [
     ("vision_lazy_contours.json", "this took"), ("vision_xycut.json", "the XY-cut took"),
     ("vision_otsu_kernel.json", "the compiled Otsu level took"),
-    ("vision_bit_morph.json", "the bit-wise morphology took")])
+    ("vision_bit_morph.json", "the bit-wise morphology took"),
+    ("vision_golden_morph.json", "the golden-image call took")])
 def test_the_docs_quote_the_vision_side_by_sides(name, what):
     # docs/performance.md's sentences on a change to the locator, against its side-by-side
     # JSON (benchmarks/side_by_side.py over vision_bench.py, squares)
