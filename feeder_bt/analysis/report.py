@@ -100,7 +100,8 @@ def world_robot_bounds(cell_spec: CellSpec, scenario: Scenario, world: Any,
            "robot_bound_mean_cycle_s": round(mean[0], 4) if mean else None}
     if cell_spec.presentation == "plate":   # nothing passes a plate: no nearest-first replay
         return out
-    placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), world.clock.now())
+    placed = selection_bound(pricing, log, tuple(cell_spec.robot.safe_mm), world.clock.now(),
+                             placed_leave=world.ship_placed)
     sel = placed * 60.0 / feed_seconds if feed_seconds > 0 else 0.0
     return {**out, "robot_bound_selection_ppm": round(sel, 3),
             "robot_bound_selection_parts": placed}
@@ -114,7 +115,8 @@ def world_kit_selection(cell_spec: CellSpec, scenario: Scenario, world: Any, kit
         return None
     replay = KitTracker(kit.counts, kit.order, kit.open_kits)
     selection_bound(Pricing.of(world.robot_model, cell_spec, scenario), world.passlog,
-                    tuple(cell_spec.robot.safe_mm), world.clock.now(), replay)
+                    tuple(cell_spec.robot.safe_mm), world.clock.now(), replay,
+                    placed_leave=world.ship_placed)
     return replay.completed
 
 

@@ -18,13 +18,19 @@ with the world's own arm (a SCARA, ``feeder_bt.robot.scara``):
   belt as recorded; parts move with the belt as it really moved. Its parts per minute of
   feeding is what nearest-first picking could have placed from this run's supply. It is
   not an optimum (a lookahead policy may beat nearest-first on a stream), so it is a
-  yardstick, not a proof; the tests check a run stays below it.
+  yardstick, not a proof: a run may place more.
   With a kit, the replay takes only the types the kit wants next (``KitTracker``), and
   the kits it completes are the report's ``kits.selection_bound_kpm``.
 
 A part picked in the replay is gone for the rest of its pass; a part the run's robot
-picked stays available to the replay until it leaves the reach; a pass the run's robot
-left to recirculate comes back as a new pass, as it did.
+picked stays available to the replay until it leaves the reach. A pass the run's robot
+left to recirculate comes back as a new pass, as it did. Where placed parts go back to
+the hopper (the closed loop), that later pass stands in for the replay's own placed part
+coming back the same way, so the replay may take it again. Where placed parts leave the
+cell (a supply plan's ``ship_placed``), nothing the replay placed comes back: none of that
+part's passes is offered to it again, and it never places more parts than came. It sees a
+part the run placed only on the passes the run gave it, so a run that chose better than
+nearest-first can place more than the replay.
 """
 
 from __future__ import annotations
@@ -86,11 +92,12 @@ def mean_bound(pricing: Pricing, picks: list[tuple[float, float, float, str]]
 
 
 def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: float,
-                    kit: KitTracker | None = None) -> int:
+                    kit: KitTracker | None = None, placed_leave: bool = False) -> int:
     """Parts a nearest-first robot places from the run's passes by ``t_end`` (see the
     module); ``log`` is the world's ``PassLog``. With ``kit`` (a fresh ``KitTracker``) the
     robot takes only the types the kit wants next, as the retrieve tree does, and the
-    tracker counts the kits it completes."""
+    tracker counts the kits it completes. ``placed_leave``: placed parts leave the cell
+    (``World.ship_placed``), so a part the replay placed never comes to it again."""
     bt = np.asarray(log.belt_t)
     bp = np.maximum.accumulate(np.asarray(log.belt_pos))   # a reversal never un-passes
     t_on = np.asarray(log.t_on)
@@ -98,6 +105,8 @@ def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: fl
     if n == 0 or len(bt) == 0:
         return 0
     x0 = np.asarray(log.x0)
+    pid = np.asarray(log.pid)
+    gone: set[int] = set()         # parts the replay placed that never come back
     types = log.types
     ox = np.array([pricing.offsets.get(tp, (0.0, 0.0))[0] for tp in types])
     oy = np.array([pricing.offsets.get(tp, (0.0, 0.0))[1] for tp in types])
@@ -130,7 +139,7 @@ def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: fl
     active = np.zeros(0, dtype=int)
     while t < t_end:
         while nxt < n and t_on[order[nxt]] <= t:
-            if usable[order[nxt]]:
+            if usable[order[nxt]] and int(pid[order[nxt]]) not in gone:
                 active = np.append(active, order[nxt])
             nxt += 1
         if active.size:
@@ -165,7 +174,11 @@ def selection_bound(pricing: Pricing, log, start: tuple[float, float], t_end: fl
                     if kit is not None:
                         kit.placed(types[sel[j]])
                 here = (float(place_x[sel[j]]), float(place_y[sel[j]]))
+                taken = int(pid[sel[j]])
                 active = np.delete(active, idx[j])
+                if placed_leave:           # it never comes again, nor does a pass under way
+                    gone.add(taken)
+                    active = active[pid[active] != taken]
                 continue
         # nothing to take now: wait for the next landing or a part coming into reach
         waits = [t_on[order[nxt]]] if nxt < n else []

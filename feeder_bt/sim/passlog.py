@@ -27,6 +27,7 @@ class PassLog:
         self.belt_pos = array("d", [pos0])
         self.next_t = t0 + SAMPLE_S
         self.t_on = array("d")
+        self.pid = array("q")                    # the part's id: its passes share it
         self.x0 = array("d")
         self.y = array("d")
         self.types: list[str] = []
@@ -45,6 +46,7 @@ class PassLog:
         """A part came to rest on the horizontal belt: a pass begins."""
         self._current[pid] = len(self.t_on)
         self.t_on.append(t)
+        self.pid.append(pid)
         self.x0.append(x0)
         self.y.append(y)
         self.types.append(ptype)

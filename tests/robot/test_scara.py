@@ -152,6 +152,29 @@ def test_the_replay_takes_what_passes_nearest_first():
     assert selection_bound(p, log, (1370.0, -150.0), 30.0) == 0
 
 
+def test_a_part_the_replay_placed_comes_back_only_where_placed_parts_do():
+    """A part the run left to recirculate lands again as a new pass. Where placed parts
+    leave the cell, the replay that took it on its first pass is not offered it again (it
+    once placed 61 of 60 parts), nor, if the run dropped it beside itself, its pass then
+    under way; in the closed loop the later pass stands in for the replay's own part
+    coming back, and is taken."""
+    p = pricing()
+    log = PassLog(0.0, 0.0)
+    t = 0.0
+    while t < 60.0:
+        t += 0.02
+        log.sample(t, 200.0 * t)
+    log.landed(1, 1.0, 30.0 - 200.0, 60.0, "lens", True)
+    log.landed(1, 31.0, 30.0 - 200.0 * 31.0, 60.0, "lens", True)   # recirculated
+    assert selection_bound(p, log, (1370.0, -150.0), 60.0, placed_leave=True) == 1
+    assert selection_bound(p, log, (1370.0, -150.0), 60.0) == 2
+    log.landed(2, 40.0, 30.0 - 200.0 * 40.0, 300.0, "lens", True)
+    log.landed(2, 40.0, 60.0 - 200.0 * 40.0, 320.0, "lens", True)   # dropped beside it
+    assert selection_bound(p, log, (1370.0, -150.0), 60.0, placed_leave=True) == 2
+    log.pid[3] = 3                                 # two parts side by side: both taken
+    assert selection_bound(p, log, (1370.0, -150.0), 60.0, placed_leave=True) == 3
+
+
 @pytest.fixture(scope="module")
 def runs() -> dict[float, dict]:
     """Lenses, two simulated minutes, with the Cobra 600 and with an arm half as fast."""
