@@ -128,13 +128,15 @@ class ConnGate:
                  clock: Callable[[], float] = time.monotonic,
                  say: Callable[[str], None] | None = None) -> None:
         self.name, self.limits, self.clock = name, limits or ConnLimits(), clock
-        fds = raise_fd_limit()
-        # never more connections than file descriptors to spare (each costs one)
-        self.total = max(8, min(self.limits.total, (fds - 64) // 2))
-        self.reserve = max(0, min(self.limits.reserve, self.total))
+        # never more connections than file descriptors to spare (each costs one): the
+        # reserve, the caps and the lobby share this budget, the reserve first (the
+        # owner's connections), then the caps, the lobby what is left (at least 8)
+        budget = max(0, (raise_fd_limit() - 64) // 2)
+        self.reserve = max(0, min(self.limits.reserve, self.limits.total, budget - 8))
+        self.total = max(8, min(self.limits.total, budget - self.reserve))
         self.trials = (self.reserve + 1) // 2     # of the reserve, at most this on trial
-        # silent connections, outside the caps; with the caps, within the same fds budget
-        spare = (fds - 64) // 2 - self.total
+        # silent connections, outside the caps
+        spare = budget - self.reserve - self.total
         want = max(0, self.limits.lobby)
         self.lobby = max(min(8, want), min(want, spare))
         self.say = say or (lambda line: print(line, file=sys.stderr, flush=True))

@@ -171,3 +171,16 @@ def test_a_robot_vouched_for_in_the_lobby_enters_the_caps_when_it_speaks_never_o
     stranger = FakeTransport("10.0.0.8", port=6)
     assert g.admit(stranger, lambda: False)
     assert not g.heard(stranger) and stranger.aborted        # a stranger is still refused
+
+
+def test_the_reserve_the_caps_and_the_lobby_share_one_descriptor_budget(monkeypatch):
+    """With few file descriptors to spare, the reserve (the owner's), the caps and the lobby
+    together never hold more connections than the budget, the reserve kept whole."""
+    from feeder_bt.control import conns
+    monkeypatch.setattr(conns, "raise_fd_limit", lambda want=65536: 64 + 2 * 300)
+    g = ConnGate("test", ConnLimits(total=256, reserve=4, lobby=1000), say=lambda line: None)
+    assert g.reserve == 4 and g.total == 256
+    assert g.reserve + g.total + g.lobby == 300
+    monkeypatch.setattr(conns, "raise_fd_limit", lambda want=65536: 64 + 2 * 100)
+    g = ConnGate("test", ConnLimits(total=256, reserve=4, lobby=1000), say=lambda line: None)
+    assert (g.reserve, g.total, g.lobby) == (4, 96, 8)        # the lobby's floor of 8
