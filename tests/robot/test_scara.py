@@ -119,6 +119,16 @@ def pricing() -> Pricing:
     return Pricing.of(world_arm(cell.robot), cell, sc)
 
 
+def _belt_log(seconds: float) -> PassLog:
+    """A pass log of a belt running at 200 mm/s for ``seconds``, sampled every 20 ms."""
+    log = PassLog(0.0, 0.0)
+    t = 0.0
+    while t < seconds:
+        t += 0.02
+        log.sample(t, 200.0 * t)
+    return log
+
+
 def test_the_mean_bound_by_hand():
     p = pricing()
     place = p.places["lens"]
@@ -134,11 +144,7 @@ def test_the_replay_takes_what_passes_nearest_first():
     it cannot (lying wrong). The replay takes both, the cheaper first; a part that lands
     after the end is not taken."""
     p = pricing()
-    log = PassLog(0.0, 0.0)
-    t = 0.0
-    while t < 30.0:
-        t += 0.02
-        log.sample(t, 200.0 * t)
+    log = _belt_log(30.0)
     base = 200.0 * 1.0
     log.landed(1, 1.0, 30.0 - base, 500.0, "lens", True)      # far side: dearer
     log.landed(2, 1.0, 30.0 - base, 60.0, "lens", True)       # near the place pose
@@ -159,11 +165,7 @@ def test_a_part_the_replay_placed_comes_back_only_where_placed_parts_do():
     under way; in the closed loop the later pass stands in for the replay's own part
     coming back, and is taken."""
     p = pricing()
-    log = PassLog(0.0, 0.0)
-    t = 0.0
-    while t < 60.0:
-        t += 0.02
-        log.sample(t, 200.0 * t)
+    log = _belt_log(60.0)
     log.landed(1, 1.0, 30.0 - 200.0, 60.0, "lens", True)
     log.landed(1, 31.0, 30.0 - 200.0 * 31.0, 60.0, "lens", True)   # recirculated
     assert selection_bound(p, log, (1370.0, -150.0), 60.0, placed_leave=True) == 1
