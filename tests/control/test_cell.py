@@ -307,3 +307,27 @@ def test_cleanup_runs_the_recovery_program_when_power_is_off(rig):
     rig.drive_until(CellState.STOPPED, max_s=1.0)
     assert [m for m in rig.hal.methods()[since:] if m.startswith("robot.")] == [
         "robot.move_safe", "robot.recover", "robot.move_safe"]
+
+
+def test_a_restart_after_a_drift_fault_watches_the_encoders_afresh(rig):
+    """The drift watch's streak of verdicts past the limit does not outlive the fault it
+    raised: the operator's reset and start build the feeding trees anew (a new watch,
+    its streak 0) and the set-up anchors the sync again at rest."""
+    from feeder_bt.behaviours.adjust import CheckDrift
+
+    def drift_leaf() -> CheckDrift:
+        (leaf,) = [n for n in rig.cell.nodes() if isinstance(n, CheckDrift)]
+        return leaf
+    rig.start()
+    rig.tick(2)
+    old = drift_leaf()
+    old.watch._over = old.watch.window - 1        # one verdict short of the fault
+    rig.cell.board.set(FAULTS.ESCALATE, "belt encoders disagree (test)")
+    rig.tick()
+    rig.drive_until(CellState.FAULT, max_s=1.0)
+    rig.cell.reset()
+    rig.hal.conveyors["horizontal"].count = 7_000
+    rig.start()
+    new = drift_leaf()
+    assert new is not old and new.watch is not old.watch and new.watch._over == 0
+    assert rig.cell.encoder.reference[0] == 7_000    # anchored again at the restart
