@@ -11,17 +11,12 @@ contours found with OpenCV's on the whole frame, random masks, kernels 3 to 9 pi
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from feeder_bt.vision.contour_kernels import (
-    GOLDEN_MINUS,
-    MINUS_GOLDEN,
     _reflect,
     foreground_rois,
-    golden_mask,
-    otsu_level,
+    golden_threshold,
     roi_geometry,
 )
 from feeder_bt.vision.kernel_jit import _jit
@@ -178,19 +173,14 @@ def packed_morph(words, h, w, margin, open_dy, open_dx, close_dy, close_dx):
 def golden_morph(img, golden, golden_small, step, otsu, value, light, padded, margin,
                  open_dy, open_dx, close_dy, close_dx):
     """A frame against its golden image, to ``packed_morph``'s result, in one call: the
-    level (``value``, or Otsu's of the sampled difference, ``otsu_level``, never below
-    ``value``), the mask (``golden_mask``, into ``padded``: this thread's scratch mask, rows
-    of whole words, zeros past the last pixel), its rectangles, packing, opening and
+    level and the mask (``golden_threshold``, into ``padded``: this thread's scratch mask,
+    rows of whole words, zeros past the last pixel), its rectangles, packing, opening and
     closing. Returns (level, rectangles, image, geometry, width), as ``packed_morph``.
 
     One call where there were three (Otsu's level, OpenCV's compare, the packing), each
     with its way in from Python, which costs several times more after other work has
     emptied the caches (docs/performance.md)."""
-    level = value
-    if otsu:
-        level = max(otsu_level(img, golden_small, step,
-                               MINUS_GOLDEN if light else GOLDEN_MINUS), value)
-    golden_mask(img, golden, min(math.floor(level), 255), light, padded)
+    level = golden_threshold(img, golden, golden_small, step, otsu, value, light, padded)
     h, w = img.shape
     rois, out, geo, width = packed_morph(padded.view(np.uint64), h, w, margin,
                                          open_dy, open_dx, close_dy, close_dx)

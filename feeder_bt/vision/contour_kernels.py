@@ -6,6 +6,8 @@ the frame, in the whole frame's order (``Segmenter._contours_holes``)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from feeder_bt.vision.kernel_jit import _jit
@@ -92,6 +94,21 @@ def golden_mask(img, golden, t, light, mask):
             for u in range(w):
                 x, y = a[np.uintp(u)], g[np.uintp(u)]
                 m[np.uintp(u)] = on if (y > tt) & (x < np.uint8(y - tt)) else off
+
+
+@_jit
+def golden_threshold(img, golden, golden_small, step, otsu, value, light, mask):
+    """The mask of a frame against its golden image (``golden_mask``, into ``mask``) at
+    the level ``value``, or with ``otsu`` at Otsu's level of the sampled difference
+    (``otsu_level``, ``golden_small`` the golden image's sample at ``step``) never below
+    ``value``; returns the level. The one rule ``Segmenter._threshold`` and
+    ``bit_kernels.golden_morph`` both follow: the mask cut at the level's whole part."""
+    level = value
+    if otsu:
+        level = max(otsu_level(img, golden_small, step,
+                               MINUS_GOLDEN if light else GOLDEN_MINUS), value)
+    golden_mask(img, golden, min(math.floor(level), 255), light, mask)
+    return level
 
 
 @_jit

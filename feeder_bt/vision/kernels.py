@@ -12,7 +12,7 @@ here: before these kernels half of the locator's time was that glue between call
   sums) and the convex hull (as ``cv2.convexHull``: its vertices, no collinear points) with
   its minimum-area rectangle, area and length (the mapping, hull and rectangle in
   ``hull_kernels``, which the faces' kernels share).
-* ``otsu_level``, ``golden_mask``, ``foreground_rois``, ``pack_rois``, ``place_contours``;
+* ``otsu_level``, ``golden_mask`` / ``golden_threshold``, ``foreground_rois``, ``pack_rois``, ``place_contours``;
   ``packed_morph`` (in ``bit_kernels``: the packing with the opening and closing, a bit a
   pixel) and ``golden_morph`` (the level, mask and ``packed_morph`` in one call)
   (in ``contour_kernels``): Otsu's level of the subsampled difference image, the
@@ -43,6 +43,7 @@ from feeder_bt.vision.contour_kernels import (  # noqa: F401  (the locator reads
     PLAIN,
     foreground_rois,
     golden_mask,
+    golden_threshold,
     otsu_level,
     pack_rois,
     place_contours,
@@ -194,6 +195,7 @@ def warm() -> None:
     packed_morph(mask.view(np.uint64), 6, 12, 1, *cross, *cross)
     for otsu, light in ((True, False), (False, True)):
         golden_mask(mask, mask, 3, light, mask)
+        golden_threshold(mask, mask, mask[:2, :4].copy(), 4, otsu, 1.0, light, mask)
         golden_morph(mask, mask, mask[:2, :4].copy(), 4, otsu, 1.0, light, mask, 1,
                      *cross, *cross)
     place_contours(pts.copy(), lens, 3, geo, 16)

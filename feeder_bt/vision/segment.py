@@ -56,12 +56,12 @@ class Segmenter:
 
     def set_golden(self, image: np.ndarray) -> None:
         """Remember the cleared belt; later frames are compared against it."""
-        self._golden = np.ascontiguousarray(to_grey(image)).copy()
+        self._golden = to_grey(image).copy()     # a copy is C-ordered, as the kernels read it
         self._golden_small = subsample(self._golden).copy()
 
     def _against_golden(self, img: np.ndarray) -> tuple[bool, float] | None:
         """Where the mask is one comparison of the frame with the golden image (a fixed or
-        Otsu level, ``kernels.golden_mask``): (Otsu's or not, the level or the least Otsu
+        Otsu level, ``kernels.golden_threshold``): (Otsu's or not, the level or the least Otsu
         may give); else None (no golden image, another method, a fixed level outside
         0-254: the difference image is made and thresholded)."""
         th = self.recipe.threshold
@@ -132,16 +132,11 @@ class Segmenter:
         golden = self._against_golden(img)
         if golden is not None:
             # the frame against the golden image, no difference image (the faces read the
-            # grey from the frame and the golden image where they need it); Otsu's level
-            # from the subsample's difference
-            otsu, level = golden
-            if otsu:
-                level = max(otsu_level(img, self._golden_small,
-                                       "minus_golden" if self._light else "golden_minus"),
-                            level)
-            kernels().golden_mask(np.ascontiguousarray(img), self._golden,
-                                  min(math.floor(level), 255), self._light,
-                                  self._words(mask).view(np.uint8))
+            # grey from the frame and the golden image where they need it)
+            level = kernels().golden_threshold(
+                np.ascontiguousarray(img), self._golden, self._golden_small,
+                _sample_step(*img.shape), *golden, self._light,
+                self._words(mask).view(np.uint8))
             return mask, None, level
         diff = self._diff(img, self._buffer("diff", img.shape))
         if th.method == "fixed":

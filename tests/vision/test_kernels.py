@@ -212,31 +212,45 @@ def test_the_frame_against_the_golden_image_is_opencvs_mask(seed, h, w):
             assert not got[:, w:].any()
 
 
+@pytest.mark.parametrize("value", [20.0, 70.0])        # 70: above Otsu's level here
 @pytest.mark.parametrize("method", ["fixed", "otsu"])
 @pytest.mark.parametrize("foreground", ["dark", "light"])
-def test_the_golden_frame_in_one_call_is_the_same_as_step_by_step(method, foreground):
-    """``Segmenter._segment``'s one call (``golden_morph``: the level, the mask, the packed
-    morphology) finds the contours, holes and level that ``_threshold`` then
-    ``_contours_holes`` find."""
+def test_the_golden_frame_in_one_call_is_the_same_as_step_by_step(method, foreground, value):
+    """``Segmenter._threshold``'s level and mask against the golden image are OpenCV's
+    (Otsu on the sample, compare against the moved golden image), and ``_segment``'s one
+    call (``golden_morph``: the level, the mask, the packed morphology) finds the contours,
+    holes and level that ``_threshold`` then ``_contours_holes`` find."""
     import dataclasses
 
     from feeder_bt.core.model import VisionRecipe
-    from feeder_bt.vision.segment import Segmenter
+    from feeder_bt.vision.segment import Segmenter, subsample
     rng = np.random.default_rng(11)
     recipe = VisionRecipe()
     recipe = dataclasses.replace(recipe, foreground=foreground, golden_image=True,
                                  threshold=dataclasses.replace(recipe.threshold,
-                                                               method=method, value=20))
+                                                               method=method, value=value))
     seg = Segmenter(recipe)
     golden = np.clip(rng.normal(128, 6, (120, 150)), 0, 255).astype(np.uint8)
     seg.set_golden(golden)
     for i in range(8):
         img = golden.copy()
         blobs = _mask(i, 120, 150) > 0
-        img[blobs] = np.clip(img[blobs].astype(int) + (60 if foreground == "light" else -60),
+        img[blobs] = np.clip(img[blobs].astype(int) + (100 if foreground == "light" else -100),
                              0, 255).astype(np.uint8)
         img = cv2.GaussianBlur(img, (5, 5), 1.5)      # edges graded: the level matters
         mask, _, level = seg._threshold(img)
+        # the level and mask by OpenCV, as before the kernel: Otsu's level of the sampled
+        # difference, never below the recipe's, the golden image moved by its whole part
+        small = subsample(golden)
+        want = value if method == "fixed" else max(value, cv2.threshold(
+            cv2.subtract(subsample(img), small) if foreground == "light"
+            else cv2.subtract(small, subsample(img)),
+            0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)[0])
+        moved = np.full_like(golden, math.floor(want))
+        assert level == want
+        assert np.array_equal(mask, cv2.compare(img, cv2.add(golden, moved), cv2.CMP_GT)
+                              if foreground == "light"
+                              else cv2.compare(img, cv2.subtract(golden, moved), cv2.CMP_LT))
         step = seg._contours_holes(mask.copy(), True, True)
         contours, holes, diff, got_level = seg._segment(img, True, True)
         assert got_level == level and diff is None
